@@ -1,0 +1,233 @@
+"""From a DiscreteScheme (SymPy) to CasADi Functions and their C code.
+
+SymPy expressions are translated node by node into CasADi SX, memoised on the expression so
+that a subexpression SymPy shares is built once; CasADi's CSE then shares the rest. The Newton
+Jacobian dF/dz comes from CasADi's algorithmic differentiation of the translated residual.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import casadi as ca
+import sympy as sp
+
+from .schemes.base import DiscreteScheme
+
+#: SymPy functions with a CasADi counterpart of the same meaning.
+_FUNCTIONS = {
+    sp.sin: ca.sin, sp.cos: ca.cos, sp.tan: ca.tan, sp.exp: ca.exp, sp.log: ca.log,
+    sp.atan: ca.atan, sp.Abs: ca.fabs, sp.atan2: ca.atan2,
+}
+
+
+class MissingInputError(ValueError):
+    """An expression has a free symbol that is not an input of the function being built."""
+
+
+def check_free_symbols(name: str, expressions, inputs) -> None:
+    """Every free symbol of `expressions` must be one of `inputs` (style.md), or raise."""
+    declared = set(inputs)
+    missing = set()
+    for expr in expressions:
+        missing |= set(expr.free_symbols) - declared
+    if missing:
+        names = ", ".join(sorted(map(str, missing)))
+        raise MissingInputError(f"{name}: free symbols {names} are not inputs of the function")
+
+
+class SympyToCasadi:
+    """Translate SymPy expressions into CasADi SX over given symbol -> SX bindings."""
+
+    def __init__(self, bindings: dict[sp.Symbol, ca.SX]):
+        self._memo: dict[sp.Basic, ca.SX] = dict(bindings)
+
+    def __call__(self, expr: sp.Basic) -> ca.SX:
+        # Iterative post-order walk: deep recursive expressions (long chains) must not hit
+        # Python's recursion limit.
+        memo = self._memo
+        stack = [(expr, False)]
+        while stack:
+            node, expanded = stack.pop()
+            if node in memo:
+                continue
+            if node.is_Number:
+                memo[node] = ca.SX(float(node))
+                continue
+            if node.is_Symbol:
+                raise MissingInputError(f"symbol {node} has no binding")
+            if not expanded:
+                stack.append((node, True))
+                stack.extend((arg, False) for arg in node.args if arg not in memo)
+                continue
+            memo[node] = self._combine(node, [memo[arg] for arg in node.args])
+        return memo[expr]
+
+    @staticmethod
+    def _combine(node: sp.Basic, args: list[ca.SX]) -> ca.SX:
+        if node.is_Add:
+            total = args[0]
+            for term in args[1:]:
+                total = total + term
+            return total
+        if node.is_Mul:
+            product = args[0]
+            for factor in args[1:]:
+                product = product * factor
+            return product
+        if node.is_Pow:
+            base, exponent = args
+            e = node.exp
+            if e == sp.Rational(1, 2):
+                return ca.sqrt(base)
+            if e == -sp.Rational(1, 2):
+                return 1 / ca.sqrt(base)
+            if e == -1:
+                return 1 / base
+            if e.is_Integer and e > 0:
+                return ca.constpow(base, exponent)
+            return ca.power(base, exponent)
+        for sympy_function, casadi_function in _FUNCTIONS.items():
+            if isinstance(node, sympy_function):
+                return casadi_function(*args)
+        raise NotImplementedError(f"no CasADi translation for {type(node).__name__}: {node}")
+
+
+@dataclass(frozen=True)
+class SchemeFunctions:
+    """The CasADi Functions of one scheme, named with the package prefix."""
+
+    residual: ca.Function            # (z, x0, dt) -> F
+    residual_jacobian: ca.Function   # (z, x0, dt) -> (F, dF/dz dense, column-major)
+    predictor: ca.Function           # (x0, dt) -> z
+    next_state: ca.Function          # (z, x0, dt) -> x1
+    outputs: ca.Function             # (x) -> (phi, omega, energy, constraint residuals)
+    initial_state: ca.Function       # (phi, phidot) -> x
+
+    def all(self) -> tuple[ca.Function, ...]:
+        return (self.residual, self.residual_jacobian, self.predictor, self.next_state,
+                self.outputs, self.initial_state)
+
+
+def _vector(translate: SympyToCasadi, matrix) -> ca.SX:
+    entries = [translate(e) for e in matrix]
+    return ca.vertcat(*entries) if entries else ca.SX(0, 1)
+
+
+def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
+    """CasADi Functions for the residual, its Jacobian, and the state maps of `scheme`."""
+    nz, nx = scheme.unknowns.shape[0], scheme.state.shape[0]
+    z, x0 = ca.SX.sym("z", nz), ca.SX.sym("x0", nx)
+    dt = ca.SX.sym("dt")
+    step_inputs = list(scheme.unknowns) + list(scheme.state) + [scheme.dt]
+    for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state)):
+        check_free_symbols(name, exprs, step_inputs)
+    check_free_symbols("predictor", scheme.predictor, list(scheme.state) + [scheme.dt])
+    check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
+                       + [scheme.energy] + list(scheme.constraint_residuals), scheme.state)
+    check_free_symbols("initial_state", scheme.initial_state,
+                       list(scheme.initial_angles) + list(scheme.initial_velocities))
+
+    bindings = dict(zip(scheme.unknowns, ca.vertsplit(z)))
+    bindings.update(zip(scheme.state, ca.vertsplit(x0)))
+    bindings[scheme.dt] = dt
+    step = SympyToCasadi(bindings)
+    residual = _vector(step, scheme.residual)
+    jacobian = ca.densify(ca.jacobian(residual, z))
+    options = {"cse": True}
+
+    x = ca.SX.sym("x", nx)
+    state = SympyToCasadi(dict(zip(scheme.state, ca.vertsplit(x))))
+    n = scheme.scene.n
+    phi, phidot = ca.SX.sym("phi", n), ca.SX.sym("phidot", n)
+    initial = SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
+                             **dict(zip(scheme.initial_velocities, ca.vertsplit(phidot)))})
+
+    def fn(name, inputs, input_names, outputs, output_names):
+        return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
+                           options)
+
+    return SchemeFunctions(
+        residual=fn("residual", [z, x0, dt], ["z", "x0", "dt"], [residual], ["F"]),
+        residual_jacobian=fn("residual_jacobian", [z, x0, dt], ["z", "x0", "dt"],
+                             [residual, jacobian], ["F", "J"]),
+        predictor=fn("predictor", [x0, dt], ["x0", "dt"], [_vector(step, scheme.predictor)],
+                     ["z"]),
+        next_state=fn("next_state", [z, x0, dt], ["z", "x0", "dt"],
+                      [_vector(step, scheme.next_state)], ["x1"]),
+        outputs=fn("outputs", [x], ["x"],
+                   [_vector(state, scheme.joint_angles), _vector(state, scheme.joint_velocities),
+                    state(scheme.energy), _vector(state, scheme.constraint_residuals)],
+                   ["phi", "omega", "energy", "constraint"]),
+        initial_state=fn("initial_state", [phi, phidot], ["phi", "phidot"],
+                         [_vector(initial, scheme.initial_state)], ["x"]),
+    )
+
+
+@dataclass(frozen=True)
+class WorkSizes:
+    """Largest CasADi work arrays over a set of functions (the caller-owned workspace)."""
+
+    arg: int
+    res: int
+    iw: int
+    w: int
+
+
+def work_sizes(functions) -> WorkSizes:
+    functions = list(functions)
+    return WorkSizes(arg=max(f.sz_arg() for f in functions),
+                     res=max(f.sz_res() for f in functions),
+                     iw=max(f.sz_iw() for f in functions),
+                     w=max(f.sz_w() for f in functions))
+
+
+def casadi_c_source(functions, prefix: str) -> tuple[str, str]:
+    """C source and header of `functions` from CasADi's CodeGenerator, symbols prefixed.
+
+    Internal symbols get `prefix` through CasADi's own prefix option; the exported ones are
+    the function names, which already carry it. No export attributes: visibility is left to
+    the build.
+    """
+    generator = ca.CodeGenerator(f"{prefix}_model.c", {
+        "prefix": f"{prefix}_", "with_header": True, "with_export": False,
+        "casadi_int": "long long int"})
+    for function in functions:
+        generator.add(function)
+    source = mark_parameters_used(generator.dump())
+    header = _casadi_header(functions, prefix)
+    return source, header
+
+
+_DEFINITION = re.compile(r"^(?:static )?[A-Za-z_][\w \*]*\b(\w+)\(([^()]*)\) ?\{$")
+
+
+def mark_parameters_used(source: str) -> str:
+    """Add `(void)name;` for every parameter of every function CasADi defines.
+
+    CasADi's generated functions take (arg, res, iw, w, mem) whether they use them or not, which
+    -Wextra reports as unused parameters (CasADi issues 1875, 2014); acados patches the text
+    the same way. Casting a parameter to void changes no behaviour.
+    """
+    lines = []
+    for line in source.splitlines(keepends=True):
+        lines.append(line)
+        match = _DEFINITION.match(line.rstrip("\n"))
+        if not match or match.group(2).strip() in ("", "void"):
+            continue
+        names = [re.split(r"[\s\*]+", parameter.strip())[-1]
+                 for parameter in match.group(2).split(",")]
+        lines.append("  " + " ".join(f"(void){name};" for name in names) + "\n")
+    return "".join(lines)
+
+
+def _casadi_header(functions, prefix: str) -> str:
+    """Declarations of the evaluation entry points we call (CasADi's header declares many more
+    bookkeeping functions we never use)."""
+    guard = f"{prefix.upper()}_MODEL_H"
+    lines = [f"#ifndef {guard}", f"#define {guard}", ""]
+    for function in functions:
+        lines.append(f"int {function.name()}(const double** arg, double** res, "
+                     "long long int* iw, double* w, int mem);")
+    lines += ["", f"#endif /* {guard} */", ""]
+    return "\n".join(lines)

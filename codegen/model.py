@@ -1,0 +1,212 @@
+"""Symbolic model of the chain in centre-of-mass coordinates (model.md sections 1-4).
+
+Everything is derived with SymPy from the geometry, the kinetic energy T and the potential V;
+no printed matrix is transcribed. The scene's numbers are baked in as exact SymPy numbers, and
+terms a scene does not have (gravity with g = 0, springs, off-axis COM offsets of zero) never
+enter an expression, so the generated code holds only what the scene needs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+from sympy import ImmutableMatrix
+
+from .scene import ChaingenError, Scene, Spring
+
+#: S of model.md section 1: rotation by +90 degrees, n_i = S e_i.
+S = ImmutableMatrix([[0, -1], [1, 0]])
+
+
+class UnsupportedSceneError(ChaingenError):
+    """A valid scene that a scheme cannot represent; the message names the key."""
+
+
+def number(value: float) -> sp.Expr:
+    """A scene number as an exact SymPy number (integers stay integers, so 1.0 * x is x)."""
+    value = float(value)
+    if value.is_integer():
+        return sp.Integer(int(value))
+    return sp.Float(value)
+
+
+def cross2(a, b) -> sp.Expr:
+    """z-component of the planar cross product a x b."""
+    return a[0] * b[1] - a[1] * b[0]
+
+
+def dot2(a, b) -> sp.Expr:
+    return a[0] * b[0] + a[1] * b[1]
+
+
+@dataclass(frozen=True)
+class SpringTerms:
+    """One spring's symbolic pieces: its segment lengths and its energy (model.md section 2)."""
+
+    spring: Spring
+    segment_lengths: tuple[sp.Expr, ...]   # s_first .. s_last
+    energy: sp.Expr
+
+
+@dataclass(frozen=True)
+class ComModel:
+    """The chain in COM coordinates q = (x_1..x_n, y_1..y_n) with velocities v (model.md 4).
+
+    joints[i] is X_{i+1} (joints[0] = X_1 = 0), linear in q; directions[i] and normals[i] are
+    e_{i+1}, n_{i+1}, linear in q (valid on the constraint manifold); the constraints
+    c_i = |x_i - X_i|^2 - |c_i|^2 are quadratic in q; the mass matrix is constant.
+    """
+
+    scene: Scene
+    q: ImmutableMatrix
+    v: ImmutableMatrix
+    joints: tuple[ImmutableMatrix, ...]
+    directions: tuple[ImmutableMatrix, ...]
+    normals: tuple[ImmutableMatrix, ...]
+    fastenings: tuple[ImmutableMatrix, ...]     # chain fastenings P_1 .. P_{n+1}
+    constraints: ImmutableMatrix
+    constraint_jacobian: ImmutableMatrix
+    kinetic_energy: sp.Expr
+    mass_matrix: ImmutableMatrix
+    gravity_potential: sp.Expr
+    springs: tuple[SpringTerms, ...]
+
+    @property
+    def n(self) -> int:
+        return self.scene.n
+
+    @property
+    def spring_potential(self) -> sp.Expr:
+        return sp.Add(*(term.energy for term in self.springs))
+
+    @property
+    def potential(self) -> sp.Expr:
+        return self.gravity_potential + self.spring_potential
+
+    @property
+    def energy(self) -> sp.Expr:
+        """H = T + V (model.md section 3)."""
+        return self.kinetic_energy + self.potential
+
+    def com_position(self, i: int) -> ImmutableMatrix:
+        """x_{i+1}, the COM of link i+1 (0-based i)."""
+        return ImmutableMatrix([self.q[i], self.q[self.n + i]])
+
+    def com_velocity(self, i: int) -> ImmutableMatrix:
+        return ImmutableMatrix([self.v[i], self.v[self.n + i]])
+
+    def joint_velocity(self, i: int) -> ImmutableMatrix:
+        """Xdot_{i+1}: the joint map is linear in q, so its velocity is the same map of v."""
+        return self.joints[i].xreplace(dict(zip(self.q, self.v)))
+
+    def absolute_rates(self) -> tuple[sp.Expr, ...]:
+        """thetadot_i = ((x_i - X_i) x (v_i - Xdot_i)) / |c_i|^2 (model.md section 4)."""
+        rates = []
+        for i, link in enumerate(self.scene.links):
+            arm = self.com_position(i) - self.joints[i]
+            arm_rate = self.com_velocity(i) - self.joint_velocity(i)
+            rates.append(cross2(arm, arm_rate) / number(link.com ** 2 + link.com_normal ** 2))
+        return tuple(rates)
+
+
+def com_frame_map(link) -> ImmutableMatrix:
+    """R(-alpha_i)/|c_i|: maps the arm x_i - X_i to the unit direction e_i of the link."""
+    a, b = number(link.com), number(link.com_normal)
+    c2 = number(link.com ** 2 + link.com_normal ** 2)
+    return ImmutableMatrix([[a, b], [-b, a]]) / c2
+
+
+def spring_terms(scene: Scene, spring: Spring, joints, normals) -> SpringTerms:
+    """Segment lengths s_j = |P_{j+1} - P_j| through the spring's own fastenings, and its energy.
+
+    joints and normals are X_1..X_{n+1} and n_0..n_n (n_0 the base's (0, 1)).
+    Mono-articular: 1/2 k (s - s_0)^2; multi-articular: 1/2 k (sum s_j - S_0)^2 (model.md 2).
+    """
+    offsets = scene.spring_fastenings(spring)
+    points = [joints[j - 1] + number(r) * normals[j - 1]
+              for j, r in zip(range(spring.first, spring.last + 2), offsets)]
+    lengths = []
+    for start, end in zip(points[:-1], points[1:]):
+        d = end - start
+        lengths.append(sp.sqrt(d[0] ** 2 + d[1] ** 2))
+    stretch = sp.Add(*lengths) - number(spring.rest_length)
+    energy = number(spring.stiffness) / 2 * stretch ** 2
+    return SpringTerms(spring, tuple(lengths), energy)
+
+
+def com_model(scene: Scene) -> ComModel:
+    """Derive the COM-coordinate model of model.md section 4 for `scene`."""
+    n = scene.n
+    for i, link in enumerate(scene.links):
+        if link.com ** 2 + link.com_normal ** 2 == 0:
+            raise UnsupportedSceneError(
+                f"links[{i}].com: COM coordinates need the COM away from the proximal joint "
+                f"(com^2 + com_normal^2 > 0), link {i + 1} has com = com_normal = 0")
+    xs = sp.symbols(f"x1:{n + 1}", real=True)
+    ys = sp.symbols(f"y1:{n + 1}", real=True)
+    vxs = sp.symbols(f"vx1:{n + 1}", real=True)
+    vys = sp.symbols(f"vy1:{n + 1}", real=True)
+    q = ImmutableMatrix(list(xs) + list(ys))
+    v = ImmutableMatrix(list(vxs) + list(vys))
+
+    joints = [ImmutableMatrix([0, 0])]
+    directions, normals = [], [ImmutableMatrix([0, 1])]
+    for i, link in enumerate(scene.links):
+        com = ImmutableMatrix([xs[i], ys[i]])
+        e = com_frame_map(link) * (com - joints[i])
+        directions.append(e)
+        normals.append(S * e)
+        joints.append(joints[i] + number(link.length) * e)
+    fastenings = tuple(joints[j] + number(r) * normals[j]
+                       for j, r in enumerate(scene.chain_fastenings()))
+
+    constraints = ImmutableMatrix([
+        (xs[i] - joints[i][0]) ** 2 + (ys[i] - joints[i][1]) ** 2
+        - number(link.com ** 2 + link.com_normal ** 2)
+        for i, link in enumerate(scene.links)])
+    constraint_jacobian = constraints.jacobian(q)
+
+    # T = sum 1/2 m_i |v_i|^2 + 1/2 J_i thetadot_i^2, thetadot_i^2 = |v_i - Xdot_i|^2 / |c_i|^2
+    # on the constraint manifold, so T is a constant quadratic form in v.
+    to_v = dict(zip(q, v))
+    kinetic = sp.Integer(0)
+    for i, link in enumerate(scene.links):
+        vi = ImmutableMatrix([vxs[i], vys[i]])
+        kinetic += number(link.mass) / 2 * dot2(vi, vi)
+        if link.inertia != 0:
+            arm_rate = vi - joints[i].xreplace(to_v)
+            kinetic += (number(link.inertia) / number(link.com ** 2 + link.com_normal ** 2)
+                        / 2 * dot2(arm_rate, arm_rate))
+    mass_matrix = ImmutableMatrix(sp.hessian(kinetic, v))
+    kinetic_energy = (v.T * mass_matrix * v)[0, 0] / 2
+
+    gravity = sp.Integer(0)
+    if scene.gravity != 0:
+        gravity = sp.Add(*(number(link.mass * scene.gravity) * ys[i]
+                           for i, link in enumerate(scene.links)))
+    springs = tuple(spring_terms(scene, spring, joints, normals) for spring in scene.springs)
+
+    return ComModel(
+        scene=scene, q=q, v=v, joints=tuple(joints), directions=tuple(directions),
+        normals=tuple(normals[1:]), fastenings=fastenings, constraints=constraints,
+        constraint_jacobian=ImmutableMatrix(constraint_jacobian),
+        kinetic_energy=kinetic_energy, mass_matrix=mass_matrix, gravity_potential=gravity,
+        springs=springs)
+
+
+def joint_space_positions(scene: Scene, phi) -> tuple[list, list]:
+    """COM positions from relative joint angles (model.md section 1), as SymPy expressions.
+
+    Returns (xs, ys); used to start the schemes from (phi, phidot).
+    """
+    theta = sp.Integer(0)
+    joint = ImmutableMatrix([0, 0])
+    xs, ys = [], []
+    for i, link in enumerate(scene.links):
+        theta = theta + phi[i]
+        e = ImmutableMatrix([sp.cos(theta), sp.sin(theta)])
+        com = joint + number(link.com) * e + number(link.com_normal) * (S * e)
+        xs.append(com[0])
+        ys.append(com[1])
+        joint = joint + number(link.length) * e
+    return xs, ys

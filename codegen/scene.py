@@ -1,0 +1,504 @@
+"""Scenes: the validated numbers of one chain (../shared/spec/scene-format.md).
+
+A Scene is a frozen value. Everything downstream (symbolic model, schemes, C package) is a
+pure function of it. Loading and validation live here too: every error names the key with its
+path, e.g. ``links[2].mass: must be > 0, got -1.0``.
+"""
+from __future__ import annotations
+
+import difflib
+import json
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NoReturn
+
+from codegen import kinematics
+
+
+class ChaingenError(Exception):
+    """An error meant for people: the CLI prints its message and exits with status 2."""
+
+
+class SceneError(ChaingenError):
+    """A scene file that cannot be used; the message names the file, the key and the line."""
+
+
+@dataclass(frozen=True)
+class Link:
+    """Link i of model.md section 1 (SI units)."""
+
+    mass: float          # m_i > 0
+    inertia: float       # J_i >= 0 about the COM
+    length: float        # L_i > 0, joint i to joint i+1
+    com: float           # a_i, along the link from the proximal joint
+    com_normal: float    # b_i, normal to the link
+    fastening: float     # r_{i+1}, normal offset of the fastening at the distal joint
+    damping: float       # d_i >= 0, viscous damping of joint i
+
+
+@dataclass(frozen=True)
+class Spring:
+    """A linear spring over joints first..last (1-based, model.md section 2)."""
+
+    first: int
+    last: int
+    stiffness: float
+    rest_length: float
+    offsets: tuple[float, ...] | None   # r of fastenings first..last+1, or None: the chain's
+
+    @property
+    def is_multi_articular(self) -> bool:
+        return self.last > self.first
+
+    @property
+    def joints(self) -> tuple[int, ...]:
+        return tuple(range(self.first, self.last + 1))
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Defaults for `simulate`; command-line options override them."""
+
+    method: str = "es"
+    quadrature: int = 3
+    dt: float = 0.01
+    t_end: float = 10.0
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    gravity: float
+    base_fastening: float                  # r_1
+    links: tuple[Link, ...]
+    springs: tuple[Spring, ...]
+    initial_angles: tuple[float, ...]      # phi_i (rad)
+    initial_velocities: tuple[float, ...]  # phidot_i (rad/s)
+    simulation: Simulation
+
+    @property
+    def n(self) -> int:
+        return len(self.links)
+
+    def chain_fastenings(self) -> tuple[float, ...]:
+        """r_1 .. r_{n+1}: the base's fastening, then each link's distal one."""
+        return (self.base_fastening,) + tuple(link.fastening for link in self.links)
+
+    def spring_fastenings(self, spring: Spring) -> tuple[float, ...]:
+        """r of the fastenings P_first .. P_{last+1} that `spring` runs through."""
+        if spring.offsets is not None:
+            return spring.offsets
+        return self.chain_fastenings()[spring.first - 1: spring.last + 1]
+
+    @property
+    def c_name(self) -> str:
+        """The name as used in C identifiers and file names (see `c_identifier`)."""
+        return c_identifier(self.name)
+
+
+# --------------------------------------------------------------------------------------------
+# Loading and validation (../shared/spec/scene-format.md)
+# --------------------------------------------------------------------------------------------
+
+NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
+"""A scene name: a letter, then letters, digits, '_' or '-' (usable in C after `c_identifier`)."""
+
+METHODS = ("es", "vi", "midpoint")
+QUADRATURE_RANGE = (1, 20)
+
+_TOP_KEYS = ("name", "gravity", "base", "links", "springs", "initial", "simulation")
+_BASE_KEYS = ("fastening",)
+_LINK_KEYS = ("mass", "inertia", "length", "com", "com_normal", "fastening", "damping")
+_LINK_REQUIRED = ("mass", "inertia", "length", "com")
+_SPRING_KEYS = ("joints", "stiffness", "rest_length", "offsets")
+_SPRING_REQUIRED = ("joints", "stiffness", "rest_length")
+_INITIAL_KEYS = ("angles", "velocities")
+_SIMULATION_KEYS = ("method", "quadrature", "dt", "t_end")
+
+_MISSING = object()
+_SHOW_LIMIT = 120
+
+
+def c_identifier(name: str) -> str:
+    """The C-safe form of a scene name: lower case, '-' replaced by '_'."""
+    return name.lower().replace("-", "_")
+
+
+def load_scene(path: str | os.PathLike[str]) -> Scene:
+    """Read and validate the scene file at `path`; its default name is the file's stem."""
+    source = os.fspath(path)
+    try:
+        data = Path(source).read_bytes()
+    except OSError as error:
+        reason = error.strerror or str(error)
+        raise SceneError(f"{source}: cannot read scene file: {reason}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        line = data[: error.start].count(b"\n") + 1
+        raise SceneError(
+            f"{source}:{line}: TOML syntax error: the file is not UTF-8 text "
+            f"(invalid byte 0x{data[error.start]:02x})"
+        ) from None
+    return parse_scene(text, source, Path(source).stem)
+
+
+def parse_scene(text: str, source: str, default_name: str) -> Scene:
+    """Parse and validate scene TOML `text`; errors name `source`, the key path and the line.
+
+    Every rule of scene-format.md is checked and the first violation, in the file's order of
+    keys, raises a one-line SceneError ``<source>: <key path>: <what is wrong>, got <value>``
+    (``<source>:<line>: TOML syntax error: ...`` when the text is not TOML). List indices in
+    key paths are 0-based, as in the file's arrays: ``links[0]`` is link 1 of model.md.
+    """
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        message = str(error)
+        match = re.search(r"\(at line (\d+), column \d+\)", message)
+        if match:
+            line = int(match.group(1))
+        else:  # "(at end of document)"
+            line = max(1, len(text.splitlines()))
+        raise SceneError(f"{source}:{line}: TOML syntax error: {message}") from None
+    return _SceneReader(source, default_name).read(document)
+
+
+def _show(value: Any) -> str:
+    """A value as it would be written in TOML, on one line and shortened if long."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, (int, float)):
+        text = repr(value)
+    elif isinstance(value, str):
+        text = json.dumps(value, ensure_ascii=False)
+    elif isinstance(value, list):
+        text = "[" + ", ".join(_show(item) for item in value) + "]"
+    elif isinstance(value, dict):
+        text = "{" + ", ".join(f"{key} = {_show(item)}" for key, item in value.items()) + "}"
+    elif hasattr(value, "isoformat"):
+        text = value.isoformat()
+    else:
+        text = repr(value)
+    text = text.replace("\n", " ")
+    if len(text) > _SHOW_LIMIT:
+        text = text[: _SHOW_LIMIT - 3] + "..."
+    return text
+
+
+def _kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a float"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    return "a date/time"
+
+
+def _entries(count: int) -> str:
+    return f"{count} entry" if count == 1 else f"{count} entries"
+
+
+def _is_integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+class _SceneReader:
+    """Validates one parsed TOML document; `fail` raises the one-line SceneError."""
+
+    def __init__(self, source: str, default_name: str):
+        self.source = source
+        self.default_name = default_name
+        self.n: int | None = None
+
+    # -- errors ---------------------------------------------------------------------------
+    def fail(self, path: str, what: str, value: Any = _MISSING) -> NoReturn:
+        message = f"{self.source}: {path}: {what}"
+        if value is not _MISSING:
+            message += f", got {_show(value)}"
+        raise SceneError(message)
+
+    def unknown_key(self, path: str, key: str, value: Any, allowed: tuple[str, ...]) -> NoReturn:
+        close = difflib.get_close_matches(key, allowed, n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        self.fail(
+            f"{path}{key}" if not path else f"{path}.{key}",
+            f"unknown key ({hint}allowed here: {', '.join(allowed)})",
+            value,
+        )
+
+    # -- value checks ---------------------------------------------------------------------
+    def number(self, path: str, value: Any, meaning: str) -> float:
+        """A finite int or float (never a boolean), as float."""
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            self.fail(path, f"must be a number ({meaning}), not {_kind(value)}", value)
+        result = float(value)
+        if not math.isfinite(result):
+            self.fail(path, f"must be finite ({meaning})", value)
+        return result
+
+    def positive(self, path: str, value: Any, meaning: str) -> float:
+        result = self.number(path, value, meaning)
+        if not result > 0.0:
+            self.fail(path, f"must be > 0 ({meaning})", result)
+        return result
+
+    def nonnegative(self, path: str, value: Any, meaning: str) -> float:
+        result = self.number(path, value, meaning)
+        if not result >= 0.0:
+            self.fail(path, f"must be >= 0 ({meaning})", result)
+        return result
+
+    def table(self, path: str, value: Any, header: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            self.fail(path, f"must be a table ({header}), not {_kind(value)}", value)
+        return value
+
+    def array_of_tables(self, path: str, value: Any) -> list[Any]:
+        """The array itself; each entry is checked with `table` when its turn comes."""
+        if not isinstance(value, list):
+            self.fail(path, f"must be an array of tables ([[{path}]]), not {_kind(value)}", value)
+        return value
+
+    def number_list(self, path: str, value: Any, meaning: str, length: int | None,
+                    length_meaning: str) -> tuple[float, ...]:
+        if not isinstance(value, list):
+            self.fail(path, f"must be an array of numbers ({meaning}), not {_kind(value)}", value)
+        if length is not None and len(value) != length:
+            self.fail(path, f"must have {_entries(length)} ({length_meaning}), "
+                            f"not {len(value)}", value)
+        return tuple(self.number(f"{path}[{index}]", item, meaning)
+                     for index, item in enumerate(value))
+
+    def name(self, value: Any) -> str:
+        if not isinstance(value, str):
+            self.fail("name", f"must be a string, not {_kind(value)}", value)
+        if not NAME_PATTERN.fullmatch(value):
+            self.fail("name", "must start with a letter and contain only letters, digits, "
+                              "'_' and '-' (it prefixes generated C names)", value)
+        return value
+
+    def default_scene_name(self) -> str:
+        name = self.default_name
+        if NAME_PATTERN.fullmatch(name):
+            return name
+        suggestion = re.sub(r"[^A-Za-z0-9_-]", "_", name)
+        if not suggestion[:1].isalpha():
+            suggestion = "scene_" + suggestion
+        self.fail("name", "not set, and the default (the file's stem) is not a valid scene name "
+                          "(a letter, then letters, digits, '_' or '-'); set it in the file, "
+                          f"e.g. name = {json.dumps(suggestion)}", name)
+
+    # -- sections -------------------------------------------------------------------------
+    def read(self, document: dict[str, Any]) -> Scene:
+        links_value = document.get("links")
+        if isinstance(links_value, list):
+            self.n = len(links_value)
+
+        name = _MISSING
+        gravity = 9.81
+        base_fastening = 0.0
+        links: tuple[Link, ...] | None = None
+        springs: tuple[Spring, ...] = ()
+        angles: tuple[float, ...] | None = None
+        velocities: tuple[float, ...] | None = None
+        simulation = Simulation()
+
+        for key, value in document.items():
+            if key == "name":
+                name = self.name(value)
+            elif key == "gravity":
+                gravity = self.nonnegative("gravity", value, "g in m/s^2 along -y; 0 is off")
+            elif key == "base":
+                base_fastening = self.base(value)
+            elif key == "links":
+                links = self.links(value)
+            elif key == "springs":
+                springs = self.springs(value)
+            elif key == "initial":
+                angles, velocities = self.initial(value)
+            elif key == "simulation":
+                simulation = self.simulation(value)
+            else:
+                self.unknown_key("", key, value, _TOP_KEYS)
+
+        if name is _MISSING:
+            name = self.default_scene_name()
+        if links is None:
+            self.fail("links", "missing: at least one [[links]] table is required")
+        n = len(links)
+        scene = Scene(
+            name=name,
+            gravity=gravity,
+            base_fastening=base_fastening,
+            links=links,
+            springs=springs,
+            initial_angles=angles if angles is not None else (0.0,) * n,
+            initial_velocities=velocities if velocities is not None else (0.0,) * n,
+            simulation=simulation,
+        )
+        self.refuse_zero_length_segments(scene)
+        return scene
+
+    def base(self, value: Any) -> float:
+        table = self.table("base", value, "[base]")
+        fastening = 0.0
+        for key, item in table.items():
+            if key == "fastening":
+                fastening = self.number("base.fastening", item, "r_1, normal offset in m")
+            else:
+                self.unknown_key("base", key, item, _BASE_KEYS)
+        return fastening
+
+    def links(self, value: Any) -> tuple[Link, ...]:
+        tables = self.array_of_tables("links", value)
+        if not tables:
+            self.fail("links", "at least one link is required", value)
+        return tuple(self.link(index, self.table(f"links[{index}]", table, "[[links]]"))
+                     for index, table in enumerate(tables))
+
+    def link(self, index: int, table: dict[str, Any]) -> Link:
+        path = f"links[{index}]"
+        i = index + 1
+        fields: dict[str, float] = {"com_normal": 0.0, "fastening": 0.0, "damping": 0.0}
+        for key, item in table.items():
+            where = f"{path}.{key}"
+            if key == "mass":
+                fields[key] = self.positive(where, item, f"m_{i} in kg, link {i}")
+            elif key == "inertia":
+                fields[key] = self.nonnegative(where, item, f"J_{i} in kg m^2, link {i}")
+            elif key == "length":
+                fields[key] = self.positive(where, item, f"L_{i} in m, link {i}")
+            elif key == "com":
+                fields[key] = self.number(where, item, f"a_{i} in m, link {i}")
+            elif key == "com_normal":
+                fields[key] = self.number(where, item, f"b_{i} in m, link {i}")
+            elif key == "fastening":
+                fields[key] = self.number(where, item, f"r_{i + 1} in m, link {i}")
+            elif key == "damping":
+                fields[key] = self.nonnegative(where, item, f"d_{i} in N m s/rad, joint {i}")
+            else:
+                self.unknown_key(path, key, item, _LINK_KEYS)
+        for key in _LINK_REQUIRED:
+            if key not in fields:
+                self.fail(f"{path}.{key}", f"missing: required for every link (link {i})")
+        return Link(**fields)
+
+    def springs(self, value: Any) -> tuple[Spring, ...]:
+        tables = self.array_of_tables("springs", value)
+        return tuple(self.spring(index, self.table(f"springs[{index}]", table, "[[springs]]"))
+                     for index, table in enumerate(tables))
+
+    def spring(self, index: int, table: dict[str, Any]) -> Spring:
+        path = f"springs[{index}]"
+        joints: tuple[int, int] | None = None
+        stiffness = rest_length = None
+        offsets: tuple[float, ...] | None = None
+        offsets_raw: Any = None
+        for key, item in table.items():
+            where = f"{path}.{key}"
+            if key == "joints":
+                joints = self.spring_joints(where, item)
+            elif key == "stiffness":
+                stiffness = self.positive(where, item, "k in N/m")
+            elif key == "rest_length":
+                rest_length = self.nonnegative(where, item, "S_0 in m, over all segments")
+            elif key == "offsets":
+                offsets = self.number_list(where, item, "r of a fastening in m", None, "")
+                offsets_raw = item
+            else:
+                self.unknown_key(path, key, item, _SPRING_KEYS)
+        found = {"joints": joints, "stiffness": stiffness, "rest_length": rest_length}
+        for key in _SPRING_REQUIRED:
+            if found[key] is None:
+                self.fail(f"{path}.{key}", "missing: required for every spring")
+        first, last = joints
+        if offsets is not None and len(offsets) != last - first + 2:
+            self.fail(f"{path}.offsets",
+                      f"must have {_entries(last - first + 2)}, one per fastening "
+                      f"P_{first}..P_{last + 1} passed by joints [{first}, {last}], "
+                      f"not {len(offsets)}", offsets_raw)
+        return Spring(first=first, last=last, stiffness=stiffness, rest_length=rest_length,
+                      offsets=offsets)
+
+    def spring_joints(self, path: str, value: Any) -> tuple[int, int]:
+        if (not isinstance(value, list) or len(value) != 2
+                or not all(_is_integer(item) for item in value)):
+            self.fail(path, "must be an array of two integers [first, last] (1-based joints)",
+                      value)
+        first, last = value
+        if first < 1:
+            self.fail(path, f"joint {first} does not exist: joints are numbered from 1", value)
+        if first > last:
+            self.fail(path, f"first joint {first} is after last joint {last}; "
+                            "write [first, last] with first <= last", value)
+        if self.n is not None and last > self.n:
+            self.fail(path, f"joint {last} does not exist: the chain has {self.n} "
+                            f"joint{'s' if self.n != 1 else ''} (1..{self.n})", value)
+        return first, last
+
+    def initial(self, value: Any) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
+        table = self.table("initial", value, "[initial]")
+        angles = velocities = None
+        for key, item in table.items():
+            where = f"initial.{key}"
+            if key == "angles":
+                angles = self.number_list(where, item, "phi_i in rad", self.n, "one per link")
+            elif key == "velocities":
+                velocities = self.number_list(where, item, "phidot_i in rad/s", self.n,
+                                              "one per link")
+            else:
+                self.unknown_key("initial", key, item, _INITIAL_KEYS)
+        return angles, velocities
+
+    def simulation(self, value: Any) -> Simulation:
+        table = self.table("simulation", value, "[simulation]")
+        fields: dict[str, Any] = {}
+        for key, item in table.items():
+            where = f"simulation.{key}"
+            if key == "method":
+                if not isinstance(item, str) or item not in METHODS:
+                    self.fail(where, "must be one of " + ", ".join(f'"{m}"' for m in METHODS),
+                              item)
+                fields[key] = item
+            elif key == "quadrature":
+                low, high = QUADRATURE_RANGE
+                if not _is_integer(item) or not low <= item <= high:
+                    self.fail(where, f"must be an integer from {low} to {high} "
+                                     "(Gauss-Legendre points)", item)
+                fields[key] = item
+            elif key == "dt":
+                fields[key] = self.positive(where, item, "step in s")
+            elif key == "t_end":
+                fields[key] = self.positive(where, item, "duration in s")
+            else:
+                self.unknown_key("simulation", key, item, _SIMULATION_KEYS)
+        return Simulation(**fields)
+
+    def refuse_zero_length_segments(self, scene: Scene) -> None:
+        """Refuse a spring segment of (numerically) zero length at the initial angles.
+
+        model.md section 2: the gradient of s_j = |P_{j+1} - P_j| is undefined at s_j = 0.
+        """
+        phi = scene.initial_angles
+        for index, spring in enumerate(scene.springs):
+            geometry = kinematics.spring_geometry(scene, spring, phi)
+            tolerance = kinematics.zero_segment_tolerance(scene, spring)
+            for j, length in zip(spring.joints, geometry.segment_lengths):
+                if length < tolerance:
+                    self.fail(f"springs[{index}]",
+                              f"segment s_{j} (fastening P_{j} to P_{j + 1}, joint {j}) has zero "
+                              "length at the initial configuration (initial.angles), where its "
+                              "direction is undefined; move a fastening (offsets) or change "
+                              f"the initial angles (limit {tolerance:.3g} m)", float(length))
