@@ -16,7 +16,7 @@ from __future__ import annotations
 import sympy as sp
 from sympy import ImmutableMatrix
 
-from ..model import com_model, cross2, dot2, joint_space_positions
+from ..model import com_model, cross2, dot2, joint_space_positions, number
 from ..quadrature import gauss_legendre_nodes
 from ..scene import Scene
 from .base import DiscreteScheme, Layout
@@ -31,6 +31,23 @@ def averaged_spring_gradient(model, q0, q1, quadrature: int) -> ImmutableMatrix:
         point = {qi: a + sp.Float(tau) * (b - a) for qi, a, b in zip(model.q, q0, q1)}
         total += sp.Float(weight) * gradient.xreplace(point)
     return ImmutableMatrix(total)
+
+
+def damping_force(model) -> ImmutableMatrix:
+    """Generalised force of viscous joint damping in COM coordinates (model.md section 7).
+
+    The torque -d_i phidot_i acts between links i-1 and i; its generalised force is
+    f = sum_i -d_i phidot_i grad_v(phidot_i), phidot_i = thetadot_i - thetadot_{i-1} linear in
+    v. Evaluated at the step's mid-point, its power is -sum_i d_i phidot_i^2 <= 0: passive.
+    """
+    rates = (sp.Integer(0),) + model.absolute_rates()
+    force = sp.zeros(len(model.v), 1)
+    for link, before, after in zip(model.scene.links, rates[:-1], rates[1:]):
+        if link.damping:
+            relative = after - before
+            force -= number(link.damping) * relative * ImmutableMatrix([relative]).jacobian(
+                model.v).T
+    return ImmutableMatrix(force)
 
 
 def build(scene: Scene, quadrature: int) -> DiscreteScheme:
@@ -55,6 +72,9 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
         gradient = gradient + averaged_spring_gradient(model, q0, q1, quadrature)
     momentum_balance = (model.mass_matrix * dv - constraint_jacobian_mid.T * mu
                         + dt * gradient)
+    if any(link.damping for link in scene.links):
+        midpoint = {**dict(zip(model.q, qm)), **dict(zip(model.v, (v0 + v1) / 2))}
+        momentum_balance -= dt * damping_force(model).xreplace(midpoint)
     constraint_increment = constraint_jacobian_mid * dq
     residual = ImmutableMatrix.vstack(momentum_balance, constraint_increment)
 

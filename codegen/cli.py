@@ -1,0 +1,145 @@
+"""The `chaingen` command: generate C solvers for a scene, and simulate with them."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .scene import ChaingenError, load_scene
+from .scene import METHODS as SCENE_METHODS
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILED = 1
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+
+
+def _add_scheme_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format)")
+    parser.add_argument("--method", choices=SCENE_METHODS,
+                        help="time-stepping scheme (default: the scene's [simulation].method)")
+    parser.add_argument("--quadrature", type=_positive_int, metavar="K",
+                        help="Gauss-Legendre points for the spring terms of 'es' "
+                             "(default: the scene's)")
+
+
+def parser() -> argparse.ArgumentParser:
+    main = argparse.ArgumentParser(
+        prog="chaingen",
+        description="Structure-preserving solvers for planar elastic robot arms: SymPy derives "
+                    "the model, CasADi generates C, and the C solver simulates.")
+    main.add_argument("--version", action="version", version=f"chaingen {__version__}")
+    commands = main.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    generate = commands.add_parser("generate", help="write the C package of a scene's solver")
+    _add_scheme_options(generate)
+    generate.add_argument("-o", "--output", type=Path, metavar="DIR",
+                          help="package directory (default: ./<scene>_<method>)")
+
+    simulate = commands.add_parser("simulate", help="simulate a scene with a generated solver")
+    _add_scheme_options(simulate)
+    simulate.add_argument("--dt", type=_number, help="step in s (default: the scene's)")
+    simulate.add_argument("--t-end", type=_number, help="duration in s (default: the scene's)")
+    simulate.add_argument("--every", type=_positive_int, default=1, metavar="N",
+                          help="write every N-th step (t = 0 always included; default 1)")
+    simulate.add_argument("--out", type=Path, metavar="FILE.csv",
+                          help="write the trajectory file (scene-format.md)")
+    return main
+
+
+def command_generate(args) -> int:
+    from .package import generate_package, write_package
+    from .simulation import run_settings
+
+    scene = load_scene(args.scene)
+    settings = run_settings(scene, method=args.method, quadrature=args.quadrature)
+    package = generate_package(scene, settings.method, settings.quadrature)
+    directory = write_package(package, args.output or Path(package.prefix))
+    print(f"wrote {directory}/: {', '.join(package.files)}")
+    return 0
+
+
+def _check_output_path(path: Path) -> None:
+    if path.is_dir():
+        raise ChaingenError(f"--out: {path} is a directory; give a file name")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise ChaingenError(f"--out: directory {parent} does not exist")
+
+
+def command_simulate(args) -> int:
+    from chaingen_runtime import NewtonError, write_trajectory
+
+    from .simulation import run_settings, simulate_scene
+
+    scene = load_scene(args.scene)
+    settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
+                            dt=args.dt, t_end=args.t_end, every=args.every)
+    if args.out is not None:
+        _check_output_path(args.out)
+    try:
+        result = simulate_scene(scene, settings)
+    except NewtonError as error:
+        print(f"chaingen: simulation of {args.scene} failed: {error}", file=sys.stderr)
+        print("chaingen: no trajectory written", file=sys.stderr)
+        return EXIT_FAILED
+    if args.out is not None:
+        write_trajectory(result, args.out)
+    print(summary(result, settings, args.out))
+    return 0
+
+
+def summary(result, settings, out: Path | None) -> str:
+    label = f"method {result.method}"
+    if result.quadrature is not None:
+        label += f", quadrature {result.quadrature}"
+    per_step = result.wall_time / result.n_steps
+    lines = [
+        f"{result.scene}: {label}, dt {settings.dt:g} s, t_end {result.n_steps * settings.dt:g} s",
+        f"  steps                  {result.n_steps} ({len(result.samples)} samples, "
+        f"every {result.every})",
+        f"  wall time (C loop)     {result.wall_time:.4g} s ({per_step * 1e6:.3g} us/step)",
+        f"  t_realtime             {result.t_realtime:.3g}",
+        f"  max |energy error|     {np.abs(result.energy_error).max():.3e} J",
+        f"  max |constraint error| {result.constraint_error.max():.3e}",
+        f"  Newton iterations      mean {result.mean_newton_iterations:.2f}, "
+        f"max {result.max_newton_iterations}",
+    ]
+    if out is not None:
+        lines.append(f"  trajectory             {out}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    handlers = {"generate": command_generate, "simulate": command_simulate}
+    try:
+        return handlers[args.command](args)
+    except ChaingenError as error:
+        print(f"chaingen: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("chaingen: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

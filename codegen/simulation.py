@@ -1,0 +1,63 @@
+"""Scene -> generated package -> built solver -> simulation, in one call."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from chaingen_runtime import NewtonOptions, SimulationResult, Solver
+
+from .package import generate_package
+from .scene import ChaingenError, Scene
+
+
+class SettingsError(ChaingenError):
+    pass
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """What `simulate` runs: the scene's [simulation] defaults with overrides applied."""
+
+    method: str
+    quadrature: int
+    dt: float
+    t_end: float
+    every: int = 1
+
+    @property
+    def n_steps(self) -> int:
+        return max(1, round(self.t_end / self.dt))
+
+
+def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=None,
+                 every=None) -> RunSettings:
+    """Merge command-line overrides into the scene's defaults, validating each override."""
+    defaults = scene.simulation
+    settings = RunSettings(
+        method=method if method is not None else defaults.method,
+        quadrature=quadrature if quadrature is not None else defaults.quadrature,
+        dt=dt if dt is not None else defaults.dt,
+        t_end=t_end if t_end is not None else defaults.t_end,
+        every=every if every is not None else 1)
+    for name in ("dt", "t_end"):
+        value = getattr(settings, name)
+        if not (math.isfinite(value) and value > 0):
+            raise SettingsError(f"--{name.replace('_', '-')}: must be > 0 and finite, got {value}")
+    if not 1 <= settings.quadrature <= 20:
+        raise SettingsError(f"--quadrature: must be between 1 and 20, got {settings.quadrature}")
+    if settings.every < 1:
+        raise SettingsError(f"--every: must be >= 1, got {settings.every}")
+    return settings
+
+
+def build_solver(scene: Scene, method: str, quadrature: int) -> Solver:
+    return Solver.from_files(generate_package(scene, method, quadrature).files)
+
+
+def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None = None,
+                   options: NewtonOptions | None = None) -> SimulationResult:
+    """Simulate `scene` from its initial state; raises NewtonError if a step fails."""
+    solver = solver or build_solver(scene, settings.method, settings.quadrature)
+    return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=settings.dt,
+                           n_steps=settings.n_steps, every=settings.every, options=options,
+                           scene=scene.name)
