@@ -263,8 +263,8 @@ class Solver:
         if status:
             failed = stats.steps + 1
             raise NewtonError(
-                f"step {failed} (t = {failed * dt:.6g} s -> {(failed + 1) * dt:.6g} s) failed "
+                f"step {failed} (t = {stats.steps * dt:.6g} s -> {failed * dt:.6g} s) failed "
                 f"after {stats.failed_iterations} Newton iterations: "
                 f"{STATUS_MESSAGES.get(status, status)}",
-                status=status, step=failed, time=failed * dt, result=result)
+                status=status, step=failed, time=stats.steps * dt, result=result)
         return result

@@ -1,0 +1,173 @@
+"""Fast tier (no compiler): the SymPy model and the "es" scheme, checked numerically against
+the independent numpy kinematics of codegen/kinematics.py (straight from model.md 1-3)."""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+import sympy as sp
+
+from codegen import kinematics
+from codegen.casadi_functions import SympyToCasadi, mark_parameters_used, scheme_functions
+from codegen.model import UnsupportedSceneError, com_model
+from codegen.quadrature import gauss_legendre_nodes
+from codegen.schemes import build_scheme
+from conftest import OWN_SCENES, REFERENCE_SCENES, load
+
+ALL_SCENES = REFERENCE_SCENES + OWN_SCENES
+rng = np.random.default_rng(20261122)
+
+
+def numeric(expr_matrix, symbols, values):
+    return np.array(sp.lambdify(list(symbols), expr_matrix, "numpy")(*values),
+                    dtype=float).reshape(-1)
+
+
+@pytest.fixture(scope="module", params=ALL_SCENES)
+def scheme(request):
+    return build_scheme(load(request.param), "es", 3)
+
+
+def random_joint_state(n):
+    return rng.uniform(-np.pi, np.pi, n), rng.normal(0.0, 1.5, n)
+
+
+def test_mass_matrix_is_constant_symmetric_positive_definite(scheme):
+    model = com_model(scheme.scene)
+    M = model.mass_matrix
+    assert M.free_symbols == set()
+    M = np.array(M, dtype=float)
+    np.testing.assert_array_equal(M, M.T)
+    assert np.linalg.eigvalsh(M).min() > 0
+
+
+def test_initial_state_satisfies_the_constraints(scheme):
+    model = com_model(scheme.scene)
+    inputs = list(scheme.initial_angles) + list(scheme.initial_velocities)
+    for _ in range(5):
+        phi, phidot = random_joint_state(scheme.scene.n)
+        x = numeric(scheme.initial_state, inputs, list(phi) + list(phidot))
+        c = numeric(model.constraints, scheme.state, x)
+        np.testing.assert_allclose(c, 0.0, atol=1e-13)
+        # velocity constraint C(q) v = 0: the initial velocity is tangent to the manifold
+        C = np.array(sp.lambdify(list(scheme.state), model.constraint_jacobian)(*x), dtype=float)
+        np.testing.assert_allclose(C @ x[2 * scheme.scene.n:], 0.0, atol=1e-12)
+
+
+def test_energy_equals_the_independent_kinematics(scheme):
+    """H(x(phi, phidot)) of the scheme = T + V computed from model.md 1-3 in plain numpy."""
+    scene = scheme.scene
+    inputs = list(scheme.initial_angles) + list(scheme.initial_velocities)
+    for _ in range(5):
+        phi, phidot = random_joint_state(scene.n)
+        x = numeric(scheme.initial_state, inputs, list(phi) + list(phidot))
+        energy = numeric(sp.Matrix([scheme.energy]), scheme.state, x)[0]
+        reference = kinematics.total_energy(scene, phi, phidot)
+        assert energy == pytest.approx(reference, rel=1e-12, abs=1e-12)
+
+
+def test_joint_space_round_trip(scheme):
+    """outputs(initial_state(phi, phidot)) = (phi wrapped to (-pi, pi], phidot)."""
+    n = scheme.scene.n
+    inputs = list(scheme.initial_angles) + list(scheme.initial_velocities)
+    for _ in range(5):
+        phi, phidot = random_joint_state(n)
+        phi_unwrapped = phi + 2 * np.pi * rng.integers(-2, 3, n)
+        x = numeric(scheme.initial_state, inputs, list(phi_unwrapped) + list(phidot))
+        np.testing.assert_allclose(numeric(scheme.joint_angles, scheme.state, x), phi, atol=1e-12)
+        np.testing.assert_allclose(numeric(scheme.joint_velocities, scheme.state, x), phidot,
+                                   atol=1e-12)
+
+
+def test_spring_segment_lengths_equal_the_kinematics():
+    scene = load("five_link_biarticular")
+    model = com_model(scene)
+    scheme = build_scheme(scene, "es", 1)
+    inputs = list(scheme.initial_angles) + list(scheme.initial_velocities)
+    phi, phidot = random_joint_state(scene.n)
+    x = numeric(scheme.initial_state, inputs, list(phi) + list(phidot))
+    for terms in model.springs:
+        lengths = numeric(sp.Matrix(terms.segment_lengths), model.q, x[:2 * scene.n])
+        reference = kinematics.spring_geometry(scene, terms.spring, phi).segment_lengths
+        np.testing.assert_allclose(lengths, reference, rtol=1e-13)
+
+
+def test_generate_only_what_the_scene_needs():
+    gravity_only = build_scheme(load("three_link_gravity"), "es", 3)
+    assert not any(e.has(sp.sqrt) or any(isinstance(a, sp.Pow) and a.exp.is_Rational
+                                         and not a.exp.is_Integer for a in sp.preorder_traversal(e))
+                   for e in gravity_only.residual), "no spring terms without springs"
+    import dataclasses
+    weightless = dataclasses.replace(load("three_link_mono"), gravity=0.0)
+    model = com_model(weightless)
+    assert model.gravity_potential == 0
+
+
+@pytest.mark.parametrize("points", [1, 2, 3, 5, 8])
+def test_gauss_legendre_is_exact_to_degree_2k_minus_1(points):
+    nodes, weights = gauss_legendre_nodes(points)
+    assert sum(weights) == pytest.approx(1.0, abs=1e-15)
+    for degree in range(2 * points):
+        integral = sum(w * t ** degree for t, w in zip(nodes, weights))
+        assert integral == pytest.approx(1.0 / (degree + 1), abs=1e-14)
+    integral = sum(w * t ** (2 * points) for t, w in zip(nodes, weights))
+    assert integral != pytest.approx(1.0 / (2 * points + 1), abs=1e-14)
+
+
+def test_casadi_functions_equal_sympy(scheme):
+    """The CasADi translation evaluates to the SymPy residual and state maps."""
+    functions = scheme_functions(scheme, "t")
+    n, nx, nz = scheme.scene.n, len(scheme.state), len(scheme.unknowns)
+    for _ in range(3):
+        z, x0, dt = rng.normal(0, 0.3, nz), rng.normal(0, 1.0, nx), 0.01
+        step_inputs = list(scheme.unknowns) + list(scheme.state) + [scheme.dt]
+        values = list(z) + list(x0) + [dt]
+        np.testing.assert_allclose(np.array(functions.residual(z, x0, dt)).ravel(),
+                                   numeric(scheme.residual, step_inputs, values), rtol=1e-12,
+                                   atol=1e-12)
+        np.testing.assert_allclose(np.array(functions.next_state(z, x0, dt)).ravel(),
+                                   numeric(scheme.next_state, step_inputs, values), rtol=1e-13,
+                                   atol=1e-14)
+        energy = float(functions.outputs(x0)[2])
+        assert energy == pytest.approx(numeric(sp.Matrix([scheme.energy]), scheme.state, x0)[0],
+                                       rel=1e-13)
+    phi, phidot = random_joint_state(n)
+    np.testing.assert_allclose(
+        np.array(functions.initial_state(phi, phidot)).ravel(),
+        numeric(scheme.initial_state, list(scheme.initial_angles) +
+                list(scheme.initial_velocities), list(phi) + list(phidot)), rtol=1e-13, atol=1e-14)
+
+
+def test_translation_of_powers_and_functions():
+    x, y = sp.symbols("x y")
+    X, Y = ca.SX.sym("x"), ca.SX.sym("y")
+    translate = SympyToCasadi({x: X, y: Y})
+    expr = sp.sqrt(x) + x ** -1 + 1 / sp.sqrt(y) + x ** 3 + x ** sp.Rational(3, 2) + sp.atan2(y, x) \
+        + sp.sin(x) * sp.cos(y)
+    f = ca.Function("f", [X, Y], [translate(expr)])
+    for a, b in [(0.7, 1.3), (2.0, 0.2)]:
+        assert float(f(a, b)) == pytest.approx(float(expr.subs({x: a, y: b})), rel=1e-14)
+
+
+def test_unbound_symbol_is_an_error():
+    from codegen.casadi_functions import MissingInputError, check_free_symbols
+    x, y = sp.symbols("x y")
+    with pytest.raises(MissingInputError, match="y"):
+        check_free_symbols("f", [x + y], [x])
+
+
+def test_com_at_the_proximal_joint_is_refused_clearly():
+    import dataclasses
+    scene = load("three_link_gravity")
+    links = list(scene.links)
+    links[1] = dataclasses.replace(links[1], com=0.0, com_normal=0.0)
+    with pytest.raises(UnsupportedSceneError, match=r"links\[1\]\.com"):
+        com_model(dataclasses.replace(scene, links=tuple(links)))
+
+
+def test_unused_parameters_are_marked():
+    source = ("static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,"
+              " casadi_real* w, int mem) {\n  return 0;\n}\nint g(void) {\n  return 1;\n}\n")
+    marked = mark_parameters_used(source)
+    assert "(void)arg; (void)res; (void)iw; (void)w; (void)mem;" in marked
+    assert "int g(void) {\n  return 1;" in marked

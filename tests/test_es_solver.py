@@ -1,0 +1,182 @@
+"""Compile tier: the generated "es" solvers, built and run through the Python runtime."""
+from __future__ import annotations
+
+import subprocess
+
+import numpy as np
+import pytest
+
+from chaingen_runtime import NewtonError, NewtonOptions
+from conftest import OWN_SCENES, REFERENCE_SCENES, load, solver_for
+
+rng = np.random.default_rng(7)
+STANDARD = dict(dt=0.01, n_steps=5000)   # thesis Table 5.1: 50 s at dt = 0.01 s
+
+
+def standard_run(name, quadrature):
+    scene = load(name)
+    return solver_for(name, "es", quadrature).simulate(
+        scene.initial_angles, scene.initial_velocities, **STANDARD)
+
+
+def random_step_point(solver, scene):
+    """A state from random joint-space values and a Newton iterate near its solution."""
+    phi, phidot = rng.uniform(-np.pi, np.pi, scene.n), rng.normal(0, 1.5, scene.n)
+    x0 = solver.initial_state(phi, phidot)
+    z = rng.normal(0.0, 0.05, solver.nz)
+    return z, x0
+
+
+@pytest.mark.parametrize("name", REFERENCE_SCENES + OWN_SCENES)
+@pytest.mark.parametrize("quadrature", [1, 3])
+def test_jacobian_matches_central_differences(name, quadrature):
+    """dF/dz of the generated code against central differences of the generated residual."""
+    scene = load(name)
+    solver = solver_for(name, "es", quadrature)
+    for _ in range(3):
+        z, x0 = random_step_point(solver, scene)
+        dt = rng.uniform(0.001, 0.05)
+        _, jacobian = solver.residual_jacobian(z, x0, dt)
+        numeric = np.empty_like(jacobian)
+        for j in range(solver.nz):
+            h = 1e-6 * max(1.0, abs(z[j]))
+            up, down = z.copy(), z.copy()
+            up[j] += h
+            down[j] -= h
+            numeric[:, j] = (solver.residual(up, x0, dt) - solver.residual(down, x0, dt)) / (2 * h)
+        error = np.abs(jacobian - numeric).max() / np.abs(jacobian).max()
+        assert error <= 1e-6, f"relative Jacobian error {error:.2e}"
+
+
+def test_residual_and_jacobian_agree_on_the_residual():
+    solver = solver_for("three_link_mono", "es", 3)
+    z, x0 = random_step_point(solver, load("three_link_mono"))
+    residual, _ = solver.residual_jacobian(z, x0, 0.01)
+    np.testing.assert_array_equal(residual, solver.residual(z, x0, 0.01))
+
+
+@pytest.mark.parametrize("name,quadrature", [("three_link_gravity", 1), ("three_link_mono", 1),
+                                              ("three_link_mono", 3), ("three_link_multi", 3)])
+def test_standard_run_keeps_the_constraints_to_round_off(name, quadrature):
+    result = standard_run(name, quadrature)
+    assert result.n_steps == 5000 and len(result.samples) == 5001
+    assert result.constraint_error.max() <= 1e-12
+
+
+def test_standard_gravity_run_conserves_energy_to_round_off():
+    result = standard_run("three_link_gravity", 1)
+    assert np.abs(result.energy_error).max() <= 1e-12
+
+
+def test_midpoint_rule_energy_error_is_bounded_near_1e_5():
+    """Thesis Fig. 5.5a: with K = 1 the spring terms give a bounded error of about 1e-5."""
+    error = np.abs(standard_run("three_link_mono", 1).energy_error)
+    assert 1e-6 <= error.max() <= 1e-4
+    first, second = error[:2500].max(), error[2500:].max()
+    assert second <= 2.0 * first, "energy error grows: not bounded"
+
+
+def test_gauss_3_energy_error_is_below_1e_11():
+    assert np.abs(standard_run("three_link_mono", 3).energy_error).max() <= 1e-11
+
+
+def test_energy_error_of_the_spring_terms_has_order_2k():
+    """Halving dt divides the K = 1 energy error by about 4, and the K = 2 error by about 16."""
+    scene = load("three_link_mono")
+    for quadrature, order in ((1, 2), (2, 4)):
+        solver = solver_for("three_link_mono", "es", quadrature)
+        errors = []
+        for dt in (0.04, 0.02):
+            result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
+                                     n_steps=round(5.0 / dt))
+            errors.append(np.abs(result.energy_error).mean())
+        assert np.log2(errors[0] / errors[1]) == pytest.approx(order, abs=0.5)
+
+
+def test_damped_energy_decreases_monotonically():
+    import dataclasses
+    from codegen.simulation import build_solver
+    scene = load("three_link_mono")
+    damped = dataclasses.replace(scene, links=tuple(
+        dataclasses.replace(link, damping=0.2) for link in scene.links))
+    result = build_solver(damped, "es", 3).simulate(
+        scene.initial_angles, scene.initial_velocities, dt=0.01, n_steps=1000)
+    assert np.all(np.diff(result.energy) <= 1e-12)
+    assert result.energy[-1] < result.energy[0] - 0.1
+
+
+def test_failed_newton_solve_raises_with_the_step():
+    scene = load("three_link_mono")
+    solver = solver_for("three_link_mono", "es", 3)
+    with pytest.raises(NewtonError, match=r"step 1 \(t = 0 s") as caught:
+        solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01, n_steps=10,
+                        options=NewtonOptions(max_iterations=1))
+    assert caught.value.status == 1 and caught.value.step == 1
+    assert len(caught.value.result.samples) == 1      # only the initial row is valid
+    with pytest.raises(NewtonError, match="did not converge"):
+        solver.step(solver.initial_state(scene.initial_angles, scene.initial_velocities), 0.01,
+                    NewtonOptions(max_iterations=1))
+
+
+def test_step_matches_simulate():
+    scene = load("three_link_multi")
+    solver = solver_for("three_link_multi", "es", 3)
+    x = solver.initial_state(scene.initial_angles, scene.initial_velocities)
+    for _ in range(10):
+        x, iterations = solver.step(x, 0.01)
+        assert 1 <= iterations <= 5
+    result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                             n_steps=10, every=5)
+    np.testing.assert_array_equal(result.t, [0.0, 0.05, 0.1])
+    np.testing.assert_allclose(result.phi[-1], solver.outputs(x)[0], rtol=0, atol=1e-15)
+
+
+def test_bad_arguments_are_refused():
+    solver = solver_for("three_link_mono", "es", 3)
+    with pytest.raises(NewtonError, match="bad argument"):
+        solver.step(np.zeros(solver.nx), -0.01)
+    with pytest.raises(ValueError, match="12 entries"):
+        solver.step(np.zeros(3), 0.01)
+
+
+def _symbols(library, *flags):
+    out = subprocess.run(["nm", "-D", *flags, str(library)], capture_output=True, text=True,
+                         check=True).stdout
+    return [line.split()[-1] for line in out.splitlines() if line.strip()]
+
+
+@pytest.mark.parametrize("name", REFERENCE_SCENES)
+def test_only_prefixed_symbols_are_exported(name):
+    solver = solver_for(name, "es", 3)
+    exported = _symbols(solver.library_path, "--defined-only")
+    assert exported, "no symbols read"
+    strays = [s for s in exported if not s.startswith(solver.prefix + "_")]
+    assert strays == []
+
+
+@pytest.mark.parametrize("name", REFERENCE_SCENES)
+def test_nothing_is_allocated(name):
+    """The library imports no allocator at all, so neither step nor simulate can allocate."""
+    undefined = set(_symbols(solver_for(name, "es", 3).library_path, "--undefined-only"))
+    allocators = {"malloc", "calloc", "realloc", "free", "aligned_alloc", "posix_memalign"}
+    assert not {s.split("@")[0] for s in undefined} & allocators
+
+
+def test_two_solvers_run_side_by_side():
+    """No global mutable state: interleaved steps of two instances equal separate runs."""
+    from chaingen_runtime import Solver
+    first = solver_for("three_link_mono", "es", 3)
+    second = Solver(first.library_path, first.manifest)   # same library, own workspace
+    scene = load("three_link_mono")
+    xa = first.initial_state(scene.initial_angles, scene.initial_velocities)
+    xb = second.initial_state(np.zeros(3), np.ones(3))
+    alone_a, alone_b = xa.copy(), xb.copy()
+    for _ in range(20):
+        xa, _ = first.step(xa, 0.01)
+        xb, _ = second.step(xb, 0.01)
+    for _ in range(20):
+        alone_a, _ = first.step(alone_a, 0.01)
+    for _ in range(20):
+        alone_b, _ = second.step(alone_b, 0.01)
+    np.testing.assert_array_equal(xa, alone_a)
+    np.testing.assert_array_equal(xb, alone_b)
