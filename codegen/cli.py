@@ -70,7 +70,8 @@ def command_generate(args) -> int:
     from .simulation import run_settings
 
     scene = load_scene(args.scene)
-    settings = run_settings(scene, method=args.method, quadrature=args.quadrature)
+    settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
+                            source=str(args.scene))
     package = generate_package(scene, settings.method, settings.quadrature)
     directory = write_package(package, args.output or Path(package.prefix))
     print(f"wrote {directory}/: {', '.join(package.files)}")
@@ -92,7 +93,8 @@ def command_simulate(args) -> int:
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                            dt=args.dt, t_end=args.t_end, every=args.every)
+                            dt=args.dt, t_end=args.t_end, every=args.every,
+                            source=str(args.scene))
     if args.out is not None:
         _check_output_path(args.out)
     try:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from chaingen_runtime import NewtonOptions, SimulationResult, Solver
 
 from .package import generate_package
+from .schemes import METHODS
 from .scene import ChaingenError, Scene
 
 
@@ -30,8 +31,12 @@ class RunSettings:
 
 
 def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=None,
-                 every=None) -> RunSettings:
-    """Merge command-line overrides into the scene's defaults, validating each override."""
+                 every=None, source: str = "") -> RunSettings:
+    """Merge command-line overrides into the scene's defaults, validating each override.
+
+    `source` (the scene file) prefixes errors about values that came from the scene.
+    """
+    scene_source = f"{source}: " if source else ""
     defaults = scene.simulation
     settings = RunSettings(
         method=method if method is not None else defaults.method,
@@ -39,6 +44,11 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
         dt=dt if dt is not None else defaults.dt,
         t_end=t_end if t_end is not None else defaults.t_end,
         every=every if every is not None else 1)
+    if settings.method not in METHODS:
+        where = "--method" if method is not None else f"{scene_source}simulation.method"
+        raise SettingsError(
+            f"{where}: method {settings.method!r} is not available in this version of chaingen "
+            f"(available: {', '.join(METHODS)})")
     for name in ("dt", "t_end"):
         value = getattr(settings, name)
         if not (math.isfinite(value) and value > 0):
