@@ -113,7 +113,7 @@ def summary(result, settings, out: Path | None) -> str:
     label = f"method {result.method}"
     if result.quadrature is not None:
         label += f", quadrature {result.quadrature}"
-    per_step = result.wall_time / result.n_steps
+    per_step = result.wall_time / max(result.n_steps, 1)
     lines = [
         f"{result.scene}: {label}, dt {settings.dt:g} s, t_end {result.n_steps * settings.dt:g} s",
         f"  steps                  {result.n_steps} ({len(result.samples)} samples, "

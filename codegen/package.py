@@ -20,6 +20,8 @@ import jinja2
 import sympy
 
 from . import __version__
+from chaingen_runtime.trajectory import current_umask
+
 from .casadi_functions import casadi_c_source, scheme_functions, work_sizes
 from .scene import ChaingenError, Scene
 from .schemes import DiscreteScheme, build_scheme
@@ -193,6 +195,7 @@ def write_package(package: GeneratedPackage, directory: str | os.PathLike) -> Pa
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
+        staging.chmod(0o777 & ~current_umask())   # mkdtemp's 0700 is not what users expect
         for name, text in package.files.items():
             (staging / name).write_text(text)
         if target.exists():

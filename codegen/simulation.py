@@ -15,6 +15,12 @@ class SettingsError(ChaingenError):
     pass
 
 
+#: A run of more steps is refused: at about 1 us a step it would take days.
+MAX_STEPS = 10 ** 12
+#: Samples are held in memory before they are written.
+MAX_SAMPLE_BYTES = 4 * 2 ** 30
+
+
 @dataclass(frozen=True)
 class RunSettings:
     """What `simulate` runs: the scene's [simulation] defaults with overrides applied."""
@@ -53,6 +59,17 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
         value = getattr(settings, name)
         if not (math.isfinite(value) and value > 0):
             raise SettingsError(f"--{name.replace('_', '-')}: must be > 0 and finite, got {value}")
+    steps = settings.t_end / settings.dt
+    if steps > MAX_STEPS:
+        raise SettingsError(
+            f"--dt/--t-end: t_end / dt = {steps:.3g} steps, more than the {MAX_STEPS:.0e} a run "
+            f"may take (dt = {settings.dt:g} s, t_end = {settings.t_end:g} s)")
+    samples = (settings.n_steps // settings.every + 1) * (2 * scene.n + 3) * 8
+    if samples > MAX_SAMPLE_BYTES:
+        raise SettingsError(
+            f"--every: {settings.n_steps} steps sampled every {settings.every} would hold "
+            f"{samples / 2 ** 30:.1f} GiB of samples (limit {MAX_SAMPLE_BYTES / 2 ** 30:.0f} GiB); "
+            "sample less often with a larger --every")
     if not 1 <= settings.quadrature <= 20:
         raise SettingsError(f"--quadrature: must be between 1 and 20, got {settings.quadrature}")
     if settings.every < 1:

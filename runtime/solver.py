@@ -240,8 +240,9 @@ class Solver:
         Raises NewtonError naming the failing step and time; the rows written before it are in
         its `result`.
         """
-        if n_steps < 0 or every < 1:
-            raise ValueError(f"need n_steps >= 0 and every >= 1, got {n_steps}, {every}")
+        if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
+            raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
+                             f"{n_steps}, {every}")
         x0 = self.initial_state(phi0, omega0)
         rows = self._c("sample_count")(n_steps, every)
         samples = np.zeros((rows, self.nsample))

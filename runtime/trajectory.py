@@ -10,6 +10,12 @@ import numpy as np
 from .solver import SimulationResult
 
 
+def current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def write_trajectory(result: SimulationResult, path) -> Path:
     """Write `result` as CSV with %.17g numbers (round-trip exact), atomically.
 
@@ -19,6 +25,7 @@ def write_trajectory(result: SimulationResult, path) -> Path:
     path = Path(path)
     handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or ".")
     try:
+        os.chmod(temporary, 0o666 & ~current_umask())   # mkstemp's 0600 is not what users expect
         with os.fdopen(handle, "w") as stream:
             np.savetxt(stream, result.samples, fmt="%.17g", delimiter=",",
                        header=",".join(result.columns), comments="")
