@@ -123,8 +123,13 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
     for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state)):
         check_free_symbols(name, exprs, step_inputs)
     check_free_symbols("predictor", scheme.predictor, list(scheme.state) + [scheme.dt])
+    solve = scheme.output_solve
+    solved = list(solve.symbols) if solve else []
+    if solve:
+        check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), scheme.state)
     check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
-                       + [scheme.energy] + list(scheme.constraint_residuals), scheme.state)
+                       + [scheme.energy] + list(scheme.constraint_residuals),
+                       list(scheme.state) + solved)
     check_free_symbols("initial_state", scheme.initial_state,
                        list(scheme.initial_angles) + list(scheme.initial_velocities))
 
@@ -137,7 +142,14 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
     options = {"cse": True}
 
     x = ca.SX.sym("x", nx)
-    state = SympyToCasadi(dict(zip(scheme.state, ca.vertsplit(x))))
+    state_bindings = dict(zip(scheme.state, ca.vertsplit(x)))
+    if solve:
+        bound = SympyToCasadi(state_bindings)
+        matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
+                              for row in solve.matrix.tolist()])
+        solution = ca.solve(matrix, _vector(bound, solve.rhs))
+        state_bindings.update(zip(solve.symbols, ca.vertsplit(solution)))
+    state = SympyToCasadi(state_bindings)
     n = scheme.scene.n
     phi, phidot = ca.SX.sym("phi", n), ca.SX.sym("phidot", n)
     initial = SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),

@@ -47,6 +47,9 @@ NEWTON_DEFAULTS = {
 METHOD_SUMMARIES = {
     "es": "Energy-stable discrete gradient scheme in COM coordinates with constraints "
           "(model.md section 4).",
+    "vi": "Lie-group variational integrator on unit attitude vectors, position-momentum form "
+          "(model.md section 5).",
+    "midpoint": "Implicit midpoint rule in relative joint angles (model.md section 6).",
 }
 
 

@@ -24,6 +24,12 @@ REFERENCE_PACKAGES = (
     ("three_link_gravity.toml", "es", 1),
     ("three_link_mono.toml", "es", 3),
     ("three_link_multi.toml", "es", 3),
+    ("three_link_gravity.toml", "vi", 1),
+    ("three_link_mono.toml", "vi", 1),
+    ("three_link_multi.toml", "vi", 1),
+    ("three_link_gravity.toml", "midpoint", 1),
+    ("three_link_mono.toml", "midpoint", 1),
+    ("three_link_multi.toml", "midpoint", 1),
 )
 
 

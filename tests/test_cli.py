@@ -258,17 +258,27 @@ def test_scene_file_that_is_a_directory(tmp_path):
 
 
 @pytest.mark.parametrize("method", ["vi", "midpoint"])
-@pytest.mark.parametrize("command", ["simulate", "generate"])
-def test_scene_method_not_available_in_this_version(tmp_path, command, method):
-    # A valid scene (scene-format.md lists "vi" and "midpoint"), but only "es" is implemented.
+def test_scene_method_selects_the_scheme(tmp_path, method):
+    """[simulation].method picks the scheme; the trajectory file keeps its contract."""
     scene = write_scene(tmp_path, edited(('method = "es"', f'method = "{method}"')))
-    output = tmp_path / ("out.csv" if command == "simulate" else "pkg")
-    option = "--out" if command == "simulate" else "-o"
-    before = snapshot(tmp_path)
-    message = error_line(chaingen(command, scene, option, output, cwd=tmp_path))
-    assert_names(message, f"{scene}: simulation.method", repr(method), "not available")
-    assert not output.exists()
-    assert snapshot(tmp_path) == before
+    out = tmp_path / "out.csv"
+    result = chaingen("simulate", scene, "--t-end", "0.2", "--out", out, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert f"method {method}" in result.stdout
+    header, rows = read_csv(out)
+    assert header == ["t", "phi1", "phi2", "phi3", "omega1", "omega2", "omega3", "energy",
+                      "constraint_error"]
+    assert len(rows) == 21
+    errors = [float(row[-1]) for row in rows]
+    assert max(errors) <= (1e-13 if method == "vi" else 0.0)
+
+
+@pytest.mark.parametrize("method", ["vi", "midpoint"])
+def test_generate_method_option(tmp_path, method):
+    result = chaingen("generate", MONO, "--method", method, "-o", "pkg", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    manifest = json.loads((tmp_path / "pkg" / "chaingen.json").read_text())
+    assert manifest["method"] == method and manifest["prefix"] == f"three_link_mono_{method}"
 
 
 # -- bad command-line values -----------------------------------------------------------------
@@ -288,9 +298,6 @@ BAD_OPTIONS = [
     ("quadrature zero", ["--quadrature", "0"], "--quadrature", True, []),
     ("quadrature too large", ["--quadrature", "21"], "--quadrature", False, ["21"]),
     ("method bogus", ["--method", "bogus"], "--method", True, ["'bogus'"]),
-    ("method vi not available", ["--method", "vi"], "--method", False, ["'vi'", "not available"]),
-    ("method midpoint not available", ["--method", "midpoint"], "--method", False,
-     ["'midpoint'", "not available"]),
 ]
 
 

@@ -21,7 +21,7 @@ def wrapped(difference):
     return (np.asarray(difference) + np.pi) % (2 * np.pi) - np.pi
 
 
-@pytest.mark.parametrize("method,quadrature", [("es", 3)])
+@pytest.mark.parametrize("method,quadrature", [("es", 3), ("vi", 3), ("midpoint", 3)])
 @pytest.mark.parametrize("name", REFERENCE_SCENES + OWN_SCENES)
 def test_joint_angles_agree_with_mujoco(name, method, quadrature):
     scene = load(name)
@@ -36,10 +36,11 @@ def test_joint_angles_agree_with_mujoco(name, method, quadrature):
         assert error <= 1e-5, f"t = {t}: joint angles differ by {error:.2e} rad"
 
 
+@pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
 @pytest.mark.parametrize("name", REFERENCE_SCENES + OWN_SCENES)
-def test_initial_energy_equals_mujoco(name):
+def test_initial_energy_equals_mujoco(name, method):
     scene = load(name)
-    solver = solver_for(name, "es", 3)
+    solver = solver_for(name, method, 3)
     energy = solver.outputs(solver.initial_state(scene.initial_angles,
                                                  scene.initial_velocities))[2]
     assert energy == pytest.approx(initial_energy_mujoco(scene), rel=1e-9)

@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 from ..scene import ChaingenError, Scene
-from . import es
-from .base import DiscreteScheme, Layout
+from . import es, midpoint, vi
+from .base import DiscreteScheme, Layout, LinearSolve
 
-BUILDERS = {"es": es.build}
+BUILDERS = {"es": es.build, "vi": vi.build, "midpoint": midpoint.build}
 METHODS = tuple(BUILDERS)
 
 

@@ -27,6 +27,19 @@ class Layout:
 
 
 @dataclass(frozen=True)
+class LinearSolve:
+    """Symbols defined implicitly by matrix * symbols = rhs, all functions of the state.
+
+    "vi" stores momenta, so its joint rates are w = M(q)^-1 p: the outputs use the symbols w
+    and the C code solves for them, instead of SymPy inverting M symbolically.
+    """
+
+    symbols: ImmutableMatrix
+    matrix: ImmutableMatrix
+    rhs: ImmutableMatrix
+
+
+@dataclass(frozen=True)
 class DiscreteScheme:
     method: str
     quadrature: int
@@ -47,6 +60,7 @@ class DiscreteScheme:
     state_layout: Layout
     unknowns_layout: Layout
     residual_description: str
+    output_solve: LinearSolve | None = None   # symbols the outputs use beside the state
 
     def __post_init__(self) -> None:
         if self.residual.shape[0] != self.unknowns.shape[0]:
