@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .model import UnsupportedSceneError
 from .scene import ChaingenError, load_scene
 from .scene import METHODS as SCENE_METHODS
 
@@ -135,6 +136,9 @@ def main(argv: list[str] | None = None) -> int:
     handlers = {"generate": command_generate, "simulate": command_simulate}
     try:
         return handlers[args.command](args)
+    except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take
+        print(f"chaingen: error: {args.scene}: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except ChaingenError as error:
         print(f"chaingen: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT

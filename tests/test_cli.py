@@ -491,3 +491,13 @@ def test_package_directory_permissions_follow_umask(tmp_path):
     result = chaingen("generate", MONO, "-o", package, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert package.stat().st_mode & 0o777 == 0o777 & ~current_umask()
+
+
+def test_com_at_the_proximal_joint_is_refused_by_es_only(tmp_path):
+    scene = write_scene(tmp_path, edited(("com = 0.5", "com = 0.0", 0)))
+    out = tmp_path / "out.csv"
+    message = error_line(chaingen("simulate", scene, "--out", out, cwd=tmp_path))
+    assert_names(message, f"{scene}: links[0].com", "COM")
+    assert not out.exists()
+    result = chaingen("simulate", scene, "--method", "midpoint", "--t-end", "0.1", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
