@@ -154,8 +154,8 @@ def render_package(scheme: DiscreteScheme) -> GeneratedPackage:
         "sources": [f"{prefix}.c", f"{prefix}_model.c"],
     }
     environment = _environment()
-    files = {TEMPLATES_OUT.format(prefix=prefix): environment.get_template(template).render(context)
-             for template, TEMPLATES_OUT in TEMPLATES.items()}
+    files = {output.format(prefix=prefix): environment.get_template(template).render(context)
+             for template, output in TEMPLATES.items()}
     files[f"{prefix}_model.c"] = f"{c_banner}\n{model_source}"
     files[f"{prefix}_model.h"] = f"{c_banner}\n{model_header}"
     files[LU_HEADER] = (importlib.resources.files("chaingen_runtime")

@@ -77,3 +77,19 @@ int main(void)
     status, steps, energy_change, constraint = run.stdout.split()
     assert (int(status), int(steps)) == (0, 100)
     assert abs(float(energy_change)) <= 1e-13 and float(constraint) <= 1e-13
+
+
+def test_runtime_loads_a_package_directory_and_round_trips_the_trajectory(tmp_path):
+    """Solver.from_directory builds a checked-in package; write/read_trajectory round-trip."""
+    import numpy as np
+
+    from chaingen_runtime import Solver, write_trajectory
+    from chaingen_runtime.trajectory import read_trajectory
+
+    solver = Solver.from_directory(GENERATED / "three_link_gravity_es")
+    result = solver.simulate([0.7853981633974483, 0.3, 0.3], [0.0, 0.0, 0.0], dt=0.01,
+                             n_steps=50, every=5)
+    assert np.abs(result.energy_error).max() <= 1e-13
+    columns, rows = read_trajectory(write_trajectory(result, tmp_path / "traj.csv"))
+    assert columns == result.columns
+    np.testing.assert_array_equal(rows, result.samples)
