@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import casadi as ca
 import sympy as sp
 
+from .joint_model import angle_directions, joint_space_potential
 from .schemes.base import DiscreteScheme
 
 #: SymPy functions with a CasADi counterpart of the same meaning.
@@ -95,18 +96,28 @@ class SympyToCasadi:
 
 @dataclass(frozen=True)
 class SchemeFunctions:
-    """The CasADi Functions of one scheme, named with the package prefix."""
+    """The CasADi Functions of one scheme, named with the package prefix.
 
-    residual: ca.Function            # (z, x0, dt) -> F
-    residual_jacobian: ca.Function   # (z, x0, dt) -> (F, dF/dz dense, column-major)
+    Step functions take (z, x0, u, dt), u the torques of the actuated joints; an unactuated
+    scene's functions take (z, x0, dt): no input path at all.
+    """
+
+    residual: ca.Function            # -> F
+    residual_jacobian: ca.Function   # -> (F, dF/dz dense, column-major)
     predictor: ca.Function           # (x0, dt) -> z
-    next_state: ca.Function          # (z, x0, dt) -> x1
+    next_state: ca.Function          # -> x1, and flows = (input work, dissipated) if any
     outputs: ca.Function             # (x) -> (phi, omega, energy, constraint residuals)
     initial_state: ca.Function       # (phi, phidot) -> x
+    # Step-map sensitivities in joint space s = (phi, omega), by the implicit function theorem:
+    sensitivity_rhs: ca.Function     # -> R = [dF/dx0 dx0/ds0, dF/du]  (nz x (2n + nu))
+    sensitivity_map: ca.Function     # -> (ds1/dz, ds1/dx0 dx0/ds0, ds1/du) at fixed z
+    holding_torques: ca.Function | None  # (phi) -> dV/dphi, actuated scenes only
 
     def all(self) -> tuple[ca.Function, ...]:
-        return (self.residual, self.residual_jacobian, self.predictor, self.next_state,
-                self.outputs, self.initial_state)
+        functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
+                     self.outputs, self.initial_state, self.sensitivity_rhs,
+                     self.sensitivity_map)
+        return functions + ((self.holding_torques,) if self.holding_torques else ())
 
 
 def _vector(translate: SympyToCasadi, matrix) -> ca.SX:
@@ -116,11 +127,14 @@ def _vector(translate: SympyToCasadi, matrix) -> ca.SX:
 
 def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
     """CasADi Functions for the residual, its Jacobian, and the state maps of `scheme`."""
-    nz, nx = scheme.unknowns.shape[0], scheme.state.shape[0]
-    z, x0 = ca.SX.sym("z", nz), ca.SX.sym("x0", nx)
+    nz, nx, nu = scheme.unknowns.shape[0], scheme.state.shape[0], scheme.inputs.shape[0]
+    n = scheme.scene.n
+    z, x0, u = ca.SX.sym("z", nz), ca.SX.sym("x0", nx), ca.SX.sym("u", nu)
     dt = ca.SX.sym("dt")
-    step_inputs = list(scheme.unknowns) + list(scheme.state) + [scheme.dt]
-    for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state)):
+    step_inputs = (list(scheme.unknowns) + list(scheme.state) + list(scheme.inputs)
+                   + [scheme.dt])
+    for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state),
+                        ("energy flows", [scheme.input_work, scheme.dissipated])):
         check_free_symbols(name, exprs, step_inputs)
     check_free_symbols("predictor", scheme.predictor, list(scheme.state) + [scheme.dt])
     solve = scheme.output_solve
@@ -135,45 +149,87 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
 
     bindings = dict(zip(scheme.unknowns, ca.vertsplit(z)))
     bindings.update(zip(scheme.state, ca.vertsplit(x0)))
+    bindings.update(zip(scheme.inputs, ca.vertsplit(u)))
     bindings[scheme.dt] = dt
     step = SympyToCasadi(bindings)
     residual = _vector(step, scheme.residual)
     jacobian = ca.densify(ca.jacobian(residual, z))
+    x1 = _vector(step, scheme.next_state)
     options = {"cse": True}
 
+    def joint_space(state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+        """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
+        state_bindings = dict(zip(scheme.state, ca.vertsplit(state)))
+        if solve:
+            bound = SympyToCasadi(state_bindings)
+            matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
+                                  for row in solve.matrix.tolist()])
+            solution = ca.solve(matrix, _vector(bound, solve.rhs))
+            state_bindings.update(zip(solve.symbols, ca.vertsplit(solution)))
+        translate = SympyToCasadi(state_bindings)
+        return (_vector(translate, scheme.joint_angles),
+                _vector(translate, scheme.joint_velocities), translate(scheme.energy),
+                _vector(translate, scheme.constraint_residuals))
+
     x = ca.SX.sym("x", nx)
-    state_bindings = dict(zip(scheme.state, ca.vertsplit(x)))
-    if solve:
-        bound = SympyToCasadi(state_bindings)
-        matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
-                              for row in solve.matrix.tolist()])
-        solution = ca.solve(matrix, _vector(bound, solve.rhs))
-        state_bindings.update(zip(solve.symbols, ca.vertsplit(solution)))
-    state = SympyToCasadi(state_bindings)
-    n = scheme.scene.n
     phi, phidot = ca.SX.sym("phi", n), ca.SX.sym("phidot", n)
     initial = SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
                              **dict(zip(scheme.initial_velocities, ca.vertsplit(phidot)))})
+    initial_state = _vector(initial, scheme.initial_state)
+
+    # Sensitivities: the controller's state is s = (phi, omega); x0 = X(s0) (initial_state),
+    # s1 = S(x1) (outputs). With F(z*, x0, u) = 0, dz*/d(s0, u) = -J^-1 [F_x0 X_s, F_u] (the C
+    # code solves it with one LU of J at z*), and ds1/d(s0, u) = S_x1 (x1_z dz* + [x1_x0 X_s,
+    # x1_u]). X_s is evaluated at s0 = S(x0), so the functions take x0 as the step does.
+    s_of_x0 = ca.vertcat(*joint_space(x0)[:2])
+    state_jacobian = ca.Function("X_s", [phi, phidot],
+                                 [ca.jacobian(initial_state, ca.vertcat(phi, phidot))])
+    x_s = state_jacobian(s_of_x0[:n], s_of_x0[n:])
+    s1 = ca.vertcat(*joint_space(x1)[:2])
+    rhs = ca.densify(ca.horzcat(ca.mtimes(ca.jacobian(residual, x0), x_s),
+                                ca.jacobian(residual, u)))
+    s1_z = ca.densify(ca.jacobian(s1, z))
+    s1_s0 = ca.densify(ca.mtimes(ca.jacobian(s1, x0), x_s))
+    s1_u = ca.densify(ca.jacobian(s1, u))
+
+    step_args = [z, x0] + ([u] if nu else []) + [dt]
+    step_names = ["z", "x0"] + (["u"] if nu else []) + ["dt"]
+    flows = ([ca.vertcat(step(scheme.input_work), step(scheme.dissipated))]
+             if scheme.has_energy_flows else [])
 
     def fn(name, inputs, input_names, outputs, output_names):
         return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
                            options)
 
+    holding = None
+    if nu:
+        holding = fn("holding_torques", [phi], ["phi"], [_holding_torques(scheme, phi)], ["tau"])
     return SchemeFunctions(
-        residual=fn("residual", [z, x0, dt], ["z", "x0", "dt"], [residual], ["F"]),
-        residual_jacobian=fn("residual_jacobian", [z, x0, dt], ["z", "x0", "dt"],
+        residual=fn("residual", step_args, step_names, [residual], ["F"]),
+        residual_jacobian=fn("residual_jacobian", step_args, step_names,
                              [residual, jacobian], ["F", "J"]),
         predictor=fn("predictor", [x0, dt], ["x0", "dt"], [_vector(step, scheme.predictor)],
                      ["z"]),
-        next_state=fn("next_state", [z, x0, dt], ["z", "x0", "dt"],
-                      [_vector(step, scheme.next_state)], ["x1"]),
-        outputs=fn("outputs", [x], ["x"],
-                   [_vector(state, scheme.joint_angles), _vector(state, scheme.joint_velocities),
-                    state(scheme.energy), _vector(state, scheme.constraint_residuals)],
+        next_state=fn("next_state", step_args, step_names, [x1] + flows,
+                      ["x1"] + (["flows"] if flows else [])),
+        outputs=fn("outputs", [x], ["x"], list(joint_space(x)),
                    ["phi", "omega", "energy", "constraint"]),
-        initial_state=fn("initial_state", [phi, phidot], ["phi", "phidot"],
-                         [_vector(initial, scheme.initial_state)], ["x"]),
+        initial_state=fn("initial_state", [phi, phidot], ["phi", "phidot"], [initial_state],
+                         ["x"]),
+        sensitivity_rhs=fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
+        sensitivity_map=fn("sensitivity_map", step_args, step_names,
+                           [s1_z, s1_s0] + ([s1_u] if nu else []),
+                           ["s1_z", "s1_s0"] + (["s1_u"] if nu else [])),
+        holding_torques=holding,
     )
+
+
+def _holding_torques(scheme: DiscreteScheme, phi: ca.SX) -> ca.SX:
+    """dV/dphi: the joint torques that hold the chain still at posture phi (gravity, springs)."""
+    angles = sp.symbols(f"phi1:{scheme.scene.n + 1}", real=True)
+    potential = joint_space_potential(scheme.scene, angle_directions(angles))
+    gradient = sp.ImmutableMatrix([potential]).jacobian(angles).T
+    return _vector(SympyToCasadi(dict(zip(angles, ca.vertsplit(phi)))), gradient)
 
 
 @dataclass(frozen=True)

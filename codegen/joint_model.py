@@ -88,6 +88,22 @@ def joint_space_model(scene: Scene, directions, rates) -> JointSpaceModel:
         mass_matrix=mass_matrix, gravity_potential=gravity, springs=springs)
 
 
+def joint_space_potential(scene: Scene, directions) -> sp.Expr:
+    """V (gravity and springs) from the absolute link directions, without the kinetic terms."""
+    joints, normals, heights = [ImmutableMatrix([0, 0])], [ImmutableMatrix([0, 1])], []
+    for link, e in zip(scene.links, directions):
+        n = S * e
+        heights.append((joints[-1] + number(link.com) * e + number(link.com_normal) * n)[1])
+        joints.append(joints[-1] + number(link.length) * e)
+        normals.append(n)
+    gravity = sp.Integer(0)
+    if scene.gravity:
+        gravity = sp.Add(*(number(link.mass * scene.gravity) * y
+                           for link, y in zip(scene.links, heights)))
+    springs = (spring_terms(scene, spring, joints, normals) for spring in scene.springs)
+    return gravity + sp.Add(*(term.energy for term in springs))
+
+
 def angle_directions(angles) -> list[ImmutableMatrix]:
     """e_i = (cos theta_i, sin theta_i), theta_i = phi_1 + ... + phi_i."""
     directions, theta = [], sp.Integer(0)

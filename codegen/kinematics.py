@@ -202,3 +202,16 @@ def energy(scene: Scene, phi, phidot) -> Energy:
 def total_energy(scene: Scene, phi, phidot) -> float:
     """H = T + V at (phi, phidot) (model.md section 3): the energy reported everywhere."""
     return energy(scene, phi, phidot).total
+
+
+def mass_matrix(scene: Scene, phi) -> np.ndarray:
+    """M(phi) in joint space, T = 1/2 phidot^T M phidot, by polarisation of the quadratic form."""
+    n = scene.n
+    unit = np.eye(n)
+    diagonal = np.array([2 * kinetic_energy(scene, phi, unit[i]) for i in range(n)])
+    matrix = np.diag(diagonal)
+    for i in range(n):
+        for j in range(i + 1, n):
+            both = 2 * kinetic_energy(scene, phi, unit[i] + unit[j])
+            matrix[i, j] = matrix[j, i] = (both - diagonal[i] - diagonal[j]) / 2
+    return matrix

@@ -9,6 +9,7 @@ import dataclasses
 import hashlib
 import importlib.resources
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -22,6 +23,7 @@ import sympy
 from . import __version__
 from chaingen_runtime.trajectory import current_umask
 
+from .example import example_settings
 from .casadi_functions import casadi_c_source, scheme_functions, work_sizes
 from .scene import ChaingenError, Scene
 from .schemes import DiscreteScheme, build_scheme
@@ -32,6 +34,8 @@ TEMPLATES = {
     "solver.c.j2": "{prefix}.c",
     "Makefile.j2": "Makefile",
     "CMakeLists.txt.j2": "CMakeLists.txt",
+    "example.c.j2": "example.c",
+    "README.md.j2": "README.md",
 }
 MANIFEST = "chaingen.json"
 LU_HEADER = "chaingen_lu.h"
@@ -110,15 +114,71 @@ def scheme_label(scheme: DiscreteScheme) -> str:
     return label
 
 
-def sample_columns(n: int) -> list[tuple[str, str]]:
-    """The trajectory columns of scene-format.md, which are also simulate's sample rows."""
-    return ([("t", "time (s)")]
-            + [(f"phi{i}", f"relative angle of joint {i}, wrapped to (-pi, pi] (rad)")
-               for i in range(1, n + 1)]
-            + [(f"omega{i}", f"relative angular velocity of joint {i} (rad/s)")
-               for i in range(1, n + 1)]
-            + [("energy", "H = T + V (J)"),
-               ("constraint_error", "largest structural error of the state's coordinates")])
+def sample_columns(n: int, energy_flows: bool = False) -> list[tuple[str, str]]:
+    """The trajectory columns of scene-format.md, which are also simulate's sample rows.
+
+    A scene with actuation or damping adds the energy flows since the start, so that
+    H - H_0 = input_work - dissipated can be read off every row (model.md 7).
+    """
+    columns = ([("t", "time (s)")]
+               + [(f"phi{i}", f"relative angle of joint {i}, wrapped to (-pi, pi] (rad)")
+                  for i in range(1, n + 1)]
+               + [(f"omega{i}", f"relative angular velocity of joint {i} (rad/s)")
+                  for i in range(1, n + 1)]
+               + [("energy", "H = T + V (J)"),
+                  ("constraint_error", "largest structural error of the state's coordinates")])
+    if energy_flows:
+        columns += [("input_work", "work of the joint torques since the start (J)"),
+                    ("dissipated", "energy dissipated by joint damping since the start, >= 0 (J)")]
+    return columns
+
+
+#: How each scheme's step measures its energy flows, and what balance they satisfy.
+FLOW_DOCS = {
+    "es": ("dt sum_i tau_i phidot_i(m)", "dt sum_i d_i phidot_i(m)^2",
+           "phidot(m) the joint rates at the step's mid-point, where the torques enter. The "
+           "scheme is passive: H_1 - H_0 = flows[0] - flows[1] to quadrature and solver "
+           "accuracy (model.md 7)."),
+    "vi": ("sum_i tau_i theta_i", "sum_i d_i theta_i^2 / dt",
+           "theta the rotation increments of the step. H_1 - H_0 - flows[0] + flows[1] is the "
+           "scheme's energy error, O(dt^2)."),
+    "midpoint": ("dt sum_i tau_i w_i(m)", "dt sum_i d_i w_i(m)^2",
+                 "w(m) the mid-point joint rates. H_1 - H_0 - flows[0] + flows[1] is the "
+                 "scheme's energy error, O(dt^2)."),
+}
+
+
+def signature_parts(nu: int, flows: bool) -> dict[str, str]:
+    """Pieces of the C signatures that exist only when the scene has inputs or energy flows."""
+    return {
+        "u_param": "const double *u, " if nu else "", "u_arg": "u, " if nu else "",
+        "u_check": "!u || " if nu else "", "u_doc": "u, " if nu else "",
+        "u_step_doc": ", with the inputs u[NU] held over the step" if nu else "",
+        "du_param": "double *ds_du, " if nu else "", "du_arg": "ds_du, " if nu else "",
+        "flows_param": "double *flows, " if flows else "",
+        "flows_arg": "flows, " if flows else "", "flows_null": "NULL, " if flows else "",
+        "totals_arg": "totals, " if flows else "",
+    }
+
+
+def c_double(value: float) -> str:
+    """A double as a C literal that round-trips."""
+    text = repr(float(value))
+    return text if any(c in text for c in ".en") else text + ".0"
+
+
+def _example_context(scene: Scene) -> dict:
+    settings = example_settings(scene)
+    doubles = lambda values: ", ".join(map(c_double, values))  # noqa: E731
+    return {
+        "initial_angles": doubles(scene.initial_angles),
+        "initial_velocities": doubles(scene.initial_velocities),
+        "dt": c_double(settings.dt), "duration": c_double(settings.duration),
+        "print_every": settings.print_every, "target": doubles(settings.target),
+        "actuated_indices": ", ".join(str(j - 1) for j in scene.actuated_joints),
+        "kp": doubles(settings.kp), "kd": doubles(settings.kd),
+        "bandwidth_hz": f"{settings.bandwidth / (2 * math.pi):.3g}",
+    }
 
 
 def render_package(scheme: DiscreteScheme) -> GeneratedPackage:
@@ -135,9 +195,17 @@ def render_package(scheme: DiscreteScheme) -> GeneratedPackage:
                    f"Do not edit. chaingen_input_hash={digest}")
     c_banner = f"/* {banner_text} */"
     n = scene.n
-    columns = sample_columns(n)
+    nu = len(scene.actuated_joints)
+    flows = scheme.has_energy_flows
+    columns = sample_columns(n, flows)
+    work_doc, dissipated_doc, balance_doc = FLOW_DOCS[scheme.method]
     context = {
-        "banner": c_banner, "make_banner": f"# {banner_text}",
+        **signature_parts(nu, flows),
+        "nu": nu, "actuated_joints": scene.actuated_joints, "flows": flows,
+        "nsens": 2 * n + nu, "flows_work": work_doc, "flows_dissipated": dissipated_doc,
+        "flows_balance": balance_doc,
+        **_example_context(scene),
+        "banner": c_banner, "make_banner": f"# {banner_text}", "banner_text": banner_text,
         "prefix": prefix, "PREFIX": prefix.upper(),
         "scene_name": scene.name, "method": scheme.method, "quadrature": scheme.quadrature,
         "scheme_label": scheme_label(scheme), "method_summary": METHOD_SUMMARIES[scheme.method],
@@ -165,6 +233,7 @@ def render_package(scheme: DiscreteScheme) -> GeneratedPackage:
         "scene": scene.name, "method": scheme.method,
         "quadrature": scheme.quadrature if uses_quadrature(scene, scheme.method) else None,
         "n_joints": n, "nx": context["nx"], "nz": context["nz"], "nsample": context["nsample"],
+        "actuated_joints": list(scene.actuated_joints), "nu": nu, "energy_flows": flows,
         "state": list(scheme.state_layout.entries),
         "unknowns": list(scheme.unknowns_layout.entries),
         "sample_columns": [name for name, _ in columns],

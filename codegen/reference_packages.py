@@ -30,6 +30,7 @@ REFERENCE_PACKAGES = (
     ("three_link_gravity.toml", "midpoint", 1),
     ("three_link_mono.toml", "midpoint", 1),
     ("three_link_multi.toml", "midpoint", 1),
+    ("four_link_actuated.toml", "es", 3),
 )
 
 

@@ -79,6 +79,7 @@ class Scene:
     initial_angles: tuple[float, ...]      # phi_i (rad)
     initial_velocities: tuple[float, ...]  # phidot_i (rad/s)
     simulation: Simulation
+    actuated_joints: tuple[int, ...] = ()  # 1-based joints driven by an input torque, ascending
 
     @property
     def n(self) -> int:
@@ -110,7 +111,9 @@ NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 METHODS = ("es", "vi", "midpoint")
 QUADRATURE_RANGE = (1, 20)
 
-_TOP_KEYS = ("name", "gravity", "base", "links", "springs", "initial", "simulation")
+_TOP_KEYS = ("name", "gravity", "base", "links", "springs", "actuation", "initial",
+             "simulation")
+_ACTUATION_KEYS = ("joints",)
 _BASE_KEYS = ("fastening",)
 _LINK_KEYS = ("mass", "inertia", "length", "com", "com_normal", "fastening", "damping")
 _LINK_REQUIRED = ("mass", "inertia", "length", "com")
@@ -314,6 +317,7 @@ class _SceneReader:
         angles: tuple[float, ...] | None = None
         velocities: tuple[float, ...] | None = None
         simulation = Simulation()
+        actuated: tuple[int, ...] = ()
 
         for key, value in document.items():
             if key == "name":
@@ -326,6 +330,8 @@ class _SceneReader:
                 links = self.links(value)
             elif key == "springs":
                 springs = self.springs(value)
+            elif key == "actuation":
+                actuated = self.actuation(value)
             elif key == "initial":
                 angles, velocities = self.initial(value)
             elif key == "simulation":
@@ -347,6 +353,7 @@ class _SceneReader:
             initial_angles=angles if angles is not None else (0.0,) * n,
             initial_velocities=velocities if velocities is not None else (0.0,) * n,
             simulation=simulation,
+            actuated_joints=actuated,
         )
         self.refuse_zero_length_segments(scene)
         return scene
@@ -447,6 +454,37 @@ class _SceneReader:
             self.fail(path, f"joint {last} does not exist: the chain has {self.n} "
                             f"joint{'s' if self.n != 1 else ''} (1..{self.n})", value)
         return first, last
+
+    def actuation(self, value: Any) -> tuple[int, ...]:
+        """[actuation] joints = [...]: 1-based joints with an input torque, ascending, unique."""
+        table = self.table("actuation", value, "[actuation]")
+        joints: tuple[int, ...] | None = None
+        for key, item in table.items():
+            where = f"actuation.{key}"
+            if key == "joints":
+                joints = self.actuated_joints(where, item)
+            else:
+                self.unknown_key("actuation", key, item, _ACTUATION_KEYS)
+        if joints is None:
+            self.fail("actuation.joints", "missing: list the actuated joints (1-based), "
+                                          "or remove the [actuation] table")
+        return joints
+
+    def actuated_joints(self, path: str, value: Any) -> tuple[int, ...]:
+        if not isinstance(value, list) or not all(_is_integer(item) for item in value):
+            self.fail(path, "must be an array of integers (1-based actuated joints)", value)
+        if not value:
+            self.fail(path, "must list at least one joint; remove the [actuation] table for "
+                            "an unactuated chain", value)
+        for index, joint in enumerate(value):
+            if joint < 1 or (self.n is not None and joint > self.n):
+                chain = (f": the chain has {self.n} joint{'s' if self.n != 1 else ''} "
+                         f"(1..{self.n})" if self.n is not None else ": joints are numbered from 1")
+                self.fail(f"{path}[{index}]", f"joint {joint} does not exist{chain}", joint)
+            if index and joint <= value[index - 1]:
+                self.fail(f"{path}[{index}]", "joints must be listed in ascending order, each "
+                                              f"once (after joint {value[index - 1]})", joint)
+        return tuple(value)
 
     def initial(self, value: Any) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
         table = self.table("initial", value, "[initial]")

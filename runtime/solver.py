@@ -84,7 +84,7 @@ class SimulationResult:
 
     @property
     def n_joints(self) -> int:
-        return (len(self.columns) - 3) // 2
+        return sum(1 for name in self.columns if name.startswith("phi"))
 
     @property
     def t(self) -> np.ndarray:
@@ -112,6 +112,21 @@ class SimulationResult:
         return self.column("constraint_error")
 
     @property
+    def input_work(self) -> np.ndarray:
+        """Work of the joint torques since t = 0 (zero for a scene without energy flows)."""
+        return self.column("input_work") if "input_work" in self.columns else 0 * self.t
+
+    @property
+    def dissipated(self) -> np.ndarray:
+        """Energy dissipated by joint damping since t = 0 (zero for a scene without)."""
+        return self.column("dissipated") if "dissipated" in self.columns else 0 * self.t
+
+    @property
+    def balance_error(self) -> np.ndarray:
+        """H - H_0 - input_work + dissipated: the energy the scheme created (model.md 7)."""
+        return self.energy_error - self.input_work + self.dissipated
+
+    @property
     def t_realtime(self) -> float:
         """t_computation / t_simulation (model.md section 8)."""
         return self.wall_time / (self.n_steps * self.dt) if self.n_steps else float("nan")
@@ -119,6 +134,26 @@ class SimulationResult:
     @property
     def mean_newton_iterations(self) -> float:
         return self.newton_iterations / self.n_steps if self.n_steps else 0.0
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """One step: the next state, the Newton iterations spent, and the step's energy flows."""
+
+    x1: np.ndarray
+    iterations: int
+    input_work: float = 0.0   # work of the joint torques over the step (J)
+    dissipated: float = 0.0   # energy dissipated by joint damping over the step (J), >= 0
+
+
+@dataclass(frozen=True)
+class Sensitivities:
+    """A step and its Jacobians in the joint-space state s = (phi, omega)."""
+
+    x1: np.ndarray
+    iterations: int
+    ds_ds: np.ndarray   # (2n, 2n): d s_{k+1} / d s_k
+    ds_du: np.ndarray   # (2n, nu): d s_{k+1} / d u_k
 
 
 def _pointer(array: np.ndarray):
@@ -143,6 +178,9 @@ class Solver:
         self.nx = manifest["nx"]
         self.nz = manifest["nz"]
         self.nsample = manifest["nsample"]
+        self.actuated_joints = tuple(manifest.get("actuated_joints", ()))
+        self.nu = len(self.actuated_joints)
+        self.energy_flows = bool(manifest.get("energy_flows", False))
         self._lib = ctypes.CDLL(str(self.library_path))
         self._declare()
         self._workspace = ctypes.create_string_buffer(self._c("workspace_size")())
@@ -169,17 +207,22 @@ class Solver:
 
     def _declare(self) -> None:
         vp, dp, d, i, lng = ctypes.c_void_p, _double_p, ctypes.c_double, ctypes.c_int, ctypes.c_long
+        options, stats, count = ctypes.POINTER(_Options), ctypes.POINTER(_Stats), ctypes.POINTER(i)
+        u = [dp] if self.nu else []          # the input path exists only for actuated scenes
+        flows = [dp] if self.energy_flows else []
         signatures = {
             "workspace_size": (ctypes.c_size_t, []),
             "initial_state": (i, [dp, dp, dp, vp]),
             "outputs": (i, [dp, dp, dp, dp, dp, vp]),
-            "residual": (i, [dp, dp, d, dp, vp]),
-            "residual_jacobian": (i, [dp, dp, d, dp, dp, vp]),
-            "step": (i, [dp, d, dp, ctypes.POINTER(_Options), vp, ctypes.POINTER(i)]),
+            "residual": (i, [dp, dp, *u, d, dp, vp]),
+            "residual_jacobian": (i, [dp, dp, *u, d, dp, dp, vp]),
+            "step": (i, [dp, *u, d, dp, *flows, options, vp, count]),
+            "step_sensitivities": (i, [dp, *u, d, dp, dp, *u, options, vp, count]),
             "sample_count": (lng, [lng, lng]),
-            "simulate": (i, [dp, d, d, lng, lng, ctypes.POINTER(_Options), vp, dp, dp,
-                             ctypes.POINTER(_Stats)]),
+            "simulate": (i, [dp, d, d, lng, lng, *u, options, vp, dp, dp, stats]),
         }
+        if self.nu:
+            signatures["holding_torques"] = (i, [dp, dp, vp])
         for name, (restype, argtypes) in signatures.items():
             function = self._c(name)
             function.restype = restype
@@ -205,51 +248,102 @@ class Solver:
                                        _pointer(scalars[1:]), self._workspace), "outputs")
         return phi, omega, float(scalars[0]), float(scalars[1])
 
-    def residual(self, z, x0, dt: float) -> np.ndarray:
+    def _inputs(self, u) -> list:
+        """The u argument of a step function: [pointer] for an actuated scene, else []."""
+        if not self.nu:
+            if u is not None and np.size(u):
+                raise ValueError(f"{self.prefix} has no actuated joints; u must be None")
+            return []
+        if u is None:
+            u = np.zeros(self.nu)
+        return [_pointer(_vector(u, self.nu, "u"))]
+
+    def residual(self, z, x0, dt: float, u=None) -> np.ndarray:
         out = np.empty(self.nz)
         self._check(self._c("residual")(_pointer(_vector(z, self.nz, "z")),
-                                        _pointer(_vector(x0, self.nx, "x0")), dt,
-                                        _pointer(out), self._workspace), "residual")
+                                        _pointer(_vector(x0, self.nx, "x0")), *self._inputs(u),
+                                        dt, _pointer(out), self._workspace), "residual")
         return out
 
-    def residual_jacobian(self, z, x0, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    def residual_jacobian(self, z, x0, dt: float, u=None) -> tuple[np.ndarray, np.ndarray]:
         residual, jacobian = np.empty(self.nz), np.empty(self.nz * self.nz)
         self._check(self._c("residual_jacobian")(
-            _pointer(_vector(z, self.nz, "z")), _pointer(_vector(x0, self.nx, "x0")), dt,
-            _pointer(residual), _pointer(jacobian), self._workspace), "residual_jacobian")
+            _pointer(_vector(z, self.nz, "z")), _pointer(_vector(x0, self.nx, "x0")),
+            *self._inputs(u), dt, _pointer(residual), _pointer(jacobian), self._workspace),
+            "residual_jacobian")
         return residual, jacobian.reshape((self.nz, self.nz), order="F")
 
-    def step(self, x0, dt: float, options: NewtonOptions | None = None
-             ) -> tuple[np.ndarray, int]:
-        """One step: (x1, Newton iterations). Raises NewtonError if Newton fails."""
-        x1, iterations = np.empty(self.nx), ctypes.c_int(0)
+    def holding_torques(self, phi) -> np.ndarray:
+        """dV/dphi: the joint torques that hold the chain still at phi (actuated scenes)."""
+        if not self.nu:
+            raise ValueError(f"{self.prefix} has no actuated joints: no holding_torques")
+        tau = np.empty(self.n)
+        self._check(self._c("holding_torques")(_pointer(_vector(phi, self.n, "phi")),
+                                               _pointer(tau), self._workspace), "holding_torques")
+        return tau
+
+    def _step_failed(self, status: int, iterations: int) -> NewtonError:
+        return NewtonError(f"step failed after {iterations} Newton iterations: "
+                           f"{STATUS_MESSAGES.get(status, status)}", status=status)
+
+    def step(self, x0, dt: float, u=None, options: NewtonOptions | None = None) -> StepResult:
+        """One step from x0 with inputs u (actuated scenes). Raises NewtonError if it fails."""
+        x1, iterations, flows = np.empty(self.nx), ctypes.c_int(0), np.zeros(2)
         c_options = (options or self.default_options)._as_c()
-        status = self._c("step")(_pointer(_vector(x0, self.nx, "x0")), dt, _pointer(x1),
+        status = self._c("step")(_pointer(_vector(x0, self.nx, "x0")), *self._inputs(u), dt,
+                                 _pointer(x1), *([_pointer(flows)] if self.energy_flows else []),
                                  ctypes.byref(c_options), self._workspace,
                                  ctypes.byref(iterations))
         if status:
-            raise NewtonError(f"step failed after {iterations.value} Newton iterations: "
-                              f"{STATUS_MESSAGES.get(status, status)}", status=status)
-        return x1, iterations.value
+            raise self._step_failed(status, iterations.value)
+        return StepResult(x1, iterations.value, float(flows[0]), float(flows[1]))
+
+    def step_sensitivities(self, x0, dt: float, u=None,
+                           options: NewtonOptions | None = None) -> Sensitivities:
+        """A step and d s_{k+1}/d s_k, d s_{k+1}/d u_k in s = (phi, omega) (implicit function
+        theorem on the converged Newton system)."""
+        ns = 2 * self.n
+        x1, iterations = np.empty(self.nx), ctypes.c_int(0)
+        ds_ds, ds_du = np.empty(ns * ns), np.empty(ns * self.nu)
+        c_options = (options or self.default_options)._as_c()
+        status = self._c("step_sensitivities")(
+            _pointer(_vector(x0, self.nx, "x0")), *self._inputs(u), dt, _pointer(x1),
+            _pointer(ds_ds), *([_pointer(ds_du)] if self.nu else []), ctypes.byref(c_options),
+            self._workspace, ctypes.byref(iterations))
+        if status:
+            raise self._step_failed(status, iterations.value)
+        return Sensitivities(x1, iterations.value, ds_ds.reshape((ns, ns), order="F"),
+                             ds_du.reshape((ns, self.nu), order="F"))
 
     def simulate(self, phi0, omega0, *, dt: float, n_steps: int, every: int = 1,
-                 options: NewtonOptions | None = None, scene: str = "",
+                 torques=None, options: NewtonOptions | None = None, scene: str = "",
                  quadrature: int | None = None) -> SimulationResult:
         """Run n_steps steps from joint space (phi0, omega0) in one C call.
 
-        Raises NewtonError naming the failing step and time; the rows written before it are in
-        its `result`.
+        torques: (n_steps, nu) inputs of the actuated joints, row k held over step k (zero if
+        None). Raises NewtonError naming the failing step and time; the rows written before it
+        are in its `result`.
         """
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
                              f"{n_steps}, {every}")
+        inputs = []
+        if self.nu:
+            u = (np.zeros((n_steps, self.nu)) if torques is None
+                 else np.ascontiguousarray(torques, dtype=np.float64))
+            if u.shape != (n_steps, self.nu):
+                raise ValueError(f"torques must have shape ({n_steps}, {self.nu}) (steps, "
+                                 f"actuated joints), got {u.shape}")
+            inputs = [_pointer(u)]
+        elif torques is not None:
+            raise ValueError(f"{self.prefix} has no actuated joints; torques must be None")
         x0 = self.initial_state(phi0, omega0)
         rows = self._c("sample_count")(n_steps, every)
         samples = np.zeros((rows, self.nsample))
         stats = _Stats()
         c_options = (options or self.default_options)._as_c()
         started = time.perf_counter()
-        status = self._c("simulate")(_pointer(x0), 0.0, dt, n_steps, every,
+        status = self._c("simulate")(_pointer(x0), 0.0, dt, n_steps, every, *inputs,
                                      ctypes.byref(c_options), self._workspace,
                                      _pointer(samples), None, ctypes.byref(stats))
         wall = time.perf_counter() - started

@@ -176,7 +176,7 @@ def test_failed_newton_solve_raises_with_the_step():
     assert len(caught.value.result.samples) == 1      # only the initial row is valid
     with pytest.raises(NewtonError, match="did not converge"):
         solver.step(solver.initial_state(scene.initial_angles, scene.initial_velocities), 0.01,
-                    NewtonOptions(max_iterations=1))
+                    options=NewtonOptions(max_iterations=1))
 
 
 def test_step_matches_simulate():
@@ -184,8 +184,9 @@ def test_step_matches_simulate():
     solver = solver_for("three_link_multi", "es", 3)
     x = solver.initial_state(scene.initial_angles, scene.initial_velocities)
     for _ in range(10):
-        x, iterations = solver.step(x, 0.01)
-        assert 1 <= iterations <= 5
+        step = solver.step(x, 0.01)
+        x = step.x1
+        assert 1 <= step.iterations <= 5
     result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
                              n_steps=10, every=5)
     np.testing.assert_array_equal(result.t, [0.0, 0.05, 0.1])
@@ -235,11 +236,11 @@ def test_two_solvers_run_side_by_side():
     xb = second.initial_state(np.zeros(3), np.ones(3))
     alone_a, alone_b = xa.copy(), xb.copy()
     for _ in range(20):
-        xa, _ = first.step(xa, 0.01)
-        xb, _ = second.step(xb, 0.01)
+        xa = first.step(xa, 0.01).x1
+        xb = second.step(xb, 0.01).x1
     for _ in range(20):
-        alone_a, _ = first.step(alone_a, 0.01)
+        alone_a = first.step(alone_a, 0.01).x1
     for _ in range(20):
-        alone_b, _ = second.step(alone_b, 0.01)
+        alone_b = second.step(alone_b, 0.01).x1
     np.testing.assert_array_equal(xa, alone_a)
     np.testing.assert_array_equal(xb, alone_b)

@@ -61,6 +61,17 @@ class DiscreteScheme:
     unknowns_layout: Layout
     residual_description: str
     output_solve: LinearSolve | None = None   # symbols the outputs use beside the state
+    # Inputs (model.md 7): torques u of the scene's actuated joints, constant over a step; the
+    # residual and next_state may depend on them. Empty for an unactuated scene.
+    inputs: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
+    # Energy flows of one step, functions of (z, x0, u, dt): the work of u and the energy
+    # dissipated by joint damping (>= 0). Zero for a scene with neither.
+    input_work: sp.Expr = sp.Integer(0)
+    dissipated: sp.Expr = sp.Integer(0)
+
+    @property
+    def has_energy_flows(self) -> bool:
+        return has_energy_flows(self.scene)
 
     def __post_init__(self) -> None:
         if self.residual.shape[0] != self.unknowns.shape[0]:
@@ -68,3 +79,21 @@ class DiscreteScheme:
                              f"{self.unknowns.shape[0]} unknowns")
         if self.next_state.shape[0] != self.state.shape[0]:
             raise ValueError(f"{self.method}: next_state does not match the state")
+
+
+def has_energy_flows(scene: Scene) -> bool:
+    """Whether energy can enter (actuation) or leave (damping) the chain."""
+    return bool(scene.actuated_joints) or any(link.damping for link in scene.links)
+
+
+def input_symbols(scene: Scene) -> ImmutableMatrix:
+    """u: one torque symbol per actuated joint, in the scene's order."""
+    return ImmutableMatrix(sp.symbols([f"tau{j}" for j in scene.actuated_joints], real=True))
+
+
+def joint_torques(scene: Scene, inputs) -> list[sp.Expr]:
+    """tau_i for every joint i: the input of an actuated joint, zero elsewhere."""
+    torques = [sp.Integer(0)] * scene.n
+    for joint, u in zip(scene.actuated_joints, inputs):
+        torques[joint - 1] = u
+    return torques

@@ -5,11 +5,12 @@ C(q) qdot = 0, with q_1 eliminated (q_1 = q_0 + dt (v_0 + v_1)/2). Unknowns z = 
 dv = v_1 - v_0 and mu = Lambda_1 - Lambda_0, so q_1 - q_0 = dt (v_0 + dv/2). The residual is
 model.md's multiplied by dt:
 
-    M dv - C(q_m)^T mu + dt gradV~ = 0                 (2n equations)
+    M dv - C(q_m)^T mu + dt (gradV~ - f~) = 0          (2n equations)
     C(q_m) (q_1 - q_0) = 0                             (n equations)
 
 gradV~ is the average of grad V on the segment q_0 -> q_1: gravity's gradient is constant and
-enters exactly; the spring part is averaged with K-point Gauss-Legendre quadrature.
+enters exactly; the spring part is averaged with K-point Gauss-Legendre quadrature. f~ is the
+generalised force of the joint torques (inputs and damping) at the mid-point (model.md 7).
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from sympy import ImmutableMatrix
 from ..model import com_model, cross2, dot2, joint_space_positions, number
 from ..quadrature import gauss_legendre_nodes
 from ..scene import Scene
-from .base import DiscreteScheme, Layout
+from .base import DiscreteScheme, Layout, input_symbols, joint_torques
 
 
 def averaged_spring_gradient(model, q0, q1, quadrature: int) -> ImmutableMatrix:
@@ -33,20 +34,21 @@ def averaged_spring_gradient(model, q0, q1, quadrature: int) -> ImmutableMatrix:
     return ImmutableMatrix(total)
 
 
-def damping_force(model) -> ImmutableMatrix:
-    """Generalised force of viscous joint damping in COM coordinates (model.md section 7).
-
-    The torque -d_i phidot_i acts between links i-1 and i; its generalised force is
-    f = sum_i -d_i phidot_i grad_v(phidot_i), phidot_i = thetadot_i - thetadot_{i-1} linear in
-    v. Evaluated at the step's mid-point, its power is -sum_i d_i phidot_i^2 <= 0: passive.
-    """
+def relative_rates(model) -> list[sp.Expr]:
+    """phidot_i = thetadot_i - thetadot_{i-1}, linear in v (model.md sections 4 and 7)."""
     rates = (sp.Integer(0),) + model.absolute_rates()
+    return [after - before for before, after in zip(rates[:-1], rates[1:])]
+
+
+def joint_force(model, torques) -> ImmutableMatrix:
+    """Generalised force f = sum_i tau_i grad_v(phidot_i) of joint torques tau_i (model.md 7).
+
+    Its power f . v is sum_i tau_i phidot_i, because phidot_i is linear in v.
+    """
     force = sp.zeros(len(model.v), 1)
-    for link, before, after in zip(model.scene.links, rates[:-1], rates[1:]):
-        if link.damping:
-            relative = after - before
-            force -= number(link.damping) * relative * ImmutableMatrix([relative]).jacobian(
-                model.v).T
+    for rate, torque in zip(relative_rates(model), torques):
+        if torque != 0:
+            force += torque * ImmutableMatrix([rate]).jacobian(model.v).T
     return ImmutableMatrix(force)
 
 
@@ -72,17 +74,27 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
         gradient = gradient + averaged_spring_gradient(model, q0, q1, quadrature)
     momentum_balance = (model.mass_matrix * dv - constraint_jacobian_mid.T * mu
                         + dt * gradient)
-    if any(link.damping for link in scene.links):
-        midpoint = {**dict(zip(model.q, qm)), **dict(zip(model.v, (v0 + v1) / 2))}
-        momentum_balance -= dt * damping_force(model).xreplace(midpoint)
+    # Joint torques, input u and damping -d_i phidot_i, enter f~ at the mid-point (model.md 7):
+    # then dt f~ . v_m = dt sum_i tau_i phidot_i(m), and the discrete energy balance
+    # H_1 - H_0 = work - dissipated holds to quadrature and solver accuracy.
+    inputs = input_symbols(scene)
+    midpoint = {**dict(zip(model.q, qm)), **dict(zip(model.v, (v0 + v1) / 2))}
+    rates_mid = [rate.xreplace(midpoint) for rate in relative_rates(model)]
+    torques = [u - number(link.damping) * rate for u, link, rate
+               in zip(joint_torques(scene, inputs), scene.links, relative_rates(model))]
+    if any(torque != 0 for torque in torques):
+        momentum_balance -= dt * joint_force(model, torques).xreplace(midpoint)
+    input_work = dt * sp.Add(*(u * rate for u, rate in zip(joint_torques(scene, inputs),
+                                                           rates_mid)))
+    dissipated = dt * sp.Add(*(number(link.damping) * rate ** 2
+                               for link, rate in zip(scene.links, rates_mid) if link.damping))
     constraint_increment = constraint_jacobian_mid * dq
     residual = ImmutableMatrix.vstack(momentum_balance, constraint_increment)
 
     # Joint space: phi_i is the angle from e_{i-1} to e_i, wrapped to (-pi, pi] by atan2.
     directions = (ImmutableMatrix([1, 0]),) + model.directions
     angles = [sp.atan2(cross2(a, b), dot2(a, b)) for a, b in zip(directions[:-1], directions[1:])]
-    rates = (sp.Integer(0),) + model.absolute_rates()
-    velocities = [b - a for a, b in zip(rates[:-1], rates[1:])]
+    velocities = relative_rates(model)
 
     phi = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
     phidot = ImmutableMatrix(sp.symbols(f"phidot1:{n + 1}", real=True))
@@ -111,6 +123,7 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
             "the increment dv = v_1 - v_0 of the COM velocities over the step (m/s), then the constraint impulses mu = Lambda_1 - Lambda_0"
             " (kg/s: C^T mu is a momentum)"),
         residual_description=(
-            "dt-scaled momentum balance M dv - C(q_m)^T mu + dt gradV~ (2n entries, "
+            "dt-scaled momentum balance M dv - C(q_m)^T mu + dt (gradV~ - f~) (2n entries, "
             "kg m/s), then the constraint increments C(q_m) (q_1 - q_0) (n entries, m^2)"),
+        inputs=inputs, input_work=input_work, dissipated=dissipated,
     )

@@ -1,7 +1,8 @@
 """Method "midpoint": implicit midpoint rule in joint angles (model.md section 6).
 
-State (phi, w); M(phi) phiddot + Coriolis(phi, w) + grad V(phi) = tau (damping -d_i w_i), with
-M, the Coriolis terms and grad V derived by SymPy from T and V. Unknown: dw = w_1 - w_0, so that
+State (phi, w); M(phi) phiddot + Coriolis(phi, w) + grad V(phi) = tau, tau the inputs of the
+actuated joints and damping -d_i w_i, with M, the Coriolis terms and grad V derived by SymPy from
+T and V. Unknown: dw = w_1 - w_0, so that
 w_m = w_0 + dw/2, phi_1 = phi_0 + dt w_m, phi_m = phi_0 + dt w_m / 2, and the residual (model.md's
 multiplied by dt) is
 
@@ -13,8 +14,9 @@ import sympy as sp
 from sympy import ImmutableMatrix
 
 from ..joint_model import angle_directions, joint_space_model
+from ..model import number
 from ..scene import Scene
-from .base import DiscreteScheme, Layout
+from .base import DiscreteScheme, Layout, input_symbols, joint_torques
 
 
 def coriolis(model, angles) -> ImmutableMatrix:
@@ -36,7 +38,10 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
     wm = w0 + dw / 2
     phim = phi0 + dt * wm / 2
     at_midpoint = {**dict(zip(phi0, phim)), **dict(zip(w0, wm))}
-    forces = (coriolis(model, phi0) + ImmutableMatrix([model.potential]).jacobian(phi0).T)
+    inputs = input_symbols(scene)
+    torques = joint_torques(scene, inputs)
+    forces = (coriolis(model, phi0) + ImmutableMatrix([model.potential]).jacobian(phi0).T
+              - ImmutableMatrix(torques))
     if any(link.damping for link in scene.links):
         forces = forces - model.damping_torques(w0)
     residual = model.mass_matrix.xreplace(at_midpoint) * dw + dt * forces.xreplace(at_midpoint)
@@ -62,4 +67,8 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
                                "the increment dw = w_1 - w_0 of the joint rates (rad/s)"),
         residual_description=("dt-scaled midpoint equations of motion M(phi_m) dw + dt "
                               "(Coriolis + grad V - tau) at the mid-point (N m s)"),
+        inputs=inputs,
+        input_work=dt * sp.Add(*(tau * w for tau, w in zip(torques, wm))),
+        dissipated=dt * sp.Add(*(number(link.damping) * w ** 2
+                                 for link, w in zip(scene.links, wm) if link.damping)),
     )

@@ -9,8 +9,9 @@ q_1 = Rot(theta) q_0. Position-momentum form with the rotation increments theta 
     p_1 = M(q_m) w + dt/2 (g(q_m, w) + f(w))
 
 g = dL/dphi = 1/2 d(w^T M w)/dphi - dV/dphi, where d/dphi_j of a function of q is its gradient in
-q_j dotted with S q_j (thesis 4.25). f = -d w is viscous joint damping, entering as the midpoint
-discrete Lagrange-d'Alembert forces (model.md 7).
+q_j dotted with S q_j (thesis 4.25). f = tau - d w are the joint torques, the inputs of the actuated
+joints and viscous damping, entering as the midpoint discrete Lagrange-d'Alembert forces
+(model.md 7). Over a step their work is tau . theta and the damping dissipates dt d w^2.
 """
 from __future__ import annotations
 
@@ -18,9 +19,9 @@ import sympy as sp
 from sympy import ImmutableMatrix
 
 from ..joint_model import attitude_directions, joint_space_model, rotate
-from ..model import S
+from ..model import S, number
 from ..scene import Scene
-from .base import DiscreteScheme, Layout, LinearSolve
+from .base import DiscreteScheme, Layout, LinearSolve, input_symbols, joint_torques
 
 
 def angle_derivative(expr, attitudes) -> ImmutableMatrix:
@@ -47,7 +48,9 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
 
     lagrangian = model.kinetic_energy - model.potential
     g = angle_derivative(lagrangian, attitudes)
-    forces = g
+    inputs = input_symbols(scene)
+    torques = joint_torques(scene, inputs)
+    forces = g + ImmutableMatrix(torques)
     if any(link.damping for link in scene.links):
         forces = forces + model.damping_torques(w)
     q_mid = [rotate(q, unit(t / 2)) for q, t in zip(attitudes, theta)]
@@ -89,4 +92,8 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
         residual_description=("discrete Legendre transform M(q_m) w - dt/2 (g + f) - p_0, "
                               "w = theta/dt (N m s)"),
         output_solve=LinearSolve(symbols=w, matrix=model.mass_matrix, rhs=p0),
+        inputs=inputs,
+        input_work=sp.Add(*(tau * t for tau, t in zip(torques, theta))),
+        dissipated=sp.Add(*(number(link.damping) * t ** 2 for link, t in zip(scene.links, theta)
+                            if link.damping)) / dt,
     )

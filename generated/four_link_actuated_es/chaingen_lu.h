@@ -1,0 +1,82 @@
+/* Dense LU factorisation with partial pivoting, for the Newton systems of chaingen solvers.
+ *
+ * Header-only and static: every generated package includes its own copy, nothing is exported.
+ * Matrices are column-major (a[i + j*n] is row i, column j), as CasADi writes dense outputs.
+ */
+#ifndef CHAINGEN_LU_H
+#define CHAINGEN_LU_H
+
+#include <math.h>
+
+/* Factorise a in place into L (unit lower, below the diagonal) and U, with row swaps in pivot.
+ * Returns 0, or k + 1 if column k has no usable pivot (zero or not finite). */
+static int chaingen_lu_factor(int n, double *a, int *pivot)
+{
+    int i, j, k;
+    for (k = 0; k < n; ++k) {
+        int p = k;
+        double largest = fabs(a[k + k * n]);
+        for (i = k + 1; i < n; ++i) {
+            double magnitude = fabs(a[i + k * n]);
+            if (magnitude > largest) {
+                largest = magnitude;
+                p = i;
+            }
+        }
+        pivot[k] = p;
+        if (!(largest > 0.0) || !isfinite(largest)) {
+            return k + 1;
+        }
+        if (p != k) {
+            for (j = 0; j < n; ++j) {
+                double swap = a[k + j * n];
+                a[k + j * n] = a[p + j * n];
+                a[p + j * n] = swap;
+            }
+        }
+        for (i = k + 1; i < n; ++i) {
+            a[i + k * n] /= a[k + k * n];
+        }
+        for (j = k + 1; j < n; ++j) {
+            double ukj = a[k + j * n];
+            if (ukj != 0.0) {
+                for (i = k + 1; i < n; ++i) {
+                    a[i + j * n] -= a[i + k * n] * ukj;
+                }
+            }
+        }
+    }
+    return 0;
+}
+
+/* Solve (LU) x = b in place of b, with the factors and pivots of chaingen_lu_factor. */
+static void chaingen_lu_solve(int n, const double *lu, const int *pivot, double *b)
+{
+    int i, j;
+    for (i = 0; i < n; ++i) {
+        if (pivot[i] != i) {
+            double swap = b[i];
+            b[i] = b[pivot[i]];
+            b[pivot[i]] = swap;
+        }
+    }
+    for (j = 0; j < n; ++j) {
+        double bj = b[j];
+        if (bj != 0.0) {
+            for (i = j + 1; i < n; ++i) {
+                b[i] -= lu[i + j * n] * bj;
+            }
+        }
+    }
+    for (j = n - 1; j >= 0; --j) {
+        b[j] /= lu[j + j * n];
+        {
+            double bj = b[j];
+            for (i = 0; i < j; ++i) {
+                b[i] -= lu[i + j * n] * bj;
+            }
+        }
+    }
+}
+
+#endif /* CHAINGEN_LU_H */
