@@ -122,6 +122,14 @@ def summary(result, settings, out: Path | None) -> str:
         f"  wall time (C loop)     {result.wall_time:.4g} s ({per_step * 1e6:.3g} us/step)",
         f"  t_realtime             {result.t_realtime:.3g}",
         f"  max |energy error|     {np.abs(result.energy_error).max():.3e} J",
+    ]
+    if "dissipated" in result.columns:
+        lines += [
+            f"  input work, dissipated {result.input_work[-1]:.6g} J, {result.dissipated[-1]:.6g} J",
+            f"  max |balance error|    {np.abs(result.balance_error).max():.3e} J "
+            "(H - H_0 - work + dissipated)",
+        ]
+    lines += [
         f"  max |constraint error| {result.constraint_error.max():.3e}",
         f"  Newton iterations      mean {result.mean_newton_iterations:.2f}, "
         f"max {result.max_newton_iterations}",

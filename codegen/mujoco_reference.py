@@ -76,8 +76,11 @@ def initial_energy_mujoco(scene: Scene) -> float:
 
 
 def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
-                    integrator: str = "RK4") -> MujocoTrajectory:
+                    integrator: str = "RK4", torques=None) -> MujocoTrajectory:
     """Integrate `scene` with MuJoCo for round(t_end/dt) steps of `dt` with `integrator`.
+
+    `torques` (one per actuated joint of the scene, constant) act on the joints as generalised
+    forces (mjData.qfrc_applied), in the same sense as model.md 7: power tau_i phidot_i.
 
     Starts from qpos = initial angles, qvel = initial velocities and samples (qpos, qvel, H)
     after round(t/dt) steps for each t in `sample_times` (any order; each a whole number of
@@ -93,6 +96,13 @@ def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
             raise ValueError(f"sample_times[{k}]: {sample_times[k]!r} s is after t_end = {t_end!r} s")
 
     model, data = _model_and_data(scene, dt, integrator)
+    if torques is not None:
+        torques = np.asarray(torques, dtype=float)
+        if torques.shape != (len(scene.actuated_joints),):
+            raise ValueError(f"torques: one per actuated joint {scene.actuated_joints}, got "
+                             f"shape {torques.shape}")
+        for joint, torque in zip(scene.actuated_joints, torques):
+            data.qfrc_applied[joint - 1] = torque
     initial_energy = _energy(data)
 
     n = scene.n

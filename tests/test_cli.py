@@ -105,6 +105,8 @@ BAD_SCENES = [
      "initial.accel", ["unknown key"]),
     ("unknown key in simulation", [("t_end = 50.0", "t_end = 50.0\nsteps = 100")],
      "simulation.steps", ["unknown key"]),
+    ("actuated joint beyond the chain", [("[initial]", "[actuation]\njoints = [1, 4]\n\n[initial]")],
+     "actuation.joints[1]", ["joint 4 does not exist", "3 joints"]),
     # wrong types
     ("string mass", [("mass = 1.0", 'mass = "1.0"', 0)], "links[0].mass",
      ["must be a number", "not a string"]),

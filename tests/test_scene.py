@@ -522,3 +522,48 @@ def test_missing_file_is_a_scene_error(tmp_path):
 def test_directory_is_a_scene_error(tmp_path):
     with pytest.raises(SceneError, match="cannot read scene file"):
         load_scene(tmp_path)
+
+
+# -- [actuation] (docs/scene-extensions.md) --------------------------------------------------
+
+ACTUATED = VALID.replace("[initial]", "[actuation]\njoints = [2]\n\n[initial]")
+
+
+def test_actuation_lists_the_actuated_joints():
+    assert parse_scene(ACTUATED, SOURCE, "unused").actuated_joints == (2,)
+    both = edited("joints = [2]\n", "joints = [1, 2]\n", ACTUATED)
+    assert parse_scene(both, SOURCE, "unused").actuated_joints == (1, 2)
+    assert parse_scene(VALID, SOURCE, "unused").actuated_joints == ()
+
+
+def test_actuation_may_come_before_the_links():
+    text = "[actuation]\njoints = [1]\n\n" + MINIMAL
+    assert parse_scene(text, SOURCE, "x").actuated_joints == (1,)
+    assert_names(scene_error("[actuation]\njoints = [2]\n\n" + MINIMAL), "actuation.joints[0]",
+                 "joint 2 does not exist", "1 joint (1..1)")
+
+
+BAD_ACTUATION = [
+    ("joint beyond the chain", "joints = [3]", "actuation.joints[0]",
+     "joint 3 does not exist: the chain has 2 joints (1..2)"),
+    ("joint zero", "joints = [0]", "actuation.joints[0]", "joint 0 does not exist"),
+    ("descending", "joints = [2, 1]", "actuation.joints[1]", "ascending order"),
+    ("repeated", "joints = [2, 2]", "actuation.joints[1]", "each once"),
+    ("empty", "joints = []", "actuation.joints", "at least one joint"),
+    ("float", "joints = [1.0]", "actuation.joints", "array of integers"),
+    ("bool", "joints = [true]", "actuation.joints", "array of integers"),
+    ("scalar", "joints = 1", "actuation.joints", "got 1"),
+    ("unknown key", "joints = [2]\njoint = [1]", "actuation.joint", "did you mean 'joints'"),
+    ("missing joints", "", "actuation.joints", "missing"),
+]
+
+
+@pytest.mark.parametrize("new, path, fragment", [case[1:] for case in BAD_ACTUATION],
+                         ids=[case[0] for case in BAD_ACTUATION])
+def test_bad_actuation_is_an_error(new, path, fragment):
+    assert_names(scene_error(edited("joints = [2]", new, ACTUATED)), path, fragment)
+
+
+def test_actuation_must_be_a_table():
+    assert_names(scene_error("actuation = [1]\n" + MINIMAL), "actuation",
+                 "must be a table ([actuation])")
