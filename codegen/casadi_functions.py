@@ -109,15 +109,16 @@ class SchemeFunctions:
     outputs: ca.Function             # (x) -> (phi, omega, energy, constraint residuals)
     initial_state: ca.Function       # (phi, phidot) -> x
     # Step-map sensitivities in joint space s = (phi, omega), by the implicit function theorem:
-    sensitivity_rhs: ca.Function     # -> R = [dF/dx0 dx0/ds0, dF/du]  (nz x (2n + nu))
-    sensitivity_map: ca.Function     # -> (ds1/dz, ds1/dx0 dx0/ds0, ds1/du) at fixed z
+    # (None when the package is generated without them.)
+    sensitivity_rhs: ca.Function | None  # -> R = [dF/dx0 dx0/ds0, dF/du]  (nz x (2n + nu))
+    sensitivity_map: ca.Function | None  # -> (ds1/dz, ds1/dx0 dx0/ds0, ds1/du) at fixed z
     holding_torques: ca.Function | None  # (phi) -> dV/dphi, actuated scenes only
 
     def all(self) -> tuple[ca.Function, ...]:
         functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
                      self.outputs, self.initial_state, self.sensitivity_rhs,
-                     self.sensitivity_map)
-        return functions + ((self.holding_torques,) if self.holding_torques else ())
+                     self.sensitivity_map, self.holding_torques)
+        return tuple(function for function in functions if function is not None)
 
 
 def _vector(translate: SympyToCasadi, matrix) -> ca.SX:
@@ -125,8 +126,13 @@ def _vector(translate: SympyToCasadi, matrix) -> ca.SX:
     return ca.vertcat(*entries) if entries else ca.SX(0, 1)
 
 
-def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
-    """CasADi Functions for the residual, its Jacobian, and the state maps of `scheme`."""
+def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
+                     sensitivities: bool = True) -> SchemeFunctions:
+    """CasADi Functions for the residual, its Jacobian, and the state maps of `scheme`.
+
+    sensitivities=False leaves out the step-map Jacobians, the largest generated functions
+    (for "vi" about three times the Newton Jacobian), when a package does not need them.
+    """
     nz, nx, nu = scheme.unknowns.shape[0], scheme.state.shape[0], scheme.inputs.shape[0]
     n = scheme.scene.n
     z, x0, u = ca.SX.sym("z", nz), ca.SX.sym("x0", nx), ca.SX.sym("u", nu)
@@ -177,21 +183,6 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
                              **dict(zip(scheme.initial_velocities, ca.vertsplit(phidot)))})
     initial_state = _vector(initial, scheme.initial_state)
 
-    # Sensitivities: the controller's state is s = (phi, omega); x0 = X(s0) (initial_state),
-    # s1 = S(x1) (outputs). With F(z*, x0, u) = 0, dz*/d(s0, u) = -J^-1 [F_x0 X_s, F_u] (the C
-    # code solves it with one LU of J at z*), and ds1/d(s0, u) = S_x1 (x1_z dz* + [x1_x0 X_s,
-    # x1_u]). X_s is evaluated at s0 = S(x0), so the functions take x0 as the step does.
-    s_of_x0 = ca.vertcat(*joint_space(x0)[:2])
-    state_jacobian = ca.Function("X_s", [phi, phidot],
-                                 [ca.jacobian(initial_state, ca.vertcat(phi, phidot))])
-    x_s = state_jacobian(s_of_x0[:n], s_of_x0[n:])
-    s1 = ca.vertcat(*joint_space(x1)[:2])
-    rhs = ca.densify(ca.horzcat(ca.mtimes(ca.jacobian(residual, x0), x_s),
-                                ca.jacobian(residual, u)))
-    s1_z = ca.densify(ca.jacobian(s1, z))
-    s1_s0 = ca.densify(ca.mtimes(ca.jacobian(s1, x0), x_s))
-    s1_u = ca.densify(ca.jacobian(s1, u))
-
     step_args = [z, x0] + ([u] if nu else []) + [dt]
     step_names = ["z", "x0"] + (["u"] if nu else []) + ["dt"]
     flows = ([ca.vertcat(step(scheme.input_work), step(scheme.dissipated))]
@@ -201,6 +192,29 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
         return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
                            options)
 
+    def sensitivity_functions() -> tuple[ca.Function, ca.Function]:
+        """The controller's state is s = (phi, omega); x0 = X(s0) (initial_state), s1 = S(x1)
+        (outputs). With F(z*, x0, u) = 0, dz*/d(s0, u) = -J^-1 [F_x0 X_s, F_u] (the C code
+        solves it with one LU of J at z*), and ds1/d(s0, u) = S_x1 (x1_z dz* + [x1_x0 X_s,
+        x1_u]). X_s is evaluated at s0 = S(x0), so the functions take x0 as the step does."""
+        s_of_x0 = ca.vertcat(*joint_space(x0)[:2])
+        state_jacobian = ca.Function("X_s", [phi, phidot],
+                                     [ca.jacobian(initial_state, ca.vertcat(phi, phidot))])
+        x_s = state_jacobian(s_of_x0[:n], s_of_x0[n:])
+        s1 = ca.vertcat(*joint_space(x1)[:2])
+        rhs = ca.densify(ca.horzcat(ca.mtimes(ca.jacobian(residual, x0), x_s),
+                                    ca.jacobian(residual, u)))
+        s1_z = ca.densify(ca.jacobian(s1, z))
+        s1_s0 = ca.densify(ca.mtimes(ca.jacobian(s1, x0), x_s))
+        s1_u = ca.densify(ca.jacobian(s1, u))
+        return (fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
+                fn("sensitivity_map", step_args, step_names,
+                   [s1_z, s1_s0] + ([s1_u] if nu else []),
+                   ["s1_z", "s1_s0"] + (["s1_u"] if nu else [])))
+
+    sensitivity_rhs = sensitivity_map = None
+    if sensitivities:
+        sensitivity_rhs, sensitivity_map = sensitivity_functions()
     holding = None
     if nu:
         holding = fn("holding_torques", [phi], ["phi"], [_holding_torques(scheme, phi)], ["tau"])
@@ -216,10 +230,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str) -> SchemeFunctions:
                    ["phi", "omega", "energy", "constraint"]),
         initial_state=fn("initial_state", [phi, phidot], ["phi", "phidot"], [initial_state],
                          ["x"]),
-        sensitivity_rhs=fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
-        sensitivity_map=fn("sensitivity_map", step_args, step_names,
-                           [s1_z, s1_s0] + ([s1_u] if nu else []),
-                           ["s1_z", "s1_s0"] + (["s1_u"] if nu else [])),
+        sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map,
         holding_torques=holding,
     )
 

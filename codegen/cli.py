@@ -54,6 +54,8 @@ def parser() -> argparse.ArgumentParser:
     _add_scheme_options(generate)
     generate.add_argument("-o", "--output", type=Path, metavar="DIR",
                           help="package directory (default: ./<scene>_<method>)")
+    generate.add_argument("--no-sensitivities", dest="sensitivities", action="store_false",
+                          help="leave out step_sensitivities (smaller code, faster build)")
 
     simulate = commands.add_parser("simulate", help="simulate a scene with a generated solver")
     _add_scheme_options(simulate)
@@ -73,7 +75,8 @@ def command_generate(args) -> int:
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                             source=str(args.scene))
-    package = generate_package(scene, settings.method, settings.quadrature)
+    package = generate_package(scene, settings.method, settings.quadrature,
+                               sensitivities=args.sensitivities)
     directory = write_package(package, args.output or Path(package.prefix))
     print(f"wrote {directory}/: {', '.join(package.files)}")
     return 0

@@ -83,7 +83,7 @@ def uses_quadrature(scene: Scene, method: str) -> bool:
     return method == "es" and bool(scene.springs)
 
 
-def input_hash(scene: Scene, method: str, quadrature: int) -> str:
+def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool = True) -> str:
     """sha256 of everything the generated code depends on, and nothing else.
 
     The initial state and the simulation defaults do not enter the code; the tool versions do.
@@ -94,6 +94,7 @@ def input_hash(scene: Scene, method: str, quadrature: int) -> str:
     payload = {
         "scene": code_relevant, "method": method,
         "quadrature": quadrature if uses_quadrature(scene, method) else None,
+        "sensitivities": sensitivities,
         "chaingen": __version__, "sympy": sympy.__version__, "casadi": casadi.__version__,
     }
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
@@ -181,12 +182,16 @@ def _example_context(scene: Scene) -> dict:
     }
 
 
-def render_package(scheme: DiscreteScheme) -> GeneratedPackage:
-    """The C package of `scheme`: CasADi code for its functions and the templates around it."""
+def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True) -> GeneratedPackage:
+    """The C package of `scheme`: CasADi code for its functions and the templates around it.
+
+    sensitivities=False leaves out step_sensitivities and its generated functions (a package
+    only run forward, as `chaingen simulate` does, builds faster without them).
+    """
     scene = scheme.scene
     prefix = package_prefix(scene, scheme.method)
-    digest = input_hash(scene, scheme.method, scheme.quadrature)
-    functions = scheme_functions(scheme, prefix)
+    digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities)
+    functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
     model_source, model_header = casadi_c_source(functions.all(), prefix)
     sizes = work_sizes(functions.all())
 
@@ -202,6 +207,7 @@ def render_package(scheme: DiscreteScheme) -> GeneratedPackage:
     context = {
         **signature_parts(nu, flows),
         "nu": nu, "actuated_joints": scene.actuated_joints, "flows": flows,
+        "sensitivities": sensitivities,
         "nsens": 2 * n + nu, "flows_work": work_doc, "flows_dissipated": dissipated_doc,
         "flows_balance": balance_doc,
         **_example_context(scene),
@@ -234,6 +240,7 @@ def render_package(scheme: DiscreteScheme) -> GeneratedPackage:
         "quadrature": scheme.quadrature if uses_quadrature(scene, scheme.method) else None,
         "n_joints": n, "nx": context["nx"], "nz": context["nz"], "nsample": context["nsample"],
         "actuated_joints": list(scene.actuated_joints), "nu": nu, "energy_flows": flows,
+        "sensitivities": sensitivities,
         "state": list(scheme.state_layout.entries),
         "unknowns": list(scheme.unknowns_layout.entries),
         "sample_columns": [name for name, _ in columns],
@@ -244,9 +251,10 @@ def render_package(scheme: DiscreteScheme) -> GeneratedPackage:
     return GeneratedPackage(prefix=prefix, files=dict(sorted(files.items())), manifest=manifest)
 
 
-def generate_package(scene: Scene, method: str, quadrature: int) -> GeneratedPackage:
+def generate_package(scene: Scene, method: str, quadrature: int, *,
+                     sensitivities: bool = True) -> GeneratedPackage:
     """Scene -> scheme -> C package, all in memory."""
-    return render_package(build_scheme(scene, method, quadrature))
+    return render_package(build_scheme(scene, method, quadrature), sensitivities=sensitivities)
 
 
 def write_package(package: GeneratedPackage, directory: str | os.PathLike) -> Path:

@@ -77,14 +77,18 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
     return settings
 
 
-def build_solver(scene: Scene, method: str, quadrature: int) -> Solver:
-    return Solver.from_files(generate_package(scene, method, quadrature).files)
+def build_solver(scene: Scene, method: str, quadrature: int, *,
+                 sensitivities: bool = True) -> Solver:
+    return Solver.from_files(generate_package(scene, method, quadrature,
+                                              sensitivities=sensitivities).files)
 
 
 def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None = None,
                    options: NewtonOptions | None = None) -> SimulationResult:
     """Simulate `scene` from its initial state; raises NewtonError if a step fails."""
-    solver = solver or build_solver(scene, settings.method, settings.quadrature)
+    # A forward run needs no step sensitivities: leaving them out builds faster.
+    solver = solver or build_solver(scene, settings.method, settings.quadrature,
+                                    sensitivities=False)
     return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=settings.dt,
                            n_steps=settings.n_steps, every=settings.every, options=options,
                            scene=scene.name)

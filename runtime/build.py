@@ -48,7 +48,8 @@ def build_shared_library(prefix: str, files: dict[str, str], sources: list[str],
                          cache: Path | None = None) -> Path:
     """Path of lib<prefix>-<hash>.so built from `files` (reused when it already exists)."""
     cc = compiler()
-    all_flags = STRICT_FLAGS + tuple(flags) + ("-fPIC", "-shared")
+    # Hidden visibility: only the header's API (marked <PREFIX>_API) is exported.
+    all_flags = STRICT_FLAGS + tuple(flags) + ("-fPIC", "-fvisibility=hidden", "-shared")
     cache = Path(cache) if cache is not None else cache_directory()
     library = cache / f"lib{prefix}-{build_hash(files, all_flags, cc)}.so"
     if library.exists():

@@ -181,6 +181,7 @@ class Solver:
         self.actuated_joints = tuple(manifest.get("actuated_joints", ()))
         self.nu = len(self.actuated_joints)
         self.energy_flows = bool(manifest.get("energy_flows", False))
+        self.has_sensitivities = bool(manifest.get("sensitivities", False))
         self._lib = ctypes.CDLL(str(self.library_path))
         self._declare()
         self._workspace = ctypes.create_string_buffer(self._c("workspace_size")())
@@ -217,12 +218,13 @@ class Solver:
             "residual": (i, [dp, dp, *u, d, dp, vp]),
             "residual_jacobian": (i, [dp, dp, *u, d, dp, dp, vp]),
             "step": (i, [dp, *u, d, dp, *flows, options, vp, count]),
-            "step_sensitivities": (i, [dp, *u, d, dp, dp, *u, options, vp, count]),
             "sample_count": (lng, [lng, lng]),
             "simulate": (i, [dp, d, d, lng, lng, *u, options, vp, dp, dp, stats]),
         }
         if self.nu:
             signatures["holding_torques"] = (i, [dp, dp, vp])
+        if self.has_sensitivities:
+            signatures["step_sensitivities"] = (i, [dp, *u, d, dp, dp, *u, options, vp, count])
         for name, (restype, argtypes) in signatures.items():
             function = self._c(name)
             function.restype = restype
@@ -302,6 +304,8 @@ class Solver:
                            options: NewtonOptions | None = None) -> Sensitivities:
         """A step and d s_{k+1}/d s_k, d s_{k+1}/d u_k in s = (phi, omega) (implicit function
         theorem on the converged Newton system)."""
+        if not self.has_sensitivities:
+            raise ValueError(f"{self.prefix} was generated without step sensitivities")
         ns = 2 * self.n
         x1, iterations = np.empty(self.nx), ctypes.c_int(0)
         ds_ds, ds_du = np.empty(ns * ns), np.empty(ns * self.nu)

@@ -45,10 +45,15 @@ def load(name: str):
 _solvers: dict = {}
 
 
-def solver_for(name: str, method: str = "es", quadrature: int = 3):
-    """The built solver of a scene, generated and compiled once per session."""
-    key = (name, method, quadrature)
+def solver_for(name: str, method: str = "es", quadrature: int = 3, *,
+               sensitivities: bool = False):
+    """The built solver of a scene, generated and compiled once per session.
+
+    Without step sensitivities unless asked: they are the largest generated functions, and
+    most tests only step forward.
+    """
+    key = (name, method, quadrature, sensitivities)
     if key not in _solvers:
         from codegen.simulation import build_solver
-        _solvers[key] = build_solver(load(name), method, quadrature)
+        _solvers[key] = build_solver(load(name), method, quadrature, sensitivities=sensitivities)
     return _solvers[key]

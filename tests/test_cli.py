@@ -451,6 +451,18 @@ def test_generate_writes_the_package(tmp_path):
     assert isinstance(manifest, dict)
     assert not any(name.startswith(".") for name in names)
     assert {path.name for path in tmp_path.iterdir()} == {"pkg"}   # no staging leftovers
+    assert {"README.md", "example.c"} <= names
+    assert manifest["sensitivities"] is True
+    assert "three_link_mono_es_step_sensitivities" in (package / "three_link_mono_es.h").read_text()
+
+
+def test_generate_without_sensitivities(tmp_path):
+    result = chaingen("generate", MONO, "--no-sensitivities", "-o", tmp_path / "pkg",
+                      cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    manifest = json.loads((tmp_path / "pkg" / "chaingen.json").read_text())
+    assert manifest["sensitivities"] is False
+    assert "step_sensitivities" not in (tmp_path / "pkg" / "three_link_mono_es.h").read_text()
 
 
 def test_newton_failure_exits_1_and_writes_nothing(tmp_path):
