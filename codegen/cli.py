@@ -1,4 +1,4 @@
-"""The `chaingen` command: generate C solvers for a scene, and simulate with them."""
+"""The `chaingen` command: generate C solvers for a scene, simulate with them, check them."""
 from __future__ import annotations
 
 import argparse
@@ -65,6 +65,14 @@ def parser() -> argparse.ArgumentParser:
                           help="write every N-th step (t = 0 always included; default 1)")
     simulate.add_argument("--out", type=Path, metavar="FILE.csv",
                           help="write the trajectory file (scene-format.md)")
+
+    check = commands.add_parser(
+        "check", help="compare the generated functions with finite differences and SymPy")
+    _add_scheme_options(check)
+    check.add_argument("--samples", type=_positive_int, default=5, metavar="N",
+                       help="random states to check at (default 5)")
+    check.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    check.add_argument("--dt", type=_number, help="step in s (default: the scene's)")
     return main
 
 
@@ -80,6 +88,24 @@ def command_generate(args) -> int:
     directory = write_package(package, args.output or Path(package.prefix))
     print(f"wrote {directory}/: {', '.join(package.files)}")
     return 0
+
+
+def command_check(args) -> int:
+    from chaingen_runtime import Solver
+
+    from .check import check_solver
+    from .package import render_package
+    from .schemes import build_scheme
+    from .simulation import run_settings
+
+    scene = load_scene(args.scene)
+    settings = run_settings(scene, method=args.method, quadrature=args.quadrature, dt=args.dt,
+                            source=str(args.scene))
+    scheme = build_scheme(scene, settings.method, settings.quadrature)
+    solver = Solver.from_files(render_package(scheme, sensitivities=True).files)
+    report = check_solver(scheme, solver, samples=args.samples, seed=args.seed, dt=settings.dt)
+    print(report.table())
+    return 0 if report.passed else EXIT_FAILED
 
 
 def _check_output_path(path: Path) -> None:
@@ -144,7 +170,8 @@ def summary(result, settings, out: Path | None) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
-    handlers = {"generate": command_generate, "simulate": command_simulate}
+    handlers = {"generate": command_generate, "simulate": command_simulate,
+                "check": command_check}
     try:
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take

@@ -1,0 +1,94 @@
+"""`chaingen check`: passes on good packages, and catches a wrong derivative or a wrong value."""
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from codegen.check import check_solver
+from codegen.schemes import build_scheme
+from conftest import REFERENCE_SCENES, load, scene_path, solver_for
+
+
+def report_for(name, method, solver=None, scheme=None, samples=3):
+    scheme = scheme or build_scheme(load(name), method, 3)
+    solver = solver or solver_for(name, method, 3, sensitivities=True)
+    return check_solver(scheme, solver, samples=samples)
+
+
+@pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
+@pytest.mark.parametrize("name", REFERENCE_SCENES + ("four_link_underactuated",))
+def test_check_passes_on_the_generated_packages(name, method):
+    report = report_for(name, method)
+    assert report.passed, report.table()
+    names = {row.quantity for row in report.rows}
+    assert {"residual Jacobian", "d s1 / d s0", "residual", "energy", "joint angles",
+            "joint rates", "initial state", "next state"} <= names
+    assert ("d s1 / d u" in names) == (name == "four_link_underactuated")
+    assert ("constraint error" in names) == (method != "midpoint")
+
+
+class Perturbed:
+    """A solver whose one function is wrong, the rest delegated to a good one."""
+
+    def __init__(self, solver, **overrides):
+        self._solver = solver
+        self.__dict__.update(overrides)
+
+    def __getattr__(self, name):
+        return getattr(self._solver, name)
+
+
+def test_check_catches_a_wrong_jacobian_entry():
+    good = solver_for("three_link_mono", "es", 3, sensitivities=True)
+
+    def residual_jacobian(z, x0, dt, u=None):
+        residual, jacobian = good.residual_jacobian(z, x0, dt, u=u)
+        jacobian = jacobian.copy()
+        jacobian[1, 4] += 1e-4 * np.abs(jacobian).max()     # one entry off by 1e-4
+        return residual, jacobian
+
+    report = report_for("three_link_mono", "es",
+                        solver=Perturbed(good, residual_jacobian=residual_jacobian))
+    assert not report.passed
+    failed = [row.quantity for row in report.rows if not row.passed]
+    assert failed == ["residual Jacobian"], report.table()
+
+
+def test_check_catches_wrong_sensitivities():
+    good = solver_for("four_link_underactuated", "vi", 3, sensitivities=True)
+
+    def step_sensitivities(x0, dt, u=None, options=None):
+        result = good.step_sensitivities(x0, dt, u=u, options=options)
+        return dataclasses.replace(result, ds_du=result.ds_du * (1 + 1e-5))
+
+    report = report_for("four_link_underactuated", "vi",
+                        solver=Perturbed(good, step_sensitivities=step_sensitivities))
+    assert [row.quantity for row in report.rows if not row.passed] == ["d s1 / d u"]
+
+
+def test_check_catches_a_generated_energy_that_differs_from_the_model():
+    """The C energy against a model whose energy is off by 1e-7: the energy row fails."""
+    scheme = build_scheme(load("three_link_multi"), "midpoint", 3)
+    wrong = dataclasses.replace(scheme, energy=scheme.energy * (1 + 1e-7))
+    report = report_for("three_link_multi", "midpoint", scheme=wrong)
+    assert [row.quantity for row in report.rows if not row.passed] == ["energy"]
+
+
+def test_check_command_exits_0_on_success_and_prints_the_table():
+    result = subprocess.run([sys.executable, "-m", "codegen", "check",
+                             str(scene_path("three_link_gravity")), "--method", "midpoint",
+                             "--samples", "2"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "residual Jacobian" in result.stdout and "passed" in result.stdout
+
+
+def test_check_command_refuses_bad_options_with_status_2(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "codegen", "check",
+                             str(scene_path("three_link_gravity")), "--dt", "-1"],
+                            capture_output=True, text=True)
+    assert result.returncode == 2
+    assert "--dt" in result.stderr and "Traceback" not in result.stderr
