@@ -13,6 +13,7 @@ import casadi as ca
 import sympy as sp
 
 from .joint_model import angle_directions, joint_space_potential
+from .kinematics import run_segment_tolerance
 from .schemes.base import DiscreteScheme
 
 #: SymPy functions with a CasADi counterpart of the same meaning.
@@ -113,11 +114,13 @@ class SchemeFunctions:
     sensitivity_rhs: ca.Function | None  # -> R = [dF/dx0 dx0/ds0, dF/du]  (nz x (2n + nu))
     sensitivity_map: ca.Function | None  # -> (ds1/dz, ds1/dx0 dx0/ds0, ds1/du) at fixed z
     holding_torques: ca.Function | None  # (phi) -> dV/dphi, actuated scenes only
+    segment_margins: ca.Function | None  # (x0, x1) -> (s_j(x1) / tol_j, cos of each segment's
+                                         # turn over the step), scenes with springs only
 
     def all(self) -> tuple[ca.Function, ...]:
         functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
                      self.outputs, self.initial_state, self.sensitivity_rhs,
-                     self.sensitivity_map, self.holding_torques)
+                     self.sensitivity_map, self.holding_torques, self.segment_margins)
         return tuple(function for function in functions if function is not None)
 
 
@@ -150,6 +153,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
                        + [scheme.energy] + list(scheme.constraint_residuals),
                        list(scheme.state) + solved)
+    check_free_symbols("segment_vectors", scheme.segment_vectors, scheme.state)
     check_free_symbols("initial_state", scheme.initial_state,
                        list(scheme.initial_angles) + list(scheme.initial_velocities))
 
@@ -215,6 +219,19 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     sensitivity_rhs = sensitivity_map = None
     if sensitivities:
         sensitivity_rhs, sensitivity_map = sensitivity_functions()
+    margins = None
+    if scheme.segment_vectors.shape[0]:
+        tolerances = ca.DM([run_segment_tolerance(scheme.scene, spring)
+                            for spring in scheme.scene.springs for _ in spring.joints])
+        before = ca.reshape(_vector(SympyToCasadi(dict(zip(scheme.state, ca.vertsplit(x0)))),
+                                    scheme.segment_vectors), 2, -1)
+        after = ca.reshape(_vector(SympyToCasadi(dict(zip(scheme.state, ca.vertsplit(x)))),
+                                   scheme.segment_vectors), 2, -1)
+        lengths_before = ca.sqrt(ca.sum1(before ** 2)).T
+        lengths_after = ca.sqrt(ca.sum1(after ** 2)).T
+        turn = ca.sum1(before * after).T / (lengths_before * lengths_after)
+        margins = fn("segment_margins", [x0, x], ["x0", "x1"],
+                     [ca.vertcat(lengths_after / tolerances, turn)], ["margins"])
     holding = None
     if nu:
         holding = fn("holding_torques", [phi], ["phi"], [_holding_torques(scheme, phi)], ["tau"])
@@ -231,7 +248,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
         initial_state=fn("initial_state", [phi, phidot], ["phi", "phidot"], [initial_state],
                          ["x"]),
         sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map,
-        holding_torques=holding,
+        holding_torques=holding, segment_margins=margins,
     )
 
 

@@ -126,17 +126,32 @@ def spring_energy(scene: Scene, spring: Spring, phi) -> float:
     return 0.5 * spring.stiffness * stretch * stretch
 
 
+#: During a run, a segment shorter than this times the geometry's size stops the run: there the
+#: spring's direction turns within a step's motion and its force is no longer trustworthy.
+RUN_SEGMENT_RELATIVE_TOLERANCE = 1e-6
+
+
+def geometry_size(scene: Scene, spring: Spring) -> float:
+    """Sum of the link lengths, of |r| over the chain's fastenings and the spring's offsets."""
+    size = sum(link.length for link in scene.links)
+    size += sum(abs(r) for r in scene.chain_fastenings())
+    if spring.offsets is not None:
+        size += sum(abs(r) for r in spring.offsets)
+    return size
+
+
+def run_segment_tolerance(scene: Scene, spring: Spring) -> float:
+    """The length under which a segment of `spring` stops a run (RUN_SEGMENT_RELATIVE_TOLERANCE)."""
+    return RUN_SEGMENT_RELATIVE_TOLERANCE * geometry_size(scene, spring)
+
+
 def zero_segment_tolerance(scene: Scene, spring: Spring) -> float:
     """The length under which a segment of `spring` counts as zero.
 
     ZERO_SEGMENT_RELATIVE_TOLERANCE times the size of the geometry: the sum of the link lengths,
     of |r| over the chain's fastenings and of |r| over the spring's own offsets (if any).
     """
-    size = sum(link.length for link in scene.links)
-    size += sum(abs(r) for r in scene.chain_fastenings())
-    if spring.offsets is not None:
-        size += sum(abs(r) for r in spring.offsets)
-    return ZERO_SEGMENT_RELATIVE_TOLERANCE * size
+    return ZERO_SEGMENT_RELATIVE_TOLERANCE * geometry_size(scene, spring)
 
 
 def joint_velocities(scene: Scene, phi, phidot) -> np.ndarray:

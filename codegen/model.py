@@ -46,6 +46,7 @@ class SpringTerms:
     spring: Spring
     segment_lengths: tuple[sp.Expr, ...]   # s_first .. s_last
     energy: sp.Expr
+    segment_vectors: tuple[ImmutableMatrix, ...] = ()   # P_{j+1} - P_j
 
 
 @dataclass(frozen=True)
@@ -125,13 +126,11 @@ def spring_terms(scene: Scene, spring: Spring, joints, normals) -> SpringTerms:
     offsets = scene.spring_fastenings(spring)
     points = [joints[j - 1] + number(r) * normals[j - 1]
               for j, r in zip(range(spring.first, spring.last + 2), offsets)]
-    lengths = []
-    for start, end in zip(points[:-1], points[1:]):
-        d = end - start
-        lengths.append(sp.sqrt(d[0] ** 2 + d[1] ** 2))
+    vectors = [ImmutableMatrix(end - start) for start, end in zip(points[:-1], points[1:])]
+    lengths = [sp.sqrt(d[0] ** 2 + d[1] ** 2) for d in vectors]
     stretch = sp.Add(*lengths) - number(spring.rest_length)
     energy = number(spring.stiffness) / 2 * stretch ** 2
-    return SpringTerms(spring, tuple(lengths), energy)
+    return SpringTerms(spring, tuple(lengths), energy, tuple(vectors))
 
 
 def com_model(scene: Scene) -> ComModel:

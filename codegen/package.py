@@ -24,6 +24,7 @@ from . import __version__
 from chaingen_runtime.trajectory import current_umask
 
 from .example import example_settings
+from .kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE
 from .casadi_functions import casadi_c_source, scheme_functions, work_sizes
 from .scene import ChaingenError, Scene
 from .schemes import DiscreteScheme, build_scheme
@@ -207,7 +208,8 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True) -> Gen
     context = {
         **signature_parts(nu, flows),
         "nu": nu, "actuated_joints": scene.actuated_joints, "flows": flows,
-        "sensitivities": sensitivities,
+        "sensitivities": sensitivities, "segments": scheme.segment_vectors.shape[0] // 2,
+        "segment_tolerance": f"{RUN_SEGMENT_RELATIVE_TOLERANCE:g}",
         "nsens": 2 * n + nu, "flows_work": work_doc, "flows_dissipated": dissipated_doc,
         "flows_balance": balance_doc,
         **_example_context(scene),

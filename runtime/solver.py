@@ -22,6 +22,9 @@ STATUS_MESSAGES = {
     3: "NaN or Inf in the residual or the Newton iterate",
     4: "bad argument",
     5: "a generated function reported an evaluation error",
+    6: "a spring segment came within 1e-6 of the geometry's size of zero length or passed "
+       "through it (turned by 90 degrees or more in one step), where its direction is "
+       "undefined (model.md 2)",
 }
 
 _double_p = ctypes.POINTER(ctypes.c_double)

@@ -68,6 +68,9 @@ class DiscreteScheme:
     # dissipated by joint damping (>= 0). Zero for a scene with neither.
     input_work: sp.Expr = sp.Integer(0)
     dissipated: sp.Expr = sp.Integer(0)
+    # Every spring segment P_{j+1} - P_j of the state as (dx, dy) pairs, watched during a run
+    # (model.md 2): a segment must not shrink to zero length nor pass through it in a step.
+    segment_vectors: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
 
     @property
     def has_energy_flows(self) -> bool:
@@ -97,3 +100,8 @@ def joint_torques(scene: Scene, inputs) -> list[sp.Expr]:
     for joint, u in zip(scene.actuated_joints, inputs):
         torques[joint - 1] = u
     return torques
+
+
+def segment_vectors(model) -> ImmutableMatrix:
+    """(dx, dy) of every segment of every spring of a model, spring by spring."""
+    return ImmutableMatrix([c for term in model.springs for d in term.segment_vectors for c in d])

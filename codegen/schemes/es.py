@@ -20,7 +20,7 @@ from sympy import ImmutableMatrix
 from ..model import com_model, cross2, dot2, joint_space_positions, number
 from ..quadrature import gauss_legendre_nodes
 from ..scene import Scene
-from .base import DiscreteScheme, Layout, input_symbols, joint_torques
+from .base import DiscreteScheme, Layout, input_symbols, joint_torques, segment_vectors
 
 
 def averaged_spring_gradient(model, q0, q1, quadrature: int) -> ImmutableMatrix:
@@ -126,4 +126,5 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
             "dt-scaled momentum balance M dv - C(q_m)^T mu + dt (gradV~ - f~) (2n entries, "
             "kg m/s), then the constraint increments C(q_m) (q_1 - q_0) (n entries, m^2)"),
         inputs=inputs, input_work=input_work, dissipated=dissipated,
+        segment_vectors=segment_vectors(model),
     )

@@ -16,7 +16,7 @@ from sympy import ImmutableMatrix
 from ..joint_model import angle_directions, joint_space_model
 from ..model import number
 from ..scene import Scene
-from .base import DiscreteScheme, Layout, input_symbols, joint_torques
+from .base import DiscreteScheme, Layout, input_symbols, joint_torques, segment_vectors
 
 
 def coriolis(model, angles) -> ImmutableMatrix:
@@ -67,7 +67,7 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
                                "the increment dw = w_1 - w_0 of the joint rates (rad/s)"),
         residual_description=("dt-scaled midpoint equations of motion M(phi_m) dw + dt "
                               "(Coriolis + grad V - tau) at the mid-point (N m s)"),
-        inputs=inputs,
+        inputs=inputs, segment_vectors=segment_vectors(model),
         input_work=dt * sp.Add(*(tau * w for tau, w in zip(torques, wm))),
         dissipated=dt * sp.Add(*(number(link.damping) * w ** 2
                                  for link, w in zip(scene.links, wm) if link.damping)),

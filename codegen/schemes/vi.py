@@ -21,7 +21,8 @@ from sympy import ImmutableMatrix
 from ..joint_model import attitude_directions, joint_space_model, rotate
 from ..model import S, number
 from ..scene import Scene
-from .base import DiscreteScheme, Layout, LinearSolve, input_symbols, joint_torques
+from .base import (DiscreteScheme, Layout, LinearSolve, input_symbols, joint_torques,
+                   segment_vectors)
 
 
 def angle_derivative(expr, attitudes) -> ImmutableMatrix:
@@ -92,7 +93,7 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
         residual_description=("discrete Legendre transform M(q_m) w - dt/2 (g + f) - p_0, "
                               "w = theta/dt (N m s)"),
         output_solve=LinearSolve(symbols=w, matrix=model.mass_matrix, rhs=p0),
-        inputs=inputs,
+        inputs=inputs, segment_vectors=segment_vectors(model),
         input_work=sp.Add(*(tau * t for tau, t in zip(torques, theta))),
         dissipated=sp.Add(*(number(link.damping) * t ** 2 for link, t in zip(scene.links, theta)
                             if link.damping)) / dt,

@@ -10,6 +10,8 @@
 #define NZ FOUR_LINK_ACTUATED_ES_NZ
 #define N_JOINTS FOUR_LINK_ACTUATED_ES_N_JOINTS
 #define NCONSTRAINT 4
+#define NSEGMENT 3   /* spring segments watched for collapse */
+
 #define NU FOUR_LINK_ACTUATED_ES_NU
 #define NS (2 * N_JOINTS)   /* joint-space state s = (phi, omega) */
 #define NSENS 12     /* right-hand sides of the sensitivity solve: NS + inputs */
@@ -186,14 +188,46 @@ static int solve_step(const double *x0, const double *u, double dt, const four_l
     return status;
 }
 
-/* x1 (and the energy flows) from the converged z in the workspace. */
+/* x1 (and the energy flows) from the converged z in the workspace. The candidate is checked
+ * (finite, no spring segment collapsed) before it is copied out: a failed step leaves x1
+ * untouched. */
 static int finish_step(const double *x0, const double *u, double dt, double *x1, double *flows, four_link_actuated_es_workspace *workspace)
 {
-    double ignored[2];
+    double *candidate = workspace->candidate;
+    double step_flows[2];
+    double margins[2 * NSEGMENT];
+    int i, status;
     step_arguments(workspace->z, x0, u, &dt, workspace);
-    workspace->res[0] = x1;
-    workspace->res[1] = flows ? flows : ignored;
-    return evaluate(four_link_actuated_es_model_next_state, workspace);
+    workspace->res[0] = candidate;
+    workspace->res[1] = step_flows;
+    status = evaluate(four_link_actuated_es_model_next_state, workspace);
+    if (status != FOUR_LINK_ACTUATED_ES_OK) {
+        return status;
+    }
+    for (i = 0; i < NX; ++i) {
+        if (!isfinite(candidate[i])) {
+            return FOUR_LINK_ACTUATED_ES_NONFINITE;
+        }
+    }
+    /* Every spring segment must keep a length above its tolerance, and must not pass through
+     * zero length within the step: its direction turns by less than 90 degrees. */
+    workspace->arg[0] = x0;
+    workspace->arg[1] = candidate;
+    workspace->res[0] = margins;
+    if (evaluate(four_link_actuated_es_model_segment_margins, workspace)) {
+        return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
+    }
+    for (i = 0; i < NSEGMENT; ++i) {
+        if (!(margins[i] >= 1.0) || !(margins[NSEGMENT + i] > 0.0)) {
+            return FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED;
+        }
+    }
+    memcpy(x1, candidate, sizeof(double) * NX);
+    if (flows) {
+        flows[0] = step_flows[0];
+        flows[1] = step_flows[1];
+    }
+    return FOUR_LINK_ACTUATED_ES_OK;
 }
 
 int four_link_actuated_es_step(const double *x0, const double *u, double dt, double *x1, double *flows, const four_link_actuated_es_options *options,

@@ -100,6 +100,11 @@ extern "C" {
 #define FOUR_LINK_ACTUATED_ES_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0 or every < 1 */
 #define FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED 5 /* a generated function reported an error */
+#define FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
+                                          * geometry's size of zero length, or passed through it
+                                          * (turned by 90 degrees or more in one step): its
+                                          * direction is undefined there (model.md 2) */
+
 
 /* Newton options. Converged when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and
  * max_i |F_i| <= residual_tol at the iterate the update was computed from. A step does at most
@@ -132,6 +137,7 @@ typedef struct {
     double jacobian[FOUR_LINK_ACTUATED_ES_NZ * FOUR_LINK_ACTUATED_ES_NZ];
     int pivot[FOUR_LINK_ACTUATED_ES_NZ];
     double state[2][FOUR_LINK_ACTUATED_ES_NX];
+    double candidate[FOUR_LINK_ACTUATED_ES_NX];
     double sensitivity_rhs[FOUR_LINK_ACTUATED_ES_NZ * 12];
     double s1_z[8 * FOUR_LINK_ACTUATED_ES_NZ];
 } four_link_actuated_es_workspace;

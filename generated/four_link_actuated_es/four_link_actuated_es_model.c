@@ -28,6 +28,7 @@
 #define casadi_f6 CASADI_PREFIX(f6)
 #define casadi_f7 CASADI_PREFIX(f7)
 #define casadi_f8 CASADI_PREFIX(f8)
+#define casadi_f9 CASADI_PREFIX(f9)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
@@ -37,6 +38,7 @@
 #define casadi_s6 CASADI_PREFIX(s6)
 #define casadi_s7 CASADI_PREFIX(s7)
 #define casadi_s8 CASADI_PREFIX(s8)
+#define casadi_s9 CASADI_PREFIX(s9)
 #define casadi_sq CASADI_PREFIX(sq)
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
@@ -60,6 +62,7 @@ static const casadi_int casadi_s5[3] = {2, 1, 1};
 static const casadi_int casadi_s6[3] = {8, 12, 1};
 static const casadi_int casadi_s7[3] = {8, 8, 1};
 static const casadi_int casadi_s8[3] = {8, 4, 1};
+static const casadi_int casadi_s9[3] = {6, 1, 1};
 
 /* four_link_actuated_es_model_residual:(z[12],x0[16],u[4],dt)->(F[12]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -18192,6 +18195,261 @@ int four_link_actuated_es_model_holding_torques_work(casadi_int *sz_arg, casadi_
 int four_link_actuated_es_model_holding_torques_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
   if (sz_arg) *sz_arg = 1*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* four_link_actuated_es_model_segment_margins:(x0[16],x1[16])->(margins[6]) */
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)res; (void)iw; (void)w; (void)mem;
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
+  casadi_real a24, a25, a26, a27, a28, a29;
+  a00=arg[1]? arg[1][0] : 0;
+  a01=(2.*a00);
+  a02=-5.9999999999999998e-01;
+  a03=arg[1]? arg[1][4] : 0;
+  a04=(a02*a03);
+  a01=(a01+a04);
+  a04=casadi_sq(a01);
+  a05=-2.9999999999999999e-01;
+  a06=(2.*a03);
+  a06=(a05+a06);
+  a07=5.9999999999999998e-01;
+  a08=(a07*a00);
+  a06=(a06+a08);
+  a08=casadi_sq(a06);
+  a04=(a04+a08);
+  a04=sqrt(a04);
+  a08=4.7499999999999994e-06;
+  a09=(a04/a08);
+  if (res[0]!=0) res[0][0]=a09;
+  a09=2.0396039603960396e+00;
+  a10=arg[1]? arg[1][1] : 0;
+  a11=(a09*a10);
+  a12=1.3920792079207920e+00;
+  a13=(a12*a03);
+  a11=(a11+a13);
+  a13=-4.0792079207920793e+00;
+  a14=(a13*a00);
+  a11=(a11+a14);
+  a14=-3.9603960396039600e-01;
+  a15=arg[1]? arg[1][5] : 0;
+  a16=(a14*a15);
+  a11=(a11+a16);
+  a16=casadi_sq(a11);
+  a17=(a09*a15);
+  a18=3.9603960396039600e-01;
+  a19=(a18*a10);
+  a17=(a17+a19);
+  a19=(a13*a03);
+  a17=(a17+a19);
+  a19=-1.3920792079207920e+00;
+  a20=(a19*a00);
+  a17=(a17+a20);
+  a20=casadi_sq(a17);
+  a16=(a16+a20);
+  a16=sqrt(a16);
+  a20=(a16/a08);
+  if (res[0]!=0) res[0][1]=a20;
+  a20=arg[1]? arg[1][2] : 0;
+  a21=(2.*a20);
+  a22=1.4356435643564356e+00;
+  a23=(a22*a15);
+  a21=(a21+a23);
+  a23=4.2871287128712874e+00;
+  a24=(a23*a00);
+  a21=(a21+a24);
+  a24=-6.2500000000000000e-01;
+  a25=arg[1]? arg[1][6] : 0;
+  a26=(a24*a25);
+  a21=(a21+a26);
+  a26=-4.1435643564356432e+00;
+  a27=(a26*a10);
+  a21=(a21+a27);
+  a27=-1.6212871287128712e+00;
+  a28=(a27*a03);
+  a21=(a21+a28);
+  a28=casadi_sq(a21);
+  a25=(2.*a25);
+  a29=6.2500000000000000e-01;
+  a20=(a29*a20);
+  a25=(a25+a20);
+  a20=1.6212871287128712e+00;
+  a00=(a20*a00);
+  a25=(a25+a00);
+  a03=(a23*a03);
+  a25=(a25+a03);
+  a15=(a26*a15);
+  a25=(a25+a15);
+  a15=-1.4356435643564356e+00;
+  a10=(a15*a10);
+  a25=(a25+a10);
+  a10=casadi_sq(a25);
+  a28=(a28+a10);
+  a28=sqrt(a28);
+  a08=(a28/a08);
+  if (res[0]!=0) res[0][2]=a08;
+  a08=arg[0]? arg[0][0] : 0;
+  a10=(2.*a08);
+  a03=arg[0]? arg[0][4] : 0;
+  a02=(a02*a03);
+  a10=(a10+a02);
+  a01=(a10*a01);
+  a02=(2.*a03);
+  a05=(a05+a02);
+  a07=(a07*a08);
+  a05=(a05+a07);
+  a06=(a05*a06);
+  a01=(a01+a06);
+  a10=casadi_sq(a10);
+  a05=casadi_sq(a05);
+  a10=(a10+a05);
+  a10=sqrt(a10);
+  a10=(a10*a04);
+  a01=(a01/a10);
+  if (res[0]!=0) res[0][3]=a01;
+  a01=arg[0]? arg[0][1] : 0;
+  a10=(a09*a01);
+  a12=(a12*a03);
+  a10=(a10+a12);
+  a12=(a13*a08);
+  a10=(a10+a12);
+  a12=arg[0]? arg[0][5] : 0;
+  a14=(a14*a12);
+  a10=(a10+a14);
+  a11=(a10*a11);
+  a09=(a09*a12);
+  a18=(a18*a01);
+  a09=(a09+a18);
+  a13=(a13*a03);
+  a09=(a09+a13);
+  a19=(a19*a08);
+  a09=(a09+a19);
+  a17=(a09*a17);
+  a11=(a11+a17);
+  a10=casadi_sq(a10);
+  a09=casadi_sq(a09);
+  a10=(a10+a09);
+  a10=sqrt(a10);
+  a10=(a10*a16);
+  a11=(a11/a10);
+  if (res[0]!=0) res[0][4]=a11;
+  a11=arg[0]? arg[0][2] : 0;
+  a10=(2.*a11);
+  a22=(a22*a12);
+  a10=(a10+a22);
+  a22=(a23*a08);
+  a10=(a10+a22);
+  a22=arg[0]? arg[0][6] : 0;
+  a24=(a24*a22);
+  a10=(a10+a24);
+  a24=(a26*a01);
+  a10=(a10+a24);
+  a27=(a27*a03);
+  a10=(a10+a27);
+  a21=(a10*a21);
+  a22=(2.*a22);
+  a29=(a29*a11);
+  a22=(a22+a29);
+  a20=(a20*a08);
+  a22=(a22+a20);
+  a23=(a23*a03);
+  a22=(a22+a23);
+  a26=(a26*a12);
+  a22=(a22+a26);
+  a15=(a15*a01);
+  a22=(a22+a15);
+  a25=(a22*a25);
+  a21=(a21+a25);
+  a10=casadi_sq(a10);
+  a22=casadi_sq(a22);
+  a10=(a10+a22);
+  a10=sqrt(a10);
+  a10=(a10*a28);
+  a21=(a21/a10);
+  if (res[0]!=0) res[0][5]=a21;
+  return 0;
+}
+
+int four_link_actuated_es_model_segment_margins(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  (void)arg; (void)res; (void)iw; (void)w; (void)mem;
+  return casadi_f9(arg, res, iw, w, mem);
+}
+
+int four_link_actuated_es_model_segment_margins_checkout(void) {
+  return 0;
+}
+
+void four_link_actuated_es_model_segment_margins_release(int mem) {
+  (void)mem;
+}
+
+void four_link_actuated_es_model_segment_margins_incref(void) {
+}
+
+void four_link_actuated_es_model_segment_margins_decref(void) {
+}
+
+casadi_int four_link_actuated_es_model_segment_margins_n_in(void) { return 2;}
+
+casadi_int four_link_actuated_es_model_segment_margins_n_out(void) { return 1;}
+
+casadi_real four_link_actuated_es_model_segment_margins_default_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    default: return 0;
+  }
+}
+
+const char* four_link_actuated_es_model_segment_margins_name_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return "x0";
+    case 1: return "x1";
+    default: return 0;
+  }
+}
+
+const char* four_link_actuated_es_model_segment_margins_name_out(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return "margins";
+    default: return 0;
+  }
+}
+
+const casadi_int* four_link_actuated_es_model_segment_margins_sparsity_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return casadi_s1;
+    case 1: return casadi_s1;
+    default: return 0;
+  }
+}
+
+const casadi_int* four_link_actuated_es_model_segment_margins_sparsity_out(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return casadi_s9;
+    default: return 0;
+  }
+}
+
+int four_link_actuated_es_model_segment_margins_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
+  if (sz_arg) *sz_arg = 2;
+  if (sz_res) *sz_res = 1;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+int four_link_actuated_es_model_segment_margins_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
+  if (sz_arg) *sz_arg = 2*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 1*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);

@@ -10,6 +10,7 @@
 #define NZ THREE_LINK_GRAVITY_MIDPOINT_NZ
 #define N_JOINTS THREE_LINK_GRAVITY_MIDPOINT_N_JOINTS
 #define NCONSTRAINT 0
+
 #define NS (2 * N_JOINTS)   /* joint-space state s = (phi, omega) */
 #define NSENS 6     /* right-hand sides of the sensitivity solve: NS + inputs */
 
@@ -174,12 +175,26 @@ static int solve_step(const double *x0, double dt, const three_link_gravity_midp
     return status;
 }
 
-/* x1 (and the energy flows) from the converged z in the workspace. */
+/* x1 (and the energy flows) from the converged z in the workspace. The candidate is checked
+ * (finite) before it is copied out: a failed step leaves x1
+ * untouched. */
 static int finish_step(const double *x0, double dt, double *x1, three_link_gravity_midpoint_workspace *workspace)
 {
+    double *candidate = workspace->candidate;
+    int i, status;
     step_arguments(workspace->z, x0, &dt, workspace);
-    workspace->res[0] = x1;
-    return evaluate(three_link_gravity_midpoint_model_next_state, workspace);
+    workspace->res[0] = candidate;
+    status = evaluate(three_link_gravity_midpoint_model_next_state, workspace);
+    if (status != THREE_LINK_GRAVITY_MIDPOINT_OK) {
+        return status;
+    }
+    for (i = 0; i < NX; ++i) {
+        if (!isfinite(candidate[i])) {
+            return THREE_LINK_GRAVITY_MIDPOINT_NONFINITE;
+        }
+    }
+    memcpy(x1, candidate, sizeof(double) * NX);
+    return THREE_LINK_GRAVITY_MIDPOINT_OK;
 }
 
 int three_link_gravity_midpoint_step(const double *x0, double dt, double *x1, const three_link_gravity_midpoint_options *options,

@@ -67,6 +67,7 @@ extern "C" {
 #define THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0 or every < 1 */
 #define THREE_LINK_GRAVITY_MIDPOINT_EVALUATION_FAILED 5 /* a generated function reported an error */
 
+
 /* Newton options. Converged when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and
  * max_i |F_i| <= residual_tol at the iterate the update was computed from. A step does at most
  * max_iterations residual-and-Jacobian evaluations and LU solves, which bounds its time. */
@@ -98,6 +99,7 @@ typedef struct {
     double jacobian[THREE_LINK_GRAVITY_MIDPOINT_NZ * THREE_LINK_GRAVITY_MIDPOINT_NZ];
     int pivot[THREE_LINK_GRAVITY_MIDPOINT_NZ];
     double state[2][THREE_LINK_GRAVITY_MIDPOINT_NX];
+    double candidate[THREE_LINK_GRAVITY_MIDPOINT_NX];
     double sensitivity_rhs[THREE_LINK_GRAVITY_MIDPOINT_NZ * 6];
     double s1_z[6 * THREE_LINK_GRAVITY_MIDPOINT_NZ];
 } three_link_gravity_midpoint_workspace;

@@ -27,6 +27,7 @@
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
 #define casadi_f7 CASADI_PREFIX(f7)
+#define casadi_f8 CASADI_PREFIX(f8)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
@@ -35,6 +36,7 @@
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
 #define casadi_s7 CASADI_PREFIX(s7)
+#define casadi_s8 CASADI_PREFIX(s8)
 #define casadi_sq CASADI_PREFIX(sq)
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
@@ -57,6 +59,7 @@ static const casadi_int casadi_s4[3] = {3, 1, 1};
 static const casadi_int casadi_s5[3] = {9, 6, 1};
 static const casadi_int casadi_s6[3] = {6, 9, 1};
 static const casadi_int casadi_s7[3] = {6, 6, 1};
+static const casadi_int casadi_s8[3] = {6, 1, 1};
 
 /* three_link_multi_es_model_residual:(z[9],x0[12],dt)->(F[9]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -9578,6 +9581,252 @@ int three_link_multi_es_model_sensitivity_map_work_bytes(casadi_int *sz_arg, cas
   (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
   if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* three_link_multi_es_model_segment_margins:(x0[12],x1[12])->(margins[6]) */
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)res; (void)iw; (void)w; (void)mem;
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22;
+  a00=arg[1]? arg[1][0] : 0;
+  a01=(2.*a00);
+  a02=-8.0000000000000004e-01;
+  a03=arg[1]? arg[1][3] : 0;
+  a04=(a02*a03);
+  a01=(a01+a04);
+  a04=casadi_sq(a01);
+  a05=-4.0000000000000002e-01;
+  a06=(2.*a03);
+  a06=(a05+a06);
+  a07=8.0000000000000004e-01;
+  a08=(a07*a00);
+  a06=(a06+a08);
+  a08=casadi_sq(a06);
+  a04=(a04+a08);
+  a04=sqrt(a04);
+  a08=4.5999999999999992e-06;
+  a09=(a04/a08);
+  if (res[0]!=0) res[0][0]=a09;
+  a09=arg[1]? arg[1][1] : 0;
+  a10=(2.*a09);
+  a11=2.4000000000000004e+00;
+  a12=(a11*a03);
+  a10=(a10+a12);
+  a12=-4.;
+  a13=(a12*a00);
+  a10=(a10+a13);
+  a13=arg[1]? arg[1][4] : 0;
+  a14=(a02*a13);
+  a10=(a10+a14);
+  a14=casadi_sq(a10);
+  a15=(2.*a13);
+  a16=(a07*a09);
+  a15=(a15+a16);
+  a16=(a12*a03);
+  a15=(a15+a16);
+  a16=-2.4000000000000004e+00;
+  a17=(a16*a00);
+  a15=(a15+a17);
+  a17=casadi_sq(a15);
+  a14=(a14+a17);
+  a14=sqrt(a14);
+  a17=(a14/a08);
+  if (res[0]!=0) res[0][1]=a17;
+  a17=arg[1]? arg[1][2] : 0;
+  a18=(2.*a17);
+  a19=4.;
+  a20=(a19*a00);
+  a18=(a18+a20);
+  a20=(a11*a13);
+  a18=(a18+a20);
+  a20=(a12*a09);
+  a18=(a18+a20);
+  a20=arg[1]? arg[1][5] : 0;
+  a21=(a02*a20);
+  a18=(a18+a21);
+  a21=-3.2000000000000002e+00;
+  a22=(a21*a03);
+  a18=(a18+a22);
+  a22=casadi_sq(a18);
+  a20=(2.*a20);
+  a03=(a19*a03);
+  a20=(a20+a03);
+  a17=(a07*a17);
+  a20=(a20+a17);
+  a17=3.2000000000000002e+00;
+  a00=(a17*a00);
+  a20=(a20+a00);
+  a13=(a12*a13);
+  a20=(a20+a13);
+  a09=(a16*a09);
+  a20=(a20+a09);
+  a09=casadi_sq(a20);
+  a22=(a22+a09);
+  a22=sqrt(a22);
+  a08=(a22/a08);
+  if (res[0]!=0) res[0][2]=a08;
+  a08=arg[0]? arg[0][0] : 0;
+  a09=(2.*a08);
+  a13=arg[0]? arg[0][3] : 0;
+  a00=(a02*a13);
+  a09=(a09+a00);
+  a01=(a09*a01);
+  a00=(2.*a13);
+  a05=(a05+a00);
+  a00=(a07*a08);
+  a05=(a05+a00);
+  a06=(a05*a06);
+  a01=(a01+a06);
+  a09=casadi_sq(a09);
+  a05=casadi_sq(a05);
+  a09=(a09+a05);
+  a09=sqrt(a09);
+  a09=(a09*a04);
+  a01=(a01/a09);
+  if (res[0]!=0) res[0][3]=a01;
+  a01=arg[0]? arg[0][1] : 0;
+  a09=(2.*a01);
+  a04=(a11*a13);
+  a09=(a09+a04);
+  a04=(a12*a08);
+  a09=(a09+a04);
+  a04=arg[0]? arg[0][4] : 0;
+  a05=(a02*a04);
+  a09=(a09+a05);
+  a10=(a09*a10);
+  a05=(2.*a04);
+  a06=(a07*a01);
+  a05=(a05+a06);
+  a06=(a12*a13);
+  a05=(a05+a06);
+  a06=(a16*a08);
+  a05=(a05+a06);
+  a15=(a05*a15);
+  a10=(a10+a15);
+  a09=casadi_sq(a09);
+  a05=casadi_sq(a05);
+  a09=(a09+a05);
+  a09=sqrt(a09);
+  a09=(a09*a14);
+  a10=(a10/a09);
+  if (res[0]!=0) res[0][4]=a10;
+  a10=arg[0]? arg[0][2] : 0;
+  a09=(2.*a10);
+  a14=(a19*a08);
+  a09=(a09+a14);
+  a11=(a11*a04);
+  a09=(a09+a11);
+  a11=(a12*a01);
+  a09=(a09+a11);
+  a11=arg[0]? arg[0][5] : 0;
+  a02=(a02*a11);
+  a09=(a09+a02);
+  a21=(a21*a13);
+  a09=(a09+a21);
+  a18=(a09*a18);
+  a11=(2.*a11);
+  a19=(a19*a13);
+  a11=(a11+a19);
+  a07=(a07*a10);
+  a11=(a11+a07);
+  a17=(a17*a08);
+  a11=(a11+a17);
+  a12=(a12*a04);
+  a11=(a11+a12);
+  a16=(a16*a01);
+  a11=(a11+a16);
+  a20=(a11*a20);
+  a18=(a18+a20);
+  a09=casadi_sq(a09);
+  a11=casadi_sq(a11);
+  a09=(a09+a11);
+  a09=sqrt(a09);
+  a09=(a09*a22);
+  a18=(a18/a09);
+  if (res[0]!=0) res[0][5]=a18;
+  return 0;
+}
+
+int three_link_multi_es_model_segment_margins(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  (void)arg; (void)res; (void)iw; (void)w; (void)mem;
+  return casadi_f8(arg, res, iw, w, mem);
+}
+
+int three_link_multi_es_model_segment_margins_checkout(void) {
+  return 0;
+}
+
+void three_link_multi_es_model_segment_margins_release(int mem) {
+  (void)mem;
+}
+
+void three_link_multi_es_model_segment_margins_incref(void) {
+}
+
+void three_link_multi_es_model_segment_margins_decref(void) {
+}
+
+casadi_int three_link_multi_es_model_segment_margins_n_in(void) { return 2;}
+
+casadi_int three_link_multi_es_model_segment_margins_n_out(void) { return 1;}
+
+casadi_real three_link_multi_es_model_segment_margins_default_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    default: return 0;
+  }
+}
+
+const char* three_link_multi_es_model_segment_margins_name_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return "x0";
+    case 1: return "x1";
+    default: return 0;
+  }
+}
+
+const char* three_link_multi_es_model_segment_margins_name_out(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return "margins";
+    default: return 0;
+  }
+}
+
+const casadi_int* three_link_multi_es_model_segment_margins_sparsity_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return casadi_s1;
+    case 1: return casadi_s1;
+    default: return 0;
+  }
+}
+
+const casadi_int* three_link_multi_es_model_segment_margins_sparsity_out(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return casadi_s8;
+    default: return 0;
+  }
+}
+
+int three_link_multi_es_model_segment_margins_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
+  if (sz_arg) *sz_arg = 2;
+  if (sz_res) *sz_res = 1;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+int three_link_multi_es_model_segment_margins_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
+  if (sz_arg) *sz_arg = 2*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;

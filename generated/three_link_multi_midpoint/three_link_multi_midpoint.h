@@ -66,6 +66,11 @@ extern "C" {
 #define THREE_LINK_MULTI_MIDPOINT_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define THREE_LINK_MULTI_MIDPOINT_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0 or every < 1 */
 #define THREE_LINK_MULTI_MIDPOINT_EVALUATION_FAILED 5 /* a generated function reported an error */
+#define THREE_LINK_MULTI_MIDPOINT_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
+                                          * geometry's size of zero length, or passed through it
+                                          * (turned by 90 degrees or more in one step): its
+                                          * direction is undefined there (model.md 2) */
+
 
 /* Newton options. Converged when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and
  * max_i |F_i| <= residual_tol at the iterate the update was computed from. A step does at most
@@ -98,6 +103,7 @@ typedef struct {
     double jacobian[THREE_LINK_MULTI_MIDPOINT_NZ * THREE_LINK_MULTI_MIDPOINT_NZ];
     int pivot[THREE_LINK_MULTI_MIDPOINT_NZ];
     double state[2][THREE_LINK_MULTI_MIDPOINT_NX];
+    double candidate[THREE_LINK_MULTI_MIDPOINT_NX];
     double sensitivity_rhs[THREE_LINK_MULTI_MIDPOINT_NZ * 6];
     double s1_z[6 * THREE_LINK_MULTI_MIDPOINT_NZ];
 } three_link_multi_midpoint_workspace;

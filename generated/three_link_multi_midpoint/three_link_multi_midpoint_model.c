@@ -27,6 +27,7 @@
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
 #define casadi_f7 CASADI_PREFIX(f7)
+#define casadi_f8 CASADI_PREFIX(f8)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
@@ -5416,6 +5417,211 @@ int three_link_multi_midpoint_model_sensitivity_map_work_bytes(casadi_int *sz_ar
   (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
   if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* three_link_multi_midpoint_model_segment_margins:(x0[6],x1[6])->(margins[6]) */
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  (void)arg; (void)res; (void)iw; (void)w; (void)mem;
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15;
+  a00=-4.0000000000000002e-01;
+  a01=arg[1]? arg[1][0] : 0;
+  a02=sin(a01);
+  a03=(a00*a02);
+  a04=cos(a01);
+  a03=(a03+a04);
+  a05=casadi_sq(a03);
+  a06=4.0000000000000002e-01;
+  a07=(a06*a04);
+  a07=(a00+a07);
+  a07=(a07+a02);
+  a08=casadi_sq(a07);
+  a05=(a05+a08);
+  a05=sqrt(a05);
+  a08=4.5999999999999992e-06;
+  a09=(a05/a08);
+  if (res[0]!=0) res[0][0]=a09;
+  a02=(a06*a02);
+  a09=arg[1]? arg[1][1] : 0;
+  a01=(a01+a09);
+  a09=sin(a01);
+  a10=(a00*a09);
+  a02=(a02+a10);
+  a10=cos(a01);
+  a02=(a02+a10);
+  a11=casadi_sq(a02);
+  a12=(a06*a10);
+  a04=(a00*a04);
+  a12=(a12+a04);
+  a12=(a12+a09);
+  a04=casadi_sq(a12);
+  a11=(a11+a04);
+  a11=sqrt(a11);
+  a04=(a11/a08);
+  if (res[0]!=0) res[0][1]=a04;
+  a09=(a06*a09);
+  a04=arg[1]? arg[1][2] : 0;
+  a01=(a01+a04);
+  a04=sin(a01);
+  a13=(a00*a04);
+  a09=(a09+a13);
+  a01=cos(a01);
+  a09=(a09+a01);
+  a13=casadi_sq(a09);
+  a01=(a06*a01);
+  a10=(a00*a10);
+  a01=(a01+a10);
+  a01=(a01+a04);
+  a04=casadi_sq(a01);
+  a13=(a13+a04);
+  a13=sqrt(a13);
+  a08=(a13/a08);
+  if (res[0]!=0) res[0][2]=a08;
+  a08=arg[0]? arg[0][0] : 0;
+  a04=sin(a08);
+  a10=(a00*a04);
+  a14=cos(a08);
+  a10=(a10+a14);
+  a03=(a10*a03);
+  a15=(a06*a14);
+  a15=(a00+a15);
+  a15=(a15+a04);
+  a07=(a15*a07);
+  a03=(a03+a07);
+  a10=casadi_sq(a10);
+  a15=casadi_sq(a15);
+  a10=(a10+a15);
+  a10=sqrt(a10);
+  a10=(a10*a05);
+  a03=(a03/a10);
+  if (res[0]!=0) res[0][3]=a03;
+  a04=(a06*a04);
+  a03=arg[0]? arg[0][1] : 0;
+  a08=(a08+a03);
+  a03=sin(a08);
+  a10=(a00*a03);
+  a04=(a04+a10);
+  a10=cos(a08);
+  a04=(a04+a10);
+  a02=(a04*a02);
+  a05=(a06*a10);
+  a14=(a00*a14);
+  a05=(a05+a14);
+  a05=(a05+a03);
+  a12=(a05*a12);
+  a02=(a02+a12);
+  a04=casadi_sq(a04);
+  a05=casadi_sq(a05);
+  a04=(a04+a05);
+  a04=sqrt(a04);
+  a04=(a04*a11);
+  a02=(a02/a04);
+  if (res[0]!=0) res[0][4]=a02;
+  a03=(a06*a03);
+  a02=arg[0]? arg[0][2] : 0;
+  a08=(a08+a02);
+  a02=sin(a08);
+  a04=(a00*a02);
+  a03=(a03+a04);
+  a08=cos(a08);
+  a03=(a03+a08);
+  a09=(a03*a09);
+  a06=(a06*a08);
+  a00=(a00*a10);
+  a06=(a06+a00);
+  a06=(a06+a02);
+  a01=(a06*a01);
+  a09=(a09+a01);
+  a03=casadi_sq(a03);
+  a06=casadi_sq(a06);
+  a03=(a03+a06);
+  a03=sqrt(a03);
+  a03=(a03*a13);
+  a09=(a09/a03);
+  if (res[0]!=0) res[0][5]=a09;
+  return 0;
+}
+
+int three_link_multi_midpoint_model_segment_margins(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  (void)arg; (void)res; (void)iw; (void)w; (void)mem;
+  return casadi_f8(arg, res, iw, w, mem);
+}
+
+int three_link_multi_midpoint_model_segment_margins_checkout(void) {
+  return 0;
+}
+
+void three_link_multi_midpoint_model_segment_margins_release(int mem) {
+  (void)mem;
+}
+
+void three_link_multi_midpoint_model_segment_margins_incref(void) {
+}
+
+void three_link_multi_midpoint_model_segment_margins_decref(void) {
+}
+
+casadi_int three_link_multi_midpoint_model_segment_margins_n_in(void) { return 2;}
+
+casadi_int three_link_multi_midpoint_model_segment_margins_n_out(void) { return 1;}
+
+casadi_real three_link_multi_midpoint_model_segment_margins_default_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    default: return 0;
+  }
+}
+
+const char* three_link_multi_midpoint_model_segment_margins_name_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return "x0";
+    case 1: return "x1";
+    default: return 0;
+  }
+}
+
+const char* three_link_multi_midpoint_model_segment_margins_name_out(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return "margins";
+    default: return 0;
+  }
+}
+
+const casadi_int* three_link_multi_midpoint_model_segment_margins_sparsity_in(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return casadi_s1;
+    case 1: return casadi_s1;
+    default: return 0;
+  }
+}
+
+const casadi_int* three_link_multi_midpoint_model_segment_margins_sparsity_out(casadi_int i) {
+  (void)i;
+  switch (i) {
+    case 0: return casadi_s1;
+    default: return 0;
+  }
+}
+
+int three_link_multi_midpoint_model_segment_margins_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
+  if (sz_arg) *sz_arg = 2;
+  if (sz_res) *sz_res = 1;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+int three_link_multi_midpoint_model_segment_margins_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
+  if (sz_arg) *sz_arg = 2*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;

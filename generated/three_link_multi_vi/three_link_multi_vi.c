@@ -10,6 +10,8 @@
 #define NZ THREE_LINK_MULTI_VI_NZ
 #define N_JOINTS THREE_LINK_MULTI_VI_N_JOINTS
 #define NCONSTRAINT 3
+#define NSEGMENT 3   /* spring segments watched for collapse */
+
 #define NS (2 * N_JOINTS)   /* joint-space state s = (phi, omega) */
 #define NSENS 6     /* right-hand sides of the sensitivity solve: NS + inputs */
 
@@ -174,12 +176,40 @@ static int solve_step(const double *x0, double dt, const three_link_multi_vi_opt
     return status;
 }
 
-/* x1 (and the energy flows) from the converged z in the workspace. */
+/* x1 (and the energy flows) from the converged z in the workspace. The candidate is checked
+ * (finite, no spring segment collapsed) before it is copied out: a failed step leaves x1
+ * untouched. */
 static int finish_step(const double *x0, double dt, double *x1, three_link_multi_vi_workspace *workspace)
 {
+    double *candidate = workspace->candidate;
+    double margins[2 * NSEGMENT];
+    int i, status;
     step_arguments(workspace->z, x0, &dt, workspace);
-    workspace->res[0] = x1;
-    return evaluate(three_link_multi_vi_model_next_state, workspace);
+    workspace->res[0] = candidate;
+    status = evaluate(three_link_multi_vi_model_next_state, workspace);
+    if (status != THREE_LINK_MULTI_VI_OK) {
+        return status;
+    }
+    for (i = 0; i < NX; ++i) {
+        if (!isfinite(candidate[i])) {
+            return THREE_LINK_MULTI_VI_NONFINITE;
+        }
+    }
+    /* Every spring segment must keep a length above its tolerance, and must not pass through
+     * zero length within the step: its direction turns by less than 90 degrees. */
+    workspace->arg[0] = x0;
+    workspace->arg[1] = candidate;
+    workspace->res[0] = margins;
+    if (evaluate(three_link_multi_vi_model_segment_margins, workspace)) {
+        return THREE_LINK_MULTI_VI_EVALUATION_FAILED;
+    }
+    for (i = 0; i < NSEGMENT; ++i) {
+        if (!(margins[i] >= 1.0) || !(margins[NSEGMENT + i] > 0.0)) {
+            return THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED;
+        }
+    }
+    memcpy(x1, candidate, sizeof(double) * NX);
+    return THREE_LINK_MULTI_VI_OK;
 }
 
 int three_link_multi_vi_step(const double *x0, double dt, double *x1, const three_link_multi_vi_options *options,
