@@ -73,6 +73,14 @@ def parser() -> argparse.ArgumentParser:
                        help="random states to check at (default 5)")
     check.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     check.add_argument("--dt", type=_number, help="step in s (default: the scene's)")
+
+    order = commands.add_parser(
+        "order", help="time-step study: energy and trajectory error per dt, fitted orders")
+    _add_scheme_options(order)
+    order.add_argument("--t-end", type=_number, default=10.0,
+                       help="duration of each run in s (default 10)")
+    order.add_argument("--plot", type=Path, metavar="FILE.png",
+                       help="write the log-log order plot (needs matplotlib)")
     return main
 
 
@@ -106,6 +114,22 @@ def command_check(args) -> int:
     report = check_solver(scheme, solver, samples=args.samples, seed=args.seed, dt=settings.dt)
     print(report.table())
     return 0 if report.passed else EXIT_FAILED
+
+
+def command_order(args) -> int:
+    from .order import format_table, order_study, plot_order
+    from .simulation import run_settings
+
+    scene = load_scene(args.scene)
+    settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
+                            t_end=args.t_end, source=str(args.scene))
+    if args.plot is not None:
+        _check_output_path(args.plot)
+    study = order_study(scene, settings.method, settings.quadrature, t_end=settings.t_end)
+    print(format_table(study))
+    if args.plot is not None:
+        print(f"plot: {plot_order(study, args.plot)}")
+    return 0
 
 
 def _check_output_path(path: Path) -> None:
@@ -171,7 +195,7 @@ def summary(result, settings, out: Path | None) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     handlers = {"generate": command_generate, "simulate": command_simulate,
-                "check": command_check}
+                "check": command_check, "order": command_order}
     try:
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take

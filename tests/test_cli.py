@@ -515,3 +515,17 @@ def test_com_at_the_proximal_joint_is_refused_by_es_only(tmp_path):
     assert not out.exists()
     result = chaingen("simulate", scene, "--method", "midpoint", "--t-end", "0.1", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
+
+
+def test_order_prints_the_study_and_writes_the_plot(tmp_path):
+    result = chaingen("order", MONO, "--method", "midpoint", "--plot", tmp_path / "order.png",
+                      cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "energy order      2.0" in result.stdout and "trajectory order  2.0" in result.stdout
+    assert (tmp_path / "order.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_order_with_a_bad_duration_is_bad_input(tmp_path):
+    result = chaingen("order", MONO, "--t-end", "0.3", cwd=tmp_path)
+    assert result.returncode == 2
+    assert "t_end" in result.stderr and "Traceback" not in result.stderr
