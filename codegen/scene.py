@@ -168,6 +168,10 @@ def parse_scene(text: str, source: str, default_name: str) -> Scene:
         else:  # "(at end of document)"
             line = max(1, len(text.splitlines()))
         raise SceneError(f"{source}:{line}: TOML syntax error: {message}") from None
+    except ValueError as error:   # an integer literal beyond Python's digit limit
+        match = re.search(r"\d{4000,}", text)
+        line = text.count("\n", 0, match.start()) + 1 if match else 1
+        raise SceneError(f"{source}:{line}: TOML syntax error: {_printable(str(error))}") from None
     return _SceneReader(source, default_name).read(document)
 
 
@@ -187,10 +191,23 @@ def _show(value: Any) -> str:
         text = value.isoformat()
     else:
         text = repr(value)
-    text = text.replace("\n", " ")
+    text = _printable(text)
     if len(text) > _SHOW_LIMIT:
         text = text[: _SHOW_LIMIT - 3] + "..."
     return text
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _printable(text: str) -> str:
+    """Control characters (newlines, carriage returns, ...) written as escapes: one line."""
+    return _CONTROL.sub(lambda match: match.group().encode("unicode_escape").decode(), text)
+
+
+def _key(key: str) -> str:
+    """A key as it would be written in a key path: bare if it can be, else quoted."""
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key, ensure_ascii=False)
 
 
 def _kind(value: Any) -> str:
@@ -236,7 +253,7 @@ class _SceneReader:
         close = difflib.get_close_matches(key, allowed, n=1)
         hint = f"did you mean {close[0]!r}? " if close else ""
         self.fail(
-            f"{path}{key}" if not path else f"{path}.{key}",
+            _key(key) if not path else f"{path}.{_key(key)}",
             f"unknown key ({hint}allowed here: {', '.join(allowed)})",
             value,
         )
@@ -246,7 +263,10 @@ class _SceneReader:
         """A finite int or float (never a boolean), as float."""
         if not isinstance(value, (int, float)) or isinstance(value, bool):
             self.fail(path, f"must be a number ({meaning}), not {_kind(value)}", value)
-        result = float(value)
+        try:
+            result = float(value)
+        except OverflowError:   # an integer beyond the range of a double
+            self.fail(path, f"must be finite ({meaning}), out of the range of a double", value)
         if not math.isfinite(result):
             self.fail(path, f"must be finite ({meaning})", value)
         return result
