@@ -145,9 +145,9 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state),
                         ("energy flows", [scheme.input_work, scheme.dissipated])):
         check_free_symbols(name, exprs, step_inputs)
-    check_free_symbols("predictor", scheme.predictor, list(scheme.state) + [scheme.dt])
     solve = scheme.output_solve
     solved = list(solve.symbols) if solve else []
+    check_free_symbols("predictor", scheme.predictor, list(scheme.state) + solved + [scheme.dt])
     if solve:
         check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), scheme.state)
     check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
@@ -167,16 +167,21 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     x1 = _vector(step, scheme.next_state)
     options = {"cse": True}
 
-    def joint_space(state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
-        """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
+    def state_translator(state: ca.SX, extra: dict | None = None) -> SympyToCasadi:
+        """Expressions in the state and the output_solve symbols, bound to `state`."""
         state_bindings = dict(zip(scheme.state, ca.vertsplit(state)))
+        state_bindings.update(extra or {})
         if solve:
             bound = SympyToCasadi(state_bindings)
             matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
                                   for row in solve.matrix.tolist()])
             solution = ca.solve(matrix, _vector(bound, solve.rhs))
             state_bindings.update(zip(solve.symbols, ca.vertsplit(solution)))
-        translate = SympyToCasadi(state_bindings)
+        return SympyToCasadi(state_bindings)
+
+    def joint_space(state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+        """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
+        translate = state_translator(state)
         return (_vector(translate, scheme.joint_angles),
                 _vector(translate, scheme.joint_velocities), translate(scheme.energy),
                 _vector(translate, scheme.constraint_residuals))
@@ -239,7 +244,8 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
         residual=fn("residual", step_args, step_names, [residual], ["F"]),
         residual_jacobian=fn("residual_jacobian", step_args, step_names,
                              [residual, jacobian], ["F", "J"]),
-        predictor=fn("predictor", [x0, dt], ["x0", "dt"], [_vector(step, scheme.predictor)],
+        predictor=fn("predictor", [x0, dt], ["x0", "dt"], [_predictor(scheme, x0, dt,
+                                                                      state_translator)],
                      ["z"]),
         next_state=fn("next_state", step_args, step_names, [x1] + flows,
                       ["x1"] + (["flows"] if flows else [])),
@@ -250,6 +256,13 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
         sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map,
         holding_torques=holding, segment_margins=margins,
     )
+
+
+def _predictor(scheme: DiscreteScheme, x0: ca.SX, dt: ca.SX, state_translator) -> ca.SX:
+    """The first Newton guess; it may use the output_solve symbols (vi: w = M^-1 p)."""
+    if not any(scheme.predictor):
+        return ca.SX.zeros(scheme.unknowns.shape[0], 1)
+    return _vector(state_translator(x0, {scheme.dt: dt}), scheme.predictor)
 
 
 def _holding_torques(scheme: DiscreteScheme, phi: ca.SX) -> ca.SX:

@@ -73,7 +73,8 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
         residual=ImmutableMatrix(momentum - impulse - p0),
         next_state=ImmutableMatrix([qn[0] for qn in q_next] + [qn[1] for qn in q_next]
                                    + list(momentum + impulse)),
-        predictor=ImmutableMatrix.zeros(n, 1),
+        # First guess: the rotation at the current rates, theta = dt w_0 (w_0 = M(q_0)^-1 p_0).
+        predictor=ImmutableMatrix(dt * w),
         joint_angles=ImmutableMatrix([sp.atan2(s, c) for c, s in zip(cs, ss)]),
         joint_velocities=w,
         energy=model.energy,
