@@ -1,0 +1,103 @@
+"""Time a generated package's C loop: steps, and the evaluations a step cannot avoid.
+
+A small C program (templates/bench_harness.c.j2) is compiled with the package's sources and
+times, with the process CPU clock and no Python in between, N calls of <prefix>_step, one
+residual-and-Jacobian evaluation, one residual evaluation and one LU factorisation and solve of
+dF/dz. Each is the median of repeats. The ratio step / (residual and Jacobian) is how close a
+step is to its floor: a Newton step cannot do with less than one such evaluation.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from chaingen_runtime.build import STRICT_FLAGS, compiler
+from .package import GeneratedPackage, _environment
+
+#: Option fields the harness can set from its command line, with their C types.
+OPTION_FIELDS = (("max_iterations", "int"), ("update_rtol", "double"),
+                 ("update_atol", "double"), ("residual_tol", "double"))
+
+
+class HarnessError(RuntimeError):
+    """The harness did not build, or a step failed while timing."""
+
+
+@dataclass(frozen=True)
+class LoopTimings:
+    """CPU time of one step and of its building blocks, in nanoseconds (medians of repeats)."""
+
+    step_ns: float
+    residual_jacobian_ns: float
+    residual_ns: float
+    lu_ns: float
+    mean_iterations: float
+
+    @property
+    def step_over_evaluation(self) -> float:
+        """Step time in units of one residual-and-Jacobian evaluation."""
+        return self.step_ns / self.residual_jacobian_ns
+
+
+class Harness:
+    """A compiled timing program for one package; call `time` as often as needed."""
+
+    def __init__(self, package: GeneratedPackage, *, flags: tuple[str, ...] = ("-O2",),
+                 workdir: Path | None = None):
+        self.package = package
+        self._owned = workdir is None
+        self.workdir = Path(workdir or tempfile.mkdtemp(prefix=f"bench-{package.prefix}-"))
+        for name, text in package.files.items():
+            (self.workdir / name).write_text(text)
+        manifest = package.manifest
+        source = _environment().get_template("bench_harness.c.j2").render(
+            prefix=package.prefix, PREFIX=package.prefix.upper(), nu=manifest["nu"],
+            flows=manifest["energy_flows"], option_fields=OPTION_FIELDS)
+        (self.workdir / "bench_harness.c").write_text(source)
+        self.program = self.workdir / "bench_harness"
+        command = [compiler(), *STRICT_FLAGS, *flags, "-o", str(self.program), "bench_harness.c",
+                   *package.manifest["sources"], "-lm"]
+        start = time.perf_counter()
+        result = subprocess.run(command, cwd=self.workdir, capture_output=True, text=True)
+        #: wall time of compiling package and harness (one gcc process, the package dominates)
+        self.build_seconds = time.perf_counter() - start
+        if result.returncode != 0:
+            raise HarnessError(f"building the harness failed: {' '.join(command)}\n"
+                               f"{result.stderr}")
+
+    def time(self, x0, dt: float, *, n_steps: int = 2000, repeats: int = 7,
+             options: dict[str, float] | None = None) -> LoopTimings:
+        """Timings of `n_steps` steps from state x0 (repeated), and of the evaluations."""
+        x0 = np.asarray(x0, dtype=float)
+        arguments = [str(self.program), str(n_steps), str(repeats), repr(float(dt))]
+        arguments += [f"{key}={value!r}" for key, value in (options or {}).items()]
+        result = subprocess.run(arguments, input=" ".join(map(repr, x0.tolist())),
+                                capture_output=True, text=True)
+        try:
+            report = json.loads(result.stdout)
+        except json.JSONDecodeError:
+            raise HarnessError(f"{self.package.prefix}: harness failed: {result.stderr}") from None
+        if report["status"] != 0:
+            raise HarnessError(f"{self.package.prefix}: status {report['status']} while timing "
+                               f"(step {report.get('failed_step', '?')})")
+        return LoopTimings(step_ns=report["step_ns"],
+                           residual_jacobian_ns=report["residual_jacobian_ns"],
+                           residual_ns=report["residual_ns"], lu_ns=report["lu_ns"],
+                           mean_iterations=report["iterations"] / n_steps)
+
+    def close(self) -> None:
+        if self._owned:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+
+    def __enter__(self) -> "Harness":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
