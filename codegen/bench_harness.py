@@ -23,7 +23,8 @@ from .package import GeneratedPackage, _environment
 
 #: Option fields the harness can set from its command line, with their C types.
 OPTION_FIELDS = (("max_iterations", "int"), ("update_rtol", "double"),
-                 ("update_atol", "double"), ("residual_tol", "double"))
+                 ("update_atol", "double"), ("residual_tol", "double"), ("warm_start", "int"),
+                 ("reuse_jacobian", "int"))
 
 
 class HarnessError(RuntimeError):

@@ -47,7 +47,11 @@ NEWTON_DEFAULTS = {
     "update_rtol": "1e-10",
     "update_atol": "1e-13",
     "residual_tol": "1e-8",
+    "warm_start": 1,
+    "reuse_jacobian": 0,
 }
+#: Simplified Newton evaluates dF/dz anew when successive updates shrink by less than this.
+REFRESH_RATE = "0.1"
 
 METHOD_SUMMARIES = {
     "es": "Energy-stable discrete gradient scheme in COM coordinates with constraints "
@@ -226,7 +230,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True) -> Gen
         "residual_description": scheme.residual_description,
         "sample_columns": columns,
         "work": {key: max(1, value) for key, value in dataclasses.asdict(sizes).items()},
-        "defaults": NEWTON_DEFAULTS,
+        "defaults": NEWTON_DEFAULTS, "refresh_rate": REFRESH_RATE,
         "sources": [f"{prefix}.c", f"{prefix}_model.c"],
     }
     environment = _environment()

@@ -44,7 +44,8 @@ class NewtonError(RuntimeError):
 
 class _Options(ctypes.Structure):
     _fields_ = [("max_iterations", ctypes.c_int), ("update_rtol", ctypes.c_double),
-                ("update_atol", ctypes.c_double), ("residual_tol", ctypes.c_double)]
+                ("update_atol", ctypes.c_double), ("residual_tol", ctypes.c_double),
+                ("warm_start", ctypes.c_int), ("reuse_jacobian", ctypes.c_int)]
 
 
 class _Stats(ctypes.Structure):
@@ -60,10 +61,12 @@ class NewtonOptions:
     update_rtol: float = 1e-10
     update_atol: float = 1e-13
     residual_tol: float = 1e-8
+    warm_start: bool = True       # continue from the previous step's solutions (chained steps)
+    reuse_jacobian: bool = False  # simplified Newton: keep the factorised dF/dz across steps
 
     def _as_c(self) -> _Options:
         return _Options(self.max_iterations, self.update_rtol, self.update_atol,
-                        self.residual_tol)
+                        self.residual_tol, int(self.warm_start), int(self.reuse_jacobian))
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,7 @@ class Solver:
         self._lib = ctypes.CDLL(str(self.library_path))
         self._declare()
         self._workspace = ctypes.create_string_buffer(self._c("workspace_size")())
+        self._c("workspace_init")(self._workspace)
         self.default_options = NewtonOptions(**{
             key: type(getattr(NewtonOptions, key))(value)
             for key, value in manifest["newton_defaults"].items()})
@@ -216,6 +220,7 @@ class Solver:
         flows = [dp] if self.energy_flows else []
         signatures = {
             "workspace_size": (ctypes.c_size_t, []),
+            "workspace_init": (None, [ctypes.c_void_p]),
             "initial_state": (i, [dp, dp, dp, vp]),
             "outputs": (i, [dp, dp, dp, dp, dp, vp]),
             "residual": (i, [dp, dp, *u, d, dp, vp]),
@@ -237,6 +242,10 @@ class Solver:
         if status:
             raise NewtonError(f"{self.prefix}_{what}: {STATUS_MESSAGES.get(status, status)}",
                               status=status)
+
+    def reset(self) -> None:
+        """Forget the Newton state carried between steps (warm start, reused Jacobian)."""
+        self._c("workspace_init")(self._workspace)
 
     def initial_state(self, phi, phidot) -> np.ndarray:
         x = np.empty(self.nx)

@@ -268,12 +268,14 @@ static int alone(int i, double *x, {PREFIX}_workspace *workspace)
 
 int main(void)
 {{
-    /* The side-by-side workspaces start with garbage, the lone ones zeroed: the results may not
-     * depend on what a workspace held before. */
+    /* The side-by-side workspaces start with garbage and are initialised, the lone ones are
+     * zeroed: the results may not depend on what a workspace held before. */
     static {PREFIX}_workspace together[2], single[2];
     double x[2][NX], next[2][NX], x_alone[2][NX], flows[2][2];
     int i, k, status = {PREFIX.upper()}_OK, iterations[2] = {{ 0, 0 }};
     memset(together, 0xA5, sizeof together);
+    {PREFIX}_workspace_init(&together[0]);
+    {PREFIX}_workspace_init(&together[1]);
     memset(single, 0, sizeof single);
     for (i = 0; i < 2 && status == {PREFIX.upper()}_OK; ++i) {{
         status = {PREFIX}_initial_state(phi0[i], phidot0[i], x[i], &together[i]);

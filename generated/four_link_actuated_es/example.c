@@ -97,6 +97,7 @@ int main(int argc, char **argv)
     }
     n_steps = (long)(t_end / dt + 0.5);
     four_link_actuated_es_default_options(&e.options);
+    four_link_actuated_es_workspace_init(&e.workspace);   /* before the first step: no Newton history */
     status = four_link_actuated_es_initial_state(initial_angles, initial_velocities, e.x, &e.workspace);
     printf("# PD control of %s to phi* = (", "four-link-actuated");
     for (i = 0; i < N_JOINTS; ++i) {

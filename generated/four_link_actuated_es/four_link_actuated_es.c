@@ -22,12 +22,24 @@ size_t four_link_actuated_es_workspace_size(void)
     return sizeof(four_link_actuated_es_workspace);
 }
 
+void four_link_actuated_es_workspace_init(four_link_actuated_es_workspace *workspace)
+{
+    if (workspace) {
+        workspace->history = 0;
+        workspace->chained = 0;
+        workspace->factors_valid = 0;
+        workspace->rate = 0.0;   /* unknown */
+    }
+}
+
 void four_link_actuated_es_default_options(four_link_actuated_es_options *options)
 {
     options->max_iterations = 20;
     options->update_rtol = 1e-10;
     options->update_atol = 1e-13;
     options->residual_tol = 1e-8;
+    options->warm_start = 1;
+    options->reuse_jacobian = 0;
 }
 
 /* Evaluate a generated function: inputs and outputs by position, NULL outputs skipped. */
@@ -119,13 +131,52 @@ int four_link_actuated_es_residual_jacobian(const double *z, const double *x0, c
     return evaluate(four_link_actuated_es_model_residual_jacobian, workspace);
 }
 
-/* Newton's method on F(z; x0, u, dt) = 0 from the predictor's guess, dense LU with partial
- * pivoting, at most options->max_iterations linear solves. Leaves z in workspace->z. */
+/* Solutions of chained steps kept for the warm start: extrapolation of degree HISTORY - 1. */
+#define HISTORY 3
+
+/* Simplified Newton evaluates dF/dz anew when successive updates shrink by less than this. */
+#define REFRESH_RATE 0.1
+
+/* The first Newton guess: the scheme's predictor from x0, or with warm_start, when this step
+ * continues the workspace's previous one, the extrapolation of the previous solutions. */
+static int first_guess(const double *x0, double dt, const four_link_actuated_es_options *options,
+                       four_link_actuated_es_workspace *workspace)
+{
+    int i;
+    workspace->chained = options->warm_start && workspace->history > 0
+                         && dt == workspace->previous_dt
+                         && !memcmp(x0, workspace->previous_x1, sizeof(double) * NX);
+    if (workspace->chained) {
+        const double (*previous)[NZ] = (const double (*)[NZ])workspace->previous_z;
+        for (i = 0; i < NZ; ++i) {
+            switch (workspace->history) {
+            case 1:
+                workspace->z[i] = previous[0][i];
+                break;
+            case 2:
+                workspace->z[i] = 2.0 * previous[0][i] - previous[1][i];
+                break;
+            default:
+                workspace->z[i] = 3.0 * (previous[0][i] - previous[1][i]) + previous[2][i];
+            }
+        }
+        return FOUR_LINK_ACTUATED_ES_OK;
+    }
+    workspace->arg[0] = x0;
+    workspace->arg[1] = &dt;
+    workspace->res[0] = workspace->z;
+    return evaluate(four_link_actuated_es_model_predictor, workspace);
+}
+
+/* Newton's method on F(z; x0, u, dt) = 0 from the first guess, full or simplified (see the
+ * options in the header), dense LU with partial pivoting, at most options->max_iterations
+ * linear solves. Leaves z in workspace->z. */
 static int solve_step(const double *x0, const double *u, double dt, const four_link_actuated_es_options *options,
                       four_link_actuated_es_workspace *workspace, int *iterations)
 {
     four_link_actuated_es_options defaults;
     double *z, *dz, *residual, *jacobian;
+    double previous_update = -1.0;   /* update norm of the previous iteration, < 0: none */
     int i, iteration = 0, status;
     if (!x0 || !u || !workspace || !(dt > 0.0) || !isfinite(dt)) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
@@ -138,17 +189,23 @@ static int solve_step(const double *x0, const double *u, double dt, const four_l
     dz = workspace->dz;
     residual = workspace->residual;
     jacobian = workspace->jacobian;
-    workspace->arg[0] = x0;
-    workspace->arg[1] = &dt;
-    workspace->res[0] = z;
-    status = evaluate(four_link_actuated_es_model_predictor, workspace);
+    if (!options->reuse_jacobian || workspace->factors_dt != dt) {
+        workspace->factors_valid = 0;
+    }
+    status = first_guess(x0, dt, options, workspace);
     if (status == FOUR_LINK_ACTUATED_ES_OK) {
         status = FOUR_LINK_ACTUATED_ES_NOT_CONVERGED;
     }
     while (status == FOUR_LINK_ACTUATED_ES_NOT_CONVERGED && iteration < options->max_iterations) {
         double residual_norm = 0.0, update_norm = 0.0;
+        int evaluated;
         ++iteration;
-        if (four_link_actuated_es_residual_jacobian(z, x0, u, dt, residual, jacobian, workspace)) {
+        if (!workspace->factors_valid) {
+            evaluated = four_link_actuated_es_residual_jacobian(z, x0, u, dt, residual, jacobian, workspace);
+        } else {
+            evaluated = four_link_actuated_es_residual(z, x0, u, dt, residual, workspace);
+        }
+        if (evaluated) {
             status = FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
             break;
         }
@@ -164,9 +221,14 @@ static int solve_step(const double *x0, const double *u, double dt, const four_l
         if (status != FOUR_LINK_ACTUATED_ES_NOT_CONVERGED) {
             break;
         }
-        if (chaingen_lu_factor(NZ, jacobian, workspace->pivot)) {
-            status = FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN;
-            break;
+        if (!workspace->factors_valid) {
+            if (chaingen_lu_factor(NZ, jacobian, workspace->pivot)) {
+                status = FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN;
+                break;
+            }
+            workspace->factors_valid = 1;
+            workspace->factors_dt = dt;
+            previous_update = -1.0;   /* a new Jacobian: contraction is measured afresh */
         }
         chaingen_lu_solve(NZ, jacobian, workspace->pivot, dz);
         for (i = 0; i < NZ; ++i) {
@@ -178,8 +240,27 @@ static int solve_step(const double *x0, const double *u, double dt, const four_l
         }
         if (!isfinite(update_norm)) {
             status = FOUR_LINK_ACTUATED_ES_NONFINITE;
-        } else if (update_norm <= 1.0 && residual_norm <= options->residual_tol) {
-            status = FOUR_LINK_ACTUATED_ES_OK;
+        } else if (!options->reuse_jacobian) {
+            workspace->factors_valid = 0;
+            if (update_norm <= 1.0 && residual_norm <= options->residual_tol) {
+                status = FOUR_LINK_ACTUATED_ES_OK;
+            }
+        } else {
+            /* The contraction of this iteration, else the last one measured; 0 is unknown. */
+            double rate = previous_update > 0.0 ? update_norm / previous_update : workspace->rate;
+            if (previous_update > 0.0) {
+                workspace->rate = rate;
+            }
+            if (!(rate > 0.0)) {
+                rate = 1.0;
+            }
+            if ((update_norm == 0.0 || (rate < 1.0 && rate / (1.0 - rate) * update_norm <= 1.0))
+                && residual_norm <= options->residual_tol) {
+                status = FOUR_LINK_ACTUATED_ES_OK;
+            } else if (previous_update > 0.0 && rate > REFRESH_RATE) {
+                workspace->factors_valid = 0;
+            }
+            previous_update = update_norm;
         }
     }
     if (iterations) {
@@ -223,6 +304,18 @@ static int finish_step(const double *x0, const double *u, double dt, double *x1,
         }
     }
     memcpy(x1, candidate, sizeof(double) * NX);
+    /* Remember the solution for a warm start of the next step. */
+    if (workspace->chained && workspace->history > 0) {
+        memmove(workspace->previous_z[1], workspace->previous_z[0], sizeof(double) * NZ * (HISTORY - 1));
+        if (workspace->history < HISTORY) {
+            ++workspace->history;
+        }
+    } else {
+        workspace->history = 1;
+    }
+    memcpy(workspace->previous_z[0], workspace->z, sizeof(double) * NZ);
+    memcpy(workspace->previous_x1, x1, sizeof(double) * NX);
+    workspace->previous_dt = dt;
     if (flows) {
         flows[0] = step_flows[0];
         flows[1] = step_flows[1];
@@ -266,8 +359,11 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
         return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
     }
     if (chaingen_lu_factor(NZ, workspace->jacobian, workspace->pivot)) {
+        workspace->factors_valid = 0;
         return FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN;
     }
+    workspace->factors_valid = 1;   /* dF/dz at this step's solution: reusable */
+    workspace->factors_dt = dt;
     /* Z = -J^-1 [F_x0 X_s, F_u]: one solve per column, in place. */
     rhs = workspace->sensitivity_rhs;
     step_arguments(workspace->z, x0, u, &dt, workspace);
@@ -366,6 +462,7 @@ int four_link_actuated_es_simulate(const double *x0, double t0, double dt, long 
         four_link_actuated_es_default_options(&defaults);
         options = &defaults;
     }
+    four_link_actuated_es_workspace_init(workspace);   /* a new trajectory: no history carried in */
     current = workspace->state[0];
     next = workspace->state[1];
     memcpy(current, x0, sizeof(double) * NX);

@@ -48,6 +48,7 @@ int main(int argc, char **argv)
     }
     n_steps = (long)(t_end / dt + 0.5);
     three_link_gravity_midpoint_default_options(&e.options);
+    three_link_gravity_midpoint_workspace_init(&e.workspace);   /* before the first step: no Newton history */
     status = three_link_gravity_midpoint_initial_state(initial_angles, initial_velocities, e.x, &e.workspace);
     status = status ? status : three_link_gravity_midpoint_outputs(e.x, NULL, NULL, &initial_energy, NULL, &e.workspace);
     printf("# free motion of %s, dt = %g s, %ld steps, at most %d Newton iterations a step\n",

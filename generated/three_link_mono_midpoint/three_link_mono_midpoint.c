@@ -21,12 +21,24 @@ size_t three_link_mono_midpoint_workspace_size(void)
     return sizeof(three_link_mono_midpoint_workspace);
 }
 
+void three_link_mono_midpoint_workspace_init(three_link_mono_midpoint_workspace *workspace)
+{
+    if (workspace) {
+        workspace->history = 0;
+        workspace->chained = 0;
+        workspace->factors_valid = 0;
+        workspace->rate = 0.0;   /* unknown */
+    }
+}
+
 void three_link_mono_midpoint_default_options(three_link_mono_midpoint_options *options)
 {
     options->max_iterations = 20;
     options->update_rtol = 1e-10;
     options->update_atol = 1e-13;
     options->residual_tol = 1e-8;
+    options->warm_start = 1;
+    options->reuse_jacobian = 0;
 }
 
 /* Evaluate a generated function: inputs and outputs by position, NULL outputs skipped. */
@@ -107,13 +119,52 @@ int three_link_mono_midpoint_residual_jacobian(const double *z, const double *x0
     return evaluate(three_link_mono_midpoint_model_residual_jacobian, workspace);
 }
 
-/* Newton's method on F(z; x0, dt) = 0 from the predictor's guess, dense LU with partial
- * pivoting, at most options->max_iterations linear solves. Leaves z in workspace->z. */
+/* Solutions of chained steps kept for the warm start: extrapolation of degree HISTORY - 1. */
+#define HISTORY 3
+
+/* Simplified Newton evaluates dF/dz anew when successive updates shrink by less than this. */
+#define REFRESH_RATE 0.1
+
+/* The first Newton guess: the scheme's predictor from x0, or with warm_start, when this step
+ * continues the workspace's previous one, the extrapolation of the previous solutions. */
+static int first_guess(const double *x0, double dt, const three_link_mono_midpoint_options *options,
+                       three_link_mono_midpoint_workspace *workspace)
+{
+    int i;
+    workspace->chained = options->warm_start && workspace->history > 0
+                         && dt == workspace->previous_dt
+                         && !memcmp(x0, workspace->previous_x1, sizeof(double) * NX);
+    if (workspace->chained) {
+        const double (*previous)[NZ] = (const double (*)[NZ])workspace->previous_z;
+        for (i = 0; i < NZ; ++i) {
+            switch (workspace->history) {
+            case 1:
+                workspace->z[i] = previous[0][i];
+                break;
+            case 2:
+                workspace->z[i] = 2.0 * previous[0][i] - previous[1][i];
+                break;
+            default:
+                workspace->z[i] = 3.0 * (previous[0][i] - previous[1][i]) + previous[2][i];
+            }
+        }
+        return THREE_LINK_MONO_MIDPOINT_OK;
+    }
+    workspace->arg[0] = x0;
+    workspace->arg[1] = &dt;
+    workspace->res[0] = workspace->z;
+    return evaluate(three_link_mono_midpoint_model_predictor, workspace);
+}
+
+/* Newton's method on F(z; x0, dt) = 0 from the first guess, full or simplified (see the
+ * options in the header), dense LU with partial pivoting, at most options->max_iterations
+ * linear solves. Leaves z in workspace->z. */
 static int solve_step(const double *x0, double dt, const three_link_mono_midpoint_options *options,
                       three_link_mono_midpoint_workspace *workspace, int *iterations)
 {
     three_link_mono_midpoint_options defaults;
     double *z, *dz, *residual, *jacobian;
+    double previous_update = -1.0;   /* update norm of the previous iteration, < 0: none */
     int i, iteration = 0, status;
     if (!x0 || !workspace || !(dt > 0.0) || !isfinite(dt)) {
         return THREE_LINK_MONO_MIDPOINT_BAD_ARGUMENT;
@@ -126,17 +177,23 @@ static int solve_step(const double *x0, double dt, const three_link_mono_midpoin
     dz = workspace->dz;
     residual = workspace->residual;
     jacobian = workspace->jacobian;
-    workspace->arg[0] = x0;
-    workspace->arg[1] = &dt;
-    workspace->res[0] = z;
-    status = evaluate(three_link_mono_midpoint_model_predictor, workspace);
+    if (!options->reuse_jacobian || workspace->factors_dt != dt) {
+        workspace->factors_valid = 0;
+    }
+    status = first_guess(x0, dt, options, workspace);
     if (status == THREE_LINK_MONO_MIDPOINT_OK) {
         status = THREE_LINK_MONO_MIDPOINT_NOT_CONVERGED;
     }
     while (status == THREE_LINK_MONO_MIDPOINT_NOT_CONVERGED && iteration < options->max_iterations) {
         double residual_norm = 0.0, update_norm = 0.0;
+        int evaluated;
         ++iteration;
-        if (three_link_mono_midpoint_residual_jacobian(z, x0, dt, residual, jacobian, workspace)) {
+        if (!workspace->factors_valid) {
+            evaluated = three_link_mono_midpoint_residual_jacobian(z, x0, dt, residual, jacobian, workspace);
+        } else {
+            evaluated = three_link_mono_midpoint_residual(z, x0, dt, residual, workspace);
+        }
+        if (evaluated) {
             status = THREE_LINK_MONO_MIDPOINT_EVALUATION_FAILED;
             break;
         }
@@ -152,9 +209,14 @@ static int solve_step(const double *x0, double dt, const three_link_mono_midpoin
         if (status != THREE_LINK_MONO_MIDPOINT_NOT_CONVERGED) {
             break;
         }
-        if (chaingen_lu_factor(NZ, jacobian, workspace->pivot)) {
-            status = THREE_LINK_MONO_MIDPOINT_SINGULAR_JACOBIAN;
-            break;
+        if (!workspace->factors_valid) {
+            if (chaingen_lu_factor(NZ, jacobian, workspace->pivot)) {
+                status = THREE_LINK_MONO_MIDPOINT_SINGULAR_JACOBIAN;
+                break;
+            }
+            workspace->factors_valid = 1;
+            workspace->factors_dt = dt;
+            previous_update = -1.0;   /* a new Jacobian: contraction is measured afresh */
         }
         chaingen_lu_solve(NZ, jacobian, workspace->pivot, dz);
         for (i = 0; i < NZ; ++i) {
@@ -166,8 +228,27 @@ static int solve_step(const double *x0, double dt, const three_link_mono_midpoin
         }
         if (!isfinite(update_norm)) {
             status = THREE_LINK_MONO_MIDPOINT_NONFINITE;
-        } else if (update_norm <= 1.0 && residual_norm <= options->residual_tol) {
-            status = THREE_LINK_MONO_MIDPOINT_OK;
+        } else if (!options->reuse_jacobian) {
+            workspace->factors_valid = 0;
+            if (update_norm <= 1.0 && residual_norm <= options->residual_tol) {
+                status = THREE_LINK_MONO_MIDPOINT_OK;
+            }
+        } else {
+            /* The contraction of this iteration, else the last one measured; 0 is unknown. */
+            double rate = previous_update > 0.0 ? update_norm / previous_update : workspace->rate;
+            if (previous_update > 0.0) {
+                workspace->rate = rate;
+            }
+            if (!(rate > 0.0)) {
+                rate = 1.0;
+            }
+            if ((update_norm == 0.0 || (rate < 1.0 && rate / (1.0 - rate) * update_norm <= 1.0))
+                && residual_norm <= options->residual_tol) {
+                status = THREE_LINK_MONO_MIDPOINT_OK;
+            } else if (previous_update > 0.0 && rate > REFRESH_RATE) {
+                workspace->factors_valid = 0;
+            }
+            previous_update = update_norm;
         }
     }
     if (iterations) {
@@ -209,6 +290,18 @@ static int finish_step(const double *x0, double dt, double *x1, three_link_mono_
         }
     }
     memcpy(x1, candidate, sizeof(double) * NX);
+    /* Remember the solution for a warm start of the next step. */
+    if (workspace->chained && workspace->history > 0) {
+        memmove(workspace->previous_z[1], workspace->previous_z[0], sizeof(double) * NZ * (HISTORY - 1));
+        if (workspace->history < HISTORY) {
+            ++workspace->history;
+        }
+    } else {
+        workspace->history = 1;
+    }
+    memcpy(workspace->previous_z[0], workspace->z, sizeof(double) * NZ);
+    memcpy(workspace->previous_x1, x1, sizeof(double) * NX);
+    workspace->previous_dt = dt;
     return THREE_LINK_MONO_MIDPOINT_OK;
 }
 
@@ -248,8 +341,11 @@ int three_link_mono_midpoint_step_sensitivities(const double *x0, double dt, dou
         return THREE_LINK_MONO_MIDPOINT_EVALUATION_FAILED;
     }
     if (chaingen_lu_factor(NZ, workspace->jacobian, workspace->pivot)) {
+        workspace->factors_valid = 0;
         return THREE_LINK_MONO_MIDPOINT_SINGULAR_JACOBIAN;
     }
+    workspace->factors_valid = 1;   /* dF/dz at this step's solution: reusable */
+    workspace->factors_dt = dt;
     /* Z = -J^-1 [F_x0 X_s, F_u]: one solve per column, in place. */
     rhs = workspace->sensitivity_rhs;
     step_arguments(workspace->z, x0, &dt, workspace);
@@ -322,6 +418,7 @@ int three_link_mono_midpoint_simulate(const double *x0, double t0, double dt, lo
         three_link_mono_midpoint_default_options(&defaults);
         options = &defaults;
     }
+    three_link_mono_midpoint_workspace_init(workspace);   /* a new trajectory: no history carried in */
     current = workspace->state[0];
     next = workspace->state[1];
     memcpy(current, x0, sizeof(double) * NX);

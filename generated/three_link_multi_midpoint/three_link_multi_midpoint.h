@@ -72,14 +72,32 @@ extern "C" {
                                           * direction is undefined there (model.md 2) */
 
 
-/* Newton options. Converged when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and
- * max_i |F_i| <= residual_tol at the iterate the update was computed from. A step does at most
- * max_iterations residual-and-Jacobian evaluations and LU solves, which bounds its time. */
+/* Newton options. A step solves F(z; x0, dt) = 0 for z by Newton's method with dense LU.
+ *
+ * Full Newton (reuse_jacobian = 0) evaluates and factorises dF/dz at every iterate. It has
+ * converged when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and max_i |F_i| <=
+ * residual_tol at the iterate the update was computed from.
+ *
+ * Simplified Newton (reuse_jacobian = 1) keeps the factorised dF/dz in the workspace and
+ * reuses it over iterations and steps, evaluating only F. It converges linearly: with theta the
+ * ratio of successive update norms (from the previous step on a step's first iteration), it has
+ * converged when theta / (1 - theta) times the update norm above is <= 1, the estimated error
+ * of the new iterate, and max_i |F_i| <= residual_tol. The Jacobian is evaluated anew when
+ * there is none for this dt, or when theta exceeds 0.1 (slow contraction).
+ *
+ * Warm start (warm_start = 1): when x0 is bitwise the state the workspace's previous step
+ * produced, with the same dt, the first guess extrapolates the previous steps' solutions z
+ * (quadratically from three, linearly from two, constantly from one) instead of the scheme's predictor from x0 alone.
+ * The solution then depends on the workspace's history within the Newton tolerances.
+ *
+ * Either way a step does at most max_iterations linear solves, which bounds its time. */
 typedef struct {
     int max_iterations;  /* default 20; bounds the work of one step */
     double update_rtol;  /* default 1e-10 */
     double update_atol;  /* default 1e-13 */
     double residual_tol; /* default 1e-8 (units of F) */
+    int warm_start;      /* default 1 */
+    int reuse_jacobian;  /* default 0 */
 } three_link_multi_midpoint_options;
 
 /* Counters of one simulate call. */
@@ -104,6 +122,15 @@ typedef struct {
     int pivot[THREE_LINK_MULTI_MIDPOINT_NZ];
     double state[2][THREE_LINK_MULTI_MIDPOINT_NX];
     double candidate[THREE_LINK_MULTI_MIDPOINT_NX];
+    /* Newton state carried from step to step (warm start, simplified Newton). */
+    double previous_z[3][THREE_LINK_MULTI_MIDPOINT_NZ]; /* solutions of the last three chained steps */
+    double previous_x1[THREE_LINK_MULTI_MIDPOINT_NX];   /* the state the last step produced */
+    double previous_dt;
+    double rate;                       /* last contraction estimate of simplified Newton */
+    double factors_dt;                 /* dt of the factorised Jacobian in jacobian/pivot */
+    int history;                       /* solutions in previous_z: 0 to 3 */
+    int chained;                       /* this step continues the previous one */
+    int factors_valid;                 /* jacobian/pivot hold a usable factorisation */
     double sensitivity_rhs[THREE_LINK_MULTI_MIDPOINT_NZ * 6];
     double s1_z[6 * THREE_LINK_MULTI_MIDPOINT_NZ];
 } three_link_multi_midpoint_workspace;
@@ -111,6 +138,13 @@ typedef struct {
 /* sizeof(three_link_multi_midpoint_workspace), for callers that allocate it from another language. */
 THREE_LINK_MULTI_MIDPOINT_API
 size_t three_link_multi_midpoint_workspace_size(void);
+
+/* Forget the Newton state carried between steps (warm start, reused Jacobian). Call it once
+ * on a new workspace before stepping with warm_start or reuse_jacobian set (a zero-filled
+ * workspace, e.g. a static one, is already in this state), and whenever the model's
+ * trajectory is restarted. The default options never read that state. */
+THREE_LINK_MULTI_MIDPOINT_API
+void three_link_multi_midpoint_workspace_init(three_link_multi_midpoint_workspace *workspace);
 
 /* Fill options with the defaults above. */
 THREE_LINK_MULTI_MIDPOINT_API

@@ -1,0 +1,119 @@
+"""The Newton knobs of the generated step: warm start and simplified Newton (reused Jacobian).
+
+Both change how a step reaches its solution, never which equations it solves: every variant
+must agree with full Newton from the scheme's predictor within the Newton tolerances, and fail
+loudly rather than return an unconverged state.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from chaingen_runtime import NewtonError, NewtonOptions
+
+from conftest import load, solver_for
+
+COLD = NewtonOptions(warm_start=False, reuse_jacobian=False)
+WARM = NewtonOptions(warm_start=True, reuse_jacobian=False)
+SIMPLIFIED = NewtonOptions(warm_start=True, reuse_jacobian=True)
+METHODS = ("es", "vi", "midpoint")
+
+
+def chained_steps(solver, x, dt, options, count):
+    """`count` steps, each from the previous step's x1; returns the states and iterations."""
+    states, iterations = [x], []
+    for _ in range(count):
+        result = solver.step(states[-1], dt, options=options)
+        states.append(result.x1)
+        iterations.append(result.iterations)
+    return states, iterations
+
+
+def initial(solver, name="three_link_mono"):
+    scene = load(name)
+    return solver.initial_state(scene.initial_angles, scene.initial_velocities)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_warm_start_saves_iterations_and_changes_nothing_else(method):
+    solver = solver_for("three_link_mono", method)
+    x0 = initial(solver)
+    solver.reset()
+    cold, cold_iterations = chained_steps(solver, x0, 0.01, COLD, 20)
+    solver.reset()
+    warm, warm_iterations = chained_steps(solver, x0, 0.01, WARM, 20)
+    # From the fourth step on, the guess extrapolates three previous solutions.
+    assert max(warm_iterations[3:]) < min(cold_iterations[3:])
+    assert np.abs(np.array(warm) - np.array(cold)).max() < 1e-10
+
+
+def test_warm_start_only_continues_its_own_trajectory():
+    """A step from a state the workspace did not produce starts from the predictor."""
+    solver = solver_for("three_link_mono", "es")
+    x0 = initial(solver)
+    solver.reset()
+    cold = solver.step(x0, 0.01, options=COLD).iterations
+    states, _ = chained_steps(solver, x0, 0.01, WARM, 5)
+    assert solver.step(x0, 0.01, options=WARM).iterations == cold   # not chained: fresh start
+    # Same state, other dt: not chained either.
+    chained_steps(solver, x0, 0.01, WARM, 5)
+    other_dt = solver.step(states[5], 0.005, options=WARM).iterations
+    assert other_dt == solver.step(states[5], 0.005, options=COLD).iterations
+
+
+def test_reset_forgets_the_history():
+    solver = solver_for("three_link_mono", "es")
+    x0 = initial(solver)
+    states, _ = chained_steps(solver, x0, 0.01, WARM, 5)
+    warm = solver.step(states[5], 0.01, options=WARM).iterations
+    solver.reset()
+    chained_steps(solver, x0, 0.01, WARM, 5)   # builds the same history ...
+    solver.reset()                              # ... and forgets it
+    assert solver.step(states[5], 0.01, options=WARM).iterations > warm
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_simplified_newton_agrees_with_full_newton(method):
+    solver = solver_for("three_link_multi", method)
+    scene = load("three_link_multi")
+    full = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                           n_steps=1000, options=WARM)
+    simplified = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                                 n_steps=1000, options=SIMPLIFIED)
+    assert np.abs(simplified.phi - full.phi).max() < 1e-7
+    # Energy: the variant may not change the scheme's behaviour beyond the Newton tolerance.
+    assert (np.abs(simplified.energy_error).max()
+            <= np.abs(full.energy_error).max() + 1e-8)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_simplified_newton_refreshes_a_stale_jacobian(method):
+    """After steps at one dt (and from another state) the kept factorisation is wrong for the
+    next step; the step must still converge to the full-Newton solution."""
+    solver = solver_for("three_link_mono", method)
+    x0 = initial(solver)
+    solver.reset()
+    states, _ = chained_steps(solver, x0, 0.001, SIMPLIFIED, 3)
+    for dt in (0.05, 0.001, 0.05):
+        expected = solver.step(states[-1], dt, options=COLD).x1
+        result = solver.step(states[-1], dt, options=SIMPLIFIED)
+        assert np.abs(result.x1 - expected).max() < 1e-8
+
+
+def test_simplified_newton_reports_failure_instead_of_garbage():
+    solver = solver_for("three_link_mono", "es")
+    x0 = initial(solver)
+    solver.reset()
+    with pytest.raises(NewtonError, match="did not converge"):
+        solver.step(x0, 0.01, options=NewtonOptions(reuse_jacobian=True, max_iterations=1))
+
+
+@pytest.mark.parametrize("options", [COLD, WARM, SIMPLIFIED], ids=["cold", "warm", "simplified"])
+def test_simulate_does_not_depend_on_the_workspace_history(options):
+    solver = solver_for("three_link_gravity", "es")
+    scene = load("three_link_gravity")
+    run = lambda: solver.simulate(scene.initial_angles, scene.initial_velocities,  # noqa: E731
+                                  dt=0.01, n_steps=200, options=options)
+    first = run()
+    chained_steps(solver, initial(solver, "three_link_gravity"), 0.02, SIMPLIFIED, 4)
+    assert np.array_equal(run().samples, first.samples)
