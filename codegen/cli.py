@@ -81,6 +81,24 @@ def parser() -> argparse.ArgumentParser:
                        help="duration of each run in s (default 10)")
     order.add_argument("--plot", type=Path, metavar="FILE.png",
                        help="write the log-log order plot (needs matplotlib)")
+
+    bench = commands.add_parser(
+        "bench", help="speed/accuracy benchmark against MuJoCo and SciPy (docs/benchmarks.md)")
+    bench.add_argument("--quick", action="store_true",
+                       help="a smoke run of about a minute: one scene, short runs, n = 2, 3")
+    bench.add_argument("--out", type=Path, metavar="FILE.md",
+                       help="the document to write (default: docs/benchmarks.md)")
+    bench.add_argument("--figures", type=Path, metavar="DIR",
+                       help="directory of the figures (default: figures/ next to --out)")
+    bench.add_argument("--dts", metavar="DT,DT,...",
+                       help="our schemes' steps in s (default 0.04,0.02,0.01,0.005,0.0025)")
+    bench.add_argument("--scaling-n", metavar="N,N,...",
+                       help="chain lengths of the scaling series (default 2,3,5,10,20)")
+    bench.add_argument("--skip-scaling", action="store_true", help="leave out the scaling series")
+    bench.add_argument("--skip-reference", action="store_true",
+                       help="leave out the reference scenes")
+    bench.add_argument("--timeout", type=_number, default=300.0, metavar="SECONDS",
+                       help="limit of generate + build per scheme and n (default 300)")
     return main
 
 
@@ -129,6 +147,17 @@ def command_order(args) -> int:
     print(format_table(study))
     if args.plot is not None:
         print(f"plot: {plot_order(study, args.plot)}")
+    return 0
+
+
+def command_bench(args) -> int:
+    from .bench import bench_config, run_bench
+
+    config = bench_config(quick=args.quick, dts=args.dts, scaling_n=args.scaling_n,
+                          timeout=args.timeout, skip_scaling=args.skip_scaling,
+                          skip_reference=args.skip_reference, out=args.out,
+                          figures=args.figures)
+    run_bench(config)
     return 0
 
 
@@ -195,7 +224,7 @@ def summary(result, settings, out: Path | None) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     handlers = {"generate": command_generate, "simulate": command_simulate,
-                "check": command_check, "order": command_order}
+                "check": command_check, "order": command_order, "bench": command_bench}
     try:
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take

@@ -1,0 +1,237 @@
+"""`chaingen bench` (codegen.bench): its options, its scaling scene, the cost interpolation of
+headline c, the timing harness against the runtime, and the written docs/benchmarks.md.
+
+The default tier stays fast: bad options fail before anything runs, and one small package is
+built. The benchmark marker runs the quick benchmark itself (about a minute).
+"""
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from chaingen_runtime import Solver
+from codegen.bench import (TARGET_EQUAL_ERROR, VARIANTS, RunRow, equal_error_headline,
+                           interpolate_cost, scaling_scene)
+from codegen.bench_harness import Harness
+from codegen.cli import main
+from codegen.kinematics import spring_geometry
+from codegen.package import generate_package
+
+from conftest import load
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCUMENT = ROOT / "docs" / "benchmarks.md"
+HEADLINE_KEYS = ("a", "b", "c", "d", "e")
+
+
+# -- options ---------------------------------------------------------------------------------
+
+# (id, options, fragments of the message)
+BAD_OPTIONS = [
+    ("dts not a number", ["--dts", "0.01,abc"], ["--dts", "'abc'"]),
+    ("dts zero", ["--dts", "0"], ["--dts", "> 0"]),
+    ("dts nan", ["--dts", "nan"], ["--dts", "nan"]),
+    ("dts not dividing t_end", ["--dts", "0.03"], ["--dts", "0.03", "divide"]),
+    ("scaling-n one", ["--scaling-n", "1"], ["--scaling-n", "1"]),
+    ("scaling-n not an integer", ["--scaling-n", "2,2.5"], ["--scaling-n", "'2.5'"]),
+    ("timeout zero", ["--timeout", "0"], ["--timeout"]),
+    ("timeout negative", ["--timeout", "-5"], ["--timeout"]),
+    ("nothing to run", ["--skip-scaling", "--skip-reference"], ["--skip-scaling"]),
+]
+
+
+@pytest.mark.parametrize("options, fragments",
+                         [pytest.param(*case[1:], id=case[0]) for case in BAD_OPTIONS])
+def test_bad_option_is_one_line_and_exit_2(tmp_path, capsys, options, fragments):
+    out = tmp_path / "benchmarks.md"
+    assert main(["bench", *options, "--out", str(out), "--figures", str(tmp_path / "f")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("chaingen: error: "), captured.err
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("options, option", [
+    pytest.param(lambda tmp: ["--out", str(tmp)], "--out", id="out is a directory"),
+    pytest.param(lambda tmp: ["--out", str(tmp / "missing" / "b.md")], "--out",
+                 id="out in a missing directory"),
+    pytest.param(lambda tmp: ["--out", str(tmp / "b.md"), "--figures", str(tmp / "file")],
+                 "--figures", id="figures is a file"),
+])
+def test_bad_output_paths(tmp_path, capsys, options, option):
+    (tmp_path / "file").write_text("")
+    assert main(["bench", *options(tmp_path)]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and option in lines[0], lines
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_bad_option_from_the_command_line(tmp_path):
+    """The real command: exit 2, no traceback; a value argparse rejects prints its usage lines
+    and then one error line, like the other commands."""
+    result = subprocess.run([sys.executable, "-m", "codegen", "bench", "--timeout", "soon",
+                             "--out", str(tmp_path / "b.md")], capture_output=True, text=True,
+                            cwd=tmp_path, timeout=120)
+    assert result.returncode == 2, result.stderr
+    assert "Traceback" not in result.stderr and result.stdout == ""
+    assert "--timeout" in result.stderr.splitlines()[-1]
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- the scaling scene -----------------------------------------------------------------------
+
+@pytest.mark.parametrize("n", [2, 3, 5, 20])
+def test_scaling_scene(n):
+    scene = scaling_scene(n)
+    assert scene.n == n
+    mono = [spring for spring in scene.springs if not spring.is_multi_articular]
+    multi = [spring for spring in scene.springs if spring.is_multi_articular]
+    assert sorted(spring.first for spring in mono) == list(range(1, n + 1))
+    assert [(spring.first, spring.last) for spring in multi] == [(1, min(n, 3))]
+    straight = np.zeros(n)
+    for spring in scene.springs:   # rest lengths near the straight posture's, a little shorter
+        length = spring_geometry(scene, spring, straight).total_length
+        assert 0.9 * length <= spring.rest_length < length
+    # hanging (phi_1 = -pi/2 is straight down), deflected, every other joint a little bent
+    assert 0 < abs(scene.initial_angles[0] + math.pi / 2) < 0.5
+    assert all(angle != 0 and abs(angle) < 0.5 for angle in scene.initial_angles[1:])
+    assert scene.gravity == 9.81
+    link = scene.links[0]
+    assert math.isclose(link.inertia, link.mass * link.length ** 2 / 12)
+
+
+# -- headline c: cost at an energy error -----------------------------------------------------
+
+def test_interpolate_cost_on_a_power_law():
+    """error = 1e-2 cost^-2 is a straight line in log-log: interpolation is exact on it."""
+    points = [(100.0, 1e-6), (1.0, 1e-2), (10.0, 1e-4)]          # any order
+    assert interpolate_cost(points, 1e-5) == pytest.approx(10 ** 1.5, rel=1e-12)
+    assert interpolate_cost(points, 1e-3) == pytest.approx(10 ** 0.5, rel=1e-12)
+    assert interpolate_cost(points, 1e-4) == pytest.approx(10.0, rel=1e-12)   # a measured point
+    assert interpolate_cost(points, 1e-2) == pytest.approx(1.0, rel=1e-12)
+
+
+def test_interpolate_cost_refuses_to_extrapolate():
+    points = [(1.0, 1e-2), (10.0, 1e-4), (100.0, 1e-6)]
+    assert interpolate_cost(points, 1e-7) is None      # more accurate than any run
+    assert interpolate_cost(points, 1e-1) is None      # less accurate than any run
+    assert interpolate_cost([(1.0, 1e-2)], 1e-3) is None
+    assert interpolate_cost([], 1e-3) is None
+
+
+def test_interpolate_cost_takes_the_cheapest_crossing():
+    """Round-off makes errors rise again at high cost: the target is first reached cheaply."""
+    points = [(1.0, 1e-8), (2.0, 1e-12), (4.0, 1e-13), (8.0, 1e-11)]
+    assert interpolate_cost(points, 1e-10) == pytest.approx(2 ** 0.5, rel=1e-12)
+
+
+def _row(method: str, cost: float, error: float) -> RunRow:
+    variant = "-" if method.startswith("SciPy") else VARIANTS[0].label
+    return RunRow(scene="s", family="x", method=method, variant=variant, setting="", t_end=1.0,
+                  run_seconds=cost, energy_error=error)
+
+
+def test_headline_c_bounds_when_every_es_run_is_more_accurate():
+    scipy = [_row("SciPy DOP853", 1.0, 1e-8), _row("SciPy DOP853", 4.0, 1e-12)]
+    below = [_row("es K=3", 0.01, 1e-13), _row("es K=3", 0.02, 1e-14)]
+    headline = equal_error_headline(scipy + below, VARIANTS[0], "es K=3")
+    assert headline.measured.startswith(">= 200.0 (lower bound")
+    assert headline.passed is True
+    crossing = [_row("es K=3", 0.001, 1e-8), _row("es K=3", 0.1, 1e-12)]
+    headline = equal_error_headline(scipy + crossing, VARIANTS[0], "es K=3")
+    assert headline.measured.startswith("200.0 (2000.00 ms / 10.00 ms") and headline.passed
+    above = [_row("es K=3", 0.01, 1e-6)]
+    headline = equal_error_headline(scipy + above, VARIANTS[0], "es K=3")
+    assert headline.passed is None and "not measured" in headline.measured
+    assert TARGET_EQUAL_ERROR == 1e-10
+
+
+# -- the harness counts what the runtime counts ----------------------------------------------
+
+@pytest.mark.parametrize("variant", VARIANTS, ids=[v.label for v in VARIANTS])
+def test_harness_iterations_agree_with_simulate(variant):
+    scene = load("three_link_mono")
+    package = generate_package(scene, "es", 1, sensitivities=False)
+    solver = Solver.from_files(package.files)
+    steps, dt = 400, 0.01
+    result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
+                             n_steps=steps, options=variant.newton_options())
+    x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
+    with Harness(package) as harness:
+        timings = harness.time(x0, dt, n_steps=steps, repeats=1, options=variant.options)
+    assert timings.mean_iterations == pytest.approx(result.mean_newton_iterations, abs=1e-12)
+    assert timings.step_ns > 0 and timings.residual_jacobian_ns > 0
+
+
+# -- the written document --------------------------------------------------------------------
+
+def check_document(path: Path) -> None:
+    text = path.read_text()
+    headline = text.split("## Headline", 1)[1].split("\n## ", 1)[0]
+    keys = {line.split("|")[1].strip() for line in headline.splitlines()
+            if line.startswith("| ") and not line.startswith("| |")}
+    assert keys >= set(HEADLINE_KEYS), keys
+    for variant in VARIANTS:
+        assert f"| {variant.label} |" in headline
+    assert re.search(r"\| (pass|FAIL|not measured) \|", headline)
+    machine = text.split("## Machine", 1)[1].split("\n## ", 1)[0]
+    for item in ("- CPU:", "- cores:", "- memory:", "- OS:", "- C compiler:", "- our flags:",
+                 "- MuJoCo:", "- SciPy:", "- Python:", "numpy, sympy, casadi"):
+        assert item in machine, item
+    assert "Written by `chaingen bench" in text
+    figures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)
+    assert figures
+    for figure in figures:
+        assert (path.parent / figure).is_file(), figure
+        assert Path(figure).name.startswith("bench_")
+    assert "nan" not in text.lower().split()
+
+
+def test_the_checked_in_document():
+    if not DOCUMENT.exists():
+        pytest.skip("docs/benchmarks.md is written by a full `chaingen bench` run; none yet")
+    check_document(DOCUMENT)
+    text = DOCUMENT.read_text()
+    assert "Quick mode" not in text
+    for scene in ("three_link_gravity", "three_link_mono", "three_link_multi"):
+        assert f"### {scene}" in text
+    assert "## Scaling" in text
+
+
+@pytest.mark.benchmark
+def test_quick_benchmark_writes_document_and_figures(tmp_path):
+    out, figures = tmp_path / "benchmarks.md", tmp_path / "figures"
+    result = subprocess.run([sys.executable, "-m", "codegen", "bench", "--quick", "--out",
+                             str(out), "--figures", str(figures)], capture_output=True,
+                            text=True, cwd=ROOT, timeout=900)
+    assert result.returncode == 0, result.stderr
+    check_document(out)
+    assert {path.name for path in figures.iterdir()} == {"bench_three_link_mono.png",
+                                                         "bench_scaling.png"}
+    assert "| method | variant | setting |" in result.stdout      # tables printed as it goes
+    assert "## Headline" in out.read_text() and "Quick mode" in out.read_text()
+    assert not [p for p in tmp_path.rglob(".*")]                 # no temporary files left
+
+
+def test_scaling_point_measures_time_and_memory():
+    """One point of the scaling series as its child process computes it (n = 2, cheap)."""
+    from codegen.bench import measure_scaling_point
+
+    point = measure_scaling_point("midpoint", 3, 2, n_steps=50, repeats=1)
+    assert point["generate_seconds"] > 0 and point["build_seconds"] > 0
+    assert point["generate_peak_kb"] > 0 and point["model_c_bytes"] > 0
+    if Path("/usr/bin/time").exists():
+        # the compiler's own peak, not the fork-inherited one of the Python process
+        assert 0 < point["compile_peak_kb"] < point["generate_peak_kb"]
+    for variant in VARIANTS:
+        timing = point["timings"][variant.label]
+        assert timing["dt"] == 0.01 and timing["step_ns"] > 0 and not timing["failures"]
