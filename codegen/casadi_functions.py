@@ -44,6 +44,10 @@ class SympyToCasadi:
     def __init__(self, bindings: dict[sp.Symbol, ca.SX]):
         self._memo: dict[sp.Basic, ca.SX] = dict(bindings)
 
+    def bind(self, symbol: sp.Symbol, value: ca.SX) -> None:
+        """Bind one more symbol (an intermediate defined by earlier bindings)."""
+        self._memo[symbol] = value
+
     def __call__(self, expr: sp.Basic) -> ca.SX:
         # Iterative post-order walk: deep recursive expressions (long chains) must not hit
         # Python's recursion limit.
@@ -142,6 +146,9 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     dt = ca.SX.sym("dt")
     step_inputs = (list(scheme.unknowns) + list(scheme.state) + list(scheme.inputs)
                    + [scheme.dt])
+    for symbol, expression in scheme.definitions:
+        check_free_symbols(f"definition of {symbol}", [expression], step_inputs)
+        step_inputs.append(symbol)
     for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state),
                         ("energy flows", [scheme.input_work, scheme.dissipated])):
         check_free_symbols(name, exprs, step_inputs)
@@ -162,6 +169,8 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     bindings.update(zip(scheme.inputs, ca.vertsplit(u)))
     bindings[scheme.dt] = dt
     step = SympyToCasadi(bindings)
+    for symbol, expression in scheme.definitions:
+        step.bind(symbol, step(expression))
     residual = _vector(step, scheme.residual)
     jacobian = ca.densify(ca.jacobian(residual, z))
     x1 = _vector(step, scheme.next_state)

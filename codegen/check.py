@@ -106,8 +106,8 @@ class _SympyFunctions:
         def lam(inputs, expressions):
             return sp.lambdify(inputs, list(expressions), modules="numpy", cse=True)
 
-        self.residual = lam(step_inputs, scheme.residual)
-        self.next_state = lam(step_inputs, scheme.next_state)
+        self.residual = lam(step_inputs, scheme.inline(scheme.residual))
+        self.next_state = lam(step_inputs, scheme.inline(scheme.next_state))
         self.initial_state = lam(list(scheme.initial_angles) + list(scheme.initial_velocities),
                                  scheme.initial_state)
         self.outputs = lam(state + solved, list(scheme.joint_angles)

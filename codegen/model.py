@@ -110,6 +110,30 @@ class ComModel:
         return tuple(rates)
 
 
+def linear_coefficients(expressions, symbols) -> tuple[ImmutableMatrix, ImmutableMatrix]:
+    """(A, c) with expressions = A symbols + c, for expressions affine in the symbols.
+
+    The joints and fastenings of the COM model are affine in q but nested (each joint is built
+    from the previous one); reading off their constant coefficients once lets every derivative
+    of a spring be written down instead of differentiated through that nesting by SymPy.
+    """
+    index = {symbol: j for j, symbol in enumerate(symbols)}
+    rows, offsets = [], []
+    for expression in expressions:
+        row = [sp.Integer(0)] * len(symbols)
+        offset = sp.Integer(0)
+        for term, coefficient in sp.expand(expression).as_coefficients_dict().items():
+            if term == 1:
+                offset += coefficient
+            elif term in index:
+                row[index[term]] += coefficient
+            else:
+                raise ValueError(f"{expression} is not affine in the coordinates ({term})")
+        rows.append(row)
+        offsets.append(offset)
+    return ImmutableMatrix(rows), ImmutableMatrix(offsets)
+
+
 def com_frame_map(link) -> ImmutableMatrix:
     """R(-alpha_i)/|c_i|: maps the arm x_i - X_i to the unit direction e_i of the link."""
     a, b = number(link.com), number(link.com_normal)
@@ -163,20 +187,28 @@ def com_model(scene: Scene) -> ComModel:
         (xs[i] - joints[i][0]) ** 2 + (ys[i] - joints[i][1]) ** 2
         - number(link.com ** 2 + link.com_normal ** 2)
         for i, link in enumerate(scene.links)])
-    constraint_jacobian = constraints.jacobian(q)
+    # The joints are affine in q, X_i = A_i q + b_i: with the selector E_i of x_i, the arm
+    # x_i - X_i = B_i q - b_i, B_i = E_i - A_i, gives grad c_i = 2 (x_i - X_i)^T B_i and the
+    # mass matrix below without differentiating the nested joint expressions.
+    arm_maps = []
+    for i in range(n):
+        A, b = linear_coefficients(joints[i], q)
+        selector = sp.zeros(2, 2 * n)
+        selector[0, i] = selector[1, n + i] = 1
+        arm_maps.append((ImmutableMatrix(selector), ImmutableMatrix(selector - A), b))
+    constraint_jacobian = ImmutableMatrix.vstack(*[
+        2 * (B * q - b).T * B for _, B, b in arm_maps])
 
     # T = sum 1/2 m_i |v_i|^2 + 1/2 J_i thetadot_i^2, thetadot_i^2 = |v_i - Xdot_i|^2 / |c_i|^2
-    # on the constraint manifold, so T is a constant quadratic form in v.
-    to_v = dict(zip(q, v))
-    kinetic = sp.Integer(0)
-    for i, link in enumerate(scene.links):
-        vi = ImmutableMatrix([vxs[i], vys[i]])
-        kinetic += number(link.mass) / 2 * dot2(vi, vi)
+    # on the constraint manifold, so T is a constant quadratic form in v, with Xdot_i = A_i v.
+    mass_matrix = sp.zeros(2 * n, 2 * n)
+    for (selector, B, _), link in zip(arm_maps, scene.links):
+        mass_matrix += number(link.mass) * selector.T * selector
         if link.inertia != 0:
-            arm_rate = vi - joints[i].xreplace(to_v)
-            kinetic += (number(link.inertia) / number(link.com ** 2 + link.com_normal ** 2)
-                        / 2 * dot2(arm_rate, arm_rate))
-    mass_matrix = ImmutableMatrix(sp.hessian(kinetic, v))
+            mass_matrix += (number(link.inertia) / number(link.com ** 2 + link.com_normal ** 2)
+                            * B.T * B)
+    # Mirrored, so that M is symmetric to the last bit whatever order SymPy summed in.
+    mass_matrix = ImmutableMatrix(2 * n, 2 * n, lambda i, j: mass_matrix[min(i, j), max(i, j)])
     kinetic_energy = (v.T * mass_matrix * v)[0, 0] / 2
 
     gravity = sp.Integer(0)
@@ -209,3 +241,23 @@ def joint_space_positions(scene: Scene, phi) -> tuple[list, list]:
         ys.append(com[1])
         joint = joint + number(link.length) * e
     return xs, ys
+
+
+def joint_space_velocities(scene: Scene, phi, phidot) -> tuple[list, list]:
+    """COM velocities from relative joint angles and rates (model.md section 1): link i turns at
+    thetadot_i = phidot_1 + ... + phidot_i, so xdot_i = Xdot_i + thetadot_i S (a_i e_i + b_i n_i)
+    and Xdot_{i+1} = Xdot_i + thetadot_i L_i S e_i. Returns (vxs, vys), written down rather than
+    differentiated from joint_space_positions."""
+    theta = theta_dot = sp.Integer(0)
+    joint_velocity = ImmutableMatrix([0, 0])
+    vxs, vys = [], []
+    for i, link in enumerate(scene.links):
+        theta = theta + phi[i]
+        theta_dot = theta_dot + phidot[i]
+        e = ImmutableMatrix([sp.cos(theta), sp.sin(theta)])
+        arm = number(link.com) * e + number(link.com_normal) * (S * e)
+        velocity = joint_velocity + theta_dot * (S * arm)
+        vxs.append(velocity[0])
+        vys.append(velocity[1])
+        joint_velocity = joint_velocity + theta_dot * number(link.length) * (S * e)
+    return vxs, vys

@@ -71,6 +71,19 @@ class DiscreteScheme:
     # Every spring segment P_{j+1} - P_j of the state as (dx, dy) pairs, watched during a run
     # (model.md 2): a segment must not shrink to zero length nor pass through it in a step.
     segment_vectors: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
+    # Intermediate quantities of the step, (symbol, expression) in order of definition: each
+    # expression uses the step's inputs (z, x_k, u, dt) and earlier symbols, and residual,
+    # next_state and the flows may use the symbols. They keep a large chain's expressions as
+    # a sequence of small ones (model.md's spring segments at each quadrature node), which code
+    # generation translates once and shares, instead of SymPy expanding them into every use.
+    definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+
+    def inline(self, expressions) -> list[sp.Expr]:
+        """`expressions` with the definitions substituted: in the step's inputs alone."""
+        result = list(expressions)
+        for symbol, expression in reversed(self.definitions):
+            result = [e.xreplace({symbol: expression}) for e in result]
+        return result
 
     @property
     def has_energy_flows(self) -> bool:

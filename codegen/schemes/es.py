@@ -17,21 +17,61 @@ from __future__ import annotations
 import sympy as sp
 from sympy import ImmutableMatrix
 
-from ..model import com_model, cross2, dot2, joint_space_positions, number
+from ..model import (com_model, cross2, dot2, joint_space_positions, joint_space_velocities,
+                     linear_coefficients, number)
 from ..quadrature import gauss_legendre_nodes
 from ..scene import Scene
 from .base import DiscreteScheme, Layout, input_symbols, joint_torques, segment_vectors
 
 
-def averaged_spring_gradient(model, q0, q1, quadrature: int) -> ImmutableMatrix:
-    """sum_g w_g grad V_springs(q_0 + tau_g (q_1 - q_0)) (model.md section 4)."""
-    gradient = ImmutableMatrix([model.spring_potential]).jacobian(model.q).T
+def averaged_spring_gradient(model, q0, q1, quadrature: int):
+    """sum_g w_g grad V_springs(q_0 + tau_g (q_1 - q_0)) (model.md section 4), and the
+    definitions it uses.
+
+    Every segment vector d_j = P_{j+1} - P_j is affine in q, d_j = D_j q + c_j, so with
+    s_j = |d_j| and the stretch e = sum_j s_j - S_0 the gradient of 1/2 k e^2 is
+    k e sum_j D_j^T d_j / s_j: written down, not differentiated. At a quadrature node
+    d_j(q_tau) = d_j(q_0) + tau (d_j(q_1) - d_j(q_0)); the node's segment vectors and lengths
+    are defined once as symbols (DiscreteScheme.definitions), so that a long chain's gradient
+    stays a sum of small terms.
+    """
     nodes, weights = gauss_legendre_nodes(quadrature)
-    total = sp.zeros(*gradient.shape)
-    for tau, weight in zip(nodes, weights):
-        point = {qi: a + sp.Float(tau) * (b - a) for qi, a, b in zip(model.q, q0, q1)}
-        total += sp.Float(weight) * gradient.xreplace(point)
-    return ImmutableMatrix(total)
+    total = [sp.Integer(0)] * len(model.q)
+    increments = sp.symbols([f"d{symbol}" for symbol in map(str, model.q)], real=True)
+    definitions = [(d, b - a) for d, a, b in zip(increments, q0, q1)]
+    increments = ImmutableMatrix(increments)
+    for i, term in enumerate(model.springs):
+        segments = []
+        for j, vector in enumerate(term.segment_vectors):
+            D, c = linear_coefficients(vector, model.q)
+            start = sp.symbols(f"spring{i}_d{j}_x spring{i}_d{j}_y", real=True)
+            change = sp.symbols(f"spring{i}_dd{j}_x spring{i}_dd{j}_y", real=True)
+            definitions += list(zip(start, D * q0 + c)) + list(zip(change, D * increments))
+            segments.append((j, D, ImmutableMatrix(start), ImmutableMatrix(change)))
+        for g, (tau, weight) in enumerate(zip(nodes, weights)):
+            lengths, directions = [], []
+            for j, D, start, change in segments:
+                dx, dy, length = sp.symbols(f"spring{i}_d{j}_node{g}_x spring{i}_d{j}_node{g}_y "
+                                            f"spring{i}_s{j}_node{g}", real=True)
+                point = start + sp.Float(tau) * change
+                definitions += [(dx, point[0]), (dy, point[1]),
+                                (length, sp.sqrt(dx ** 2 + dy ** 2))]
+                lengths.append(length)
+                directions.append((j, D, dx, dy, length))
+            stretch = sp.Add(*lengths) - number(term.spring.rest_length)
+            force = sp.Symbol(f"spring{i}_force{g}", real=True)
+            definitions.append((force, sp.Float(weight) * number(term.spring.stiffness) * stretch))
+            for j, D, dx, dy, length in directions:
+                # The force along the segment, (fx, fy) = w k e d_j / s_j, once per segment and
+                # node: the gradient's entries are then sums of constant multiples of it.
+                fx, fy = sp.symbols(f"spring{i}_f{j}_node{g}_x spring{i}_f{j}_node{g}_y",
+                                    real=True)
+                scale = sp.Symbol(f"spring{i}_scale{j}_node{g}", real=True)
+                definitions += [(scale, force / length), (fx, scale * dx), (fy, scale * dy)]
+                for k in range(len(model.q)):
+                    if D[0, k] != 0 or D[1, k] != 0:
+                        total[k] += D[0, k] * fx + D[1, k] * fy
+    return ImmutableMatrix(total), tuple(definitions)
 
 
 def relative_rates(model) -> list[sp.Expr]:
@@ -70,8 +110,10 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
     constraint_jacobian_mid = model.constraint_jacobian.xreplace(dict(zip(model.q, qm)))
 
     gradient = ImmutableMatrix([model.gravity_potential]).jacobian(model.q).T
+    definitions = ()
     if model.springs:
-        gradient = gradient + averaged_spring_gradient(model, q0, q1, quadrature)
+        spring_gradient, definitions = averaged_spring_gradient(model, q0, q1, quadrature)
+        gradient = gradient + spring_gradient
     momentum_balance = (model.mass_matrix * dv - constraint_jacobian_mid.T * mu
                         + dt * gradient)
     # Joint torques, input u and damping -d_i phidot_i, enter f~ at the mid-point (model.md 7):
@@ -99,8 +141,8 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
     phi = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
     phidot = ImmutableMatrix(sp.symbols(f"phidot1:{n + 1}", real=True))
     xs, ys = joint_space_positions(scene, phi)
-    positions = ImmutableMatrix(xs + ys)
-    initial_state = ImmutableMatrix.vstack(positions, positions.jacobian(phi) * phidot)
+    vxs, vys = joint_space_velocities(scene, phi, phidot)
+    initial_state = ImmutableMatrix(xs + ys + vxs + vys)
 
     coordinates = [f"x_{i}" for i in range(1, n + 1)] + [f"y_{i}" for i in range(1, n + 1)]
     return DiscreteScheme(
@@ -126,5 +168,5 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
             "dt-scaled momentum balance M dv - C(q_m)^T mu + dt (gradV~ - f~) (2n entries, "
             "kg m/s), then the constraint increments C(q_m) (q_1 - q_0) (n entries, m^2)"),
         inputs=inputs, input_work=input_work, dissipated=dissipated,
-        segment_vectors=segment_vectors(model),
+        segment_vectors=segment_vectors(model), definitions=definitions,
     )
