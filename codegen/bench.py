@@ -60,6 +60,7 @@ from chaingen_runtime import NewtonError, NewtonOptions, Solver
 from chaingen_runtime.build import STRICT_FLAGS, compiler
 from chaingen_runtime.trajectory import current_umask
 
+from . import bench_knobs
 from .bench_harness import Harness, HarnessError
 from .package import generate_package, render_package, uses_quadrature
 from .scene import ChaingenError, Scene, load_scene, parse_scene
@@ -85,17 +86,15 @@ class Variant:
     label: str
     options: dict = field(default_factory=dict)
 
-    def newton_options(self) -> NewtonOptions:
-        """The same options for Solver.simulate (the error run). A field the Python runtime
-        does not know (a knob only the C harness sets so far) is left at its default there, and
-        the error columns are then those of the default Newton iteration."""
-        known = {f.name for f in dataclasses.fields(NewtonOptions)}
-        return NewtonOptions(**{key: value for key, value in self.options.items()
-                                if key in known})
+    def newton_options(self, solver: Solver) -> NewtonOptions:
+        """The same options for Solver.simulate (the error run): the package's defaults with
+        this variant's fields (codegen.bench_knobs.newton_options)."""
+        return bench_knobs.newton_options(solver, self.options)
 
 
-#: The Newton variants every scheme is run with: the package's defaults (full Newton, warm
-#: start) and simplified Newton (the factorised Jacobian reused across iterations and steps).
+#: The Newton variants every scheme is run with: the package's defaults (warm start; full Newton
+#: for "es" and "midpoint", simplified Newton for "vi") and simplified Newton (the factorised
+#: Jacobian reused across iterations and steps). codegen.bench_knobs measures the other knobs.
 #: A new knob is one more entry here.
 VARIANTS = (Variant("default options", {}),
             Variant("simplified Newton", {"reuse_jacobian": 1}))
@@ -103,8 +102,10 @@ VARIANTS = (Variant("default options", {}),
 DEFAULT_DTS = (0.04, 0.02, 0.01, 0.005, 0.0025)
 #: es also runs at these larger steps on the headline scene, so that its energy error can reach
 #: the error of headline c (1e-10 J) from above: measured, not extrapolated.
-BRACKET_DTS = (0.1, 0.05)
-QUADRATURES = (1, 2, 3)
+BRACKET_DTS = (0.2, 0.1, 0.05)
+#: K = 5: the quadrature error, not dt, bounds es's energy error (O(dt^2K)), so a higher K reaches
+#: a given energy error at a much larger dt (headline c).
+QUADRATURES = (1, 2, 3, 5)
 MUJOCO_INTEGRATORS = ("Euler", "implicitfast", "RK4")
 MUJOCO_DTS = (0.01, 0.005, 0.0025, 0.001, 5e-4, 2.5e-4, 1e-4)
 SCIPY_TOLERANCES = (("DOP853", tuple(10.0 ** -k for k in range(4, 13))),
@@ -429,8 +430,9 @@ def scheme_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
                                 setting=f"dt = {dt:g} s", t_end=t_end, dt=dt, n_steps=n_steps)
                     try:
                         solver.reset()     # each run starts without Newton history
+                        options = variant.newton_options(solver)
                         result = solver.simulate(phi0, omega0, dt=dt, n_steps=n_steps, every=1,
-                                                 options=variant.newton_options())
+                                                 options=options)
                         timings = harness.time(x0, dt, n_steps=n_steps, repeats=config.repeats,
                                                options=variant.options)
                     except (NewtonError, HarnessError) as error:
@@ -1255,8 +1257,27 @@ HOW_MEASURED = """\
 """
 
 
+def knob_study(config: BenchConfig, progress, emit) -> list:
+    """The speed knobs (codegen.bench_knobs): every scheme on the headline scene at the
+    headline dt, and the compiler knobs of "es" on the largest chain of the scaling series."""
+    scene = load_scene(ROOT / "scenes" / f"{HEADLINE_SCENE}.toml")
+    t_end = config.t_end or scene.simulation.t_end
+    rows = []
+    for method in METHODS:
+        rows += bench_knobs.option_rows(scene, HEADLINE_SCENE, method, 3, HEADLINE_DT, t_end,
+                                        n_steps=2000, repeats=config.repeats,
+                                        progress=progress)
+    if config.run_scaling:
+        n = max(config.scaling_ns)
+        rows += bench_knobs.flag_rows_large(scaling_scene(n), f"scaling n = {n}",
+                                            HEADLINE_DT, n_steps=config.scaling_steps // 2,
+                                            repeats=config.repeats, progress=progress)
+    emit(f"\nspeed knobs\n\n{bench_knobs.knob_table(rows)}")
+    return rows
+
+
 def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
-             figures: dict[str, Path], machine, wall_seconds: float) -> str:
+             figures: dict[str, Path], machine, wall_seconds: float, knobs=()) -> str:
     lines = ["# Benchmarks: speed against accuracy", "",
              f"Written by `{config.command}` in {wall_seconds / 60:.1f} min of wall time on "
              f"{time.strftime('%Y-%m-%d')}. Every number and figure comes from that run; nothing "
@@ -1292,7 +1313,22 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
                   f"Per step: {config.scaling_steps} steps from the initial state.", "",
                   f"![scaling]({_link(figures['scaling'], config.out)})", "",
                   scaling_table(scaling), ""]
+    if knobs:
+        lines += ["## Speed knobs", "", KNOBS_TEXT.format(scene=HEADLINE_SCENE, dt=HEADLINE_DT),
+                  "", bench_knobs.knob_table(knobs), ""]
     return "\n".join(lines).rstrip() + "\n"
+
+
+KNOBS_TEXT = """\
+One knob changed at a time against the package defaults, on {scene} at dt = {dt} s (step time
+of the C loop, median of repeats; energy error over the standard run with the same options), and
+the compiler knobs again on the largest chain of the scaling series, where the dense LU and the
+size of the generated model dominate. The package defaults are warm start, full Newton for "es"
+and "midpoint" and simplified Newton for "vi", tolerances update_rtol = 1e-10, update_atol =
+1e-13, residual_tol = 1e-8, the solver source at -O3 and a generated model larger than 1 MB at
+-O1. "step / (F, dF/dz)" is the step's time in units of one residual-and-Jacobian evaluation.
+Not measured: constants baked into the code against run-time parameters; every scene number is
+baked into the generated code (no parameter vector exists yet to compare against)."""
 
 
 def write_atomically(path: Path, text: str) -> Path:
@@ -1330,6 +1366,7 @@ def run_bench(config: BenchConfig, *, progress=None, emit=print) -> BenchReport:
     machine = machine_description()
     reference = reference_study(config, progress, emit) if config.run_reference else {}
     scaling = scaling_study(config, progress, emit) if config.run_scaling else None
+    knobs = knob_study(config, progress, emit)
     found = headlines(reference, scaling, config)
     emit(f"\nheadline\n\n{headline_table(found)}")
     figures = {}
@@ -1339,7 +1376,7 @@ def run_bench(config: BenchConfig, *, progress=None, emit=print) -> BenchReport:
         figures["scaling"] = plot_scaling(scaling, config.figures / "bench_scaling.png")
     wall = time.perf_counter() - started
     document = write_atomically(config.out, markdown(config, found, reference, scaling,
-                                                     figures, machine, wall))
+                                                     figures, machine, wall, knobs))
     emit(f"\nwrote {document} and {len(figures)} figures in {config.figures} "
          f"({wall / 60:.1f} min)")
     return BenchReport(found, reference, scaling, document, figures, wall)

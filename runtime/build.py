@@ -45,13 +45,23 @@ def build_hash(files: dict[str, str], flags: tuple[str, ...], cc: str) -> str:
 
 def build_shared_library(prefix: str, files: dict[str, str], sources: list[str], *,
                          flags: tuple[str, ...] = DEFAULT_OPTIMISATION,
+                         source_flags: dict[str, tuple[str, ...]] | None = None,
                          cache: Path | None = None) -> Path:
-    """Path of lib<prefix>-<hash>.so built from `files` (reused when it already exists)."""
+    """Path of lib<prefix>-<hash>.so built from `files` (reused when it already exists).
+
+    Each source is compiled in its own compiler process, all at once (a large model file and
+    the solver build side by side), with `flags`, or `source_flags[name]` in their place for
+    the sources it lists (a very large generated model is compiled with -O1: gcc's -O2 takes
+    minutes on it for no speed, see docs/benchmarks.md).
+    """
     cc = compiler()
+    source_flags = {name: tuple(value) for name, value in (source_flags or {}).items()}
     # Hidden visibility: only the header's API (marked <PREFIX>_API) is exported.
-    all_flags = STRICT_FLAGS + tuple(flags) + ("-fPIC", "-fvisibility=hidden", "-shared")
+    common = STRICT_FLAGS + ("-fPIC", "-fvisibility=hidden")
     cache = Path(cache) if cache is not None else cache_directory()
-    library = cache / f"lib{prefix}-{build_hash(files, all_flags, cc)}.so"
+    signature = common + tuple(flags) + tuple(
+        f"{name}:{' '.join(value)}" for name, value in sorted(source_flags.items()))
+    library = cache / f"lib{prefix}-{build_hash(files, signature, cc)}.so"
     if library.exists():
         return library
     cache.mkdir(parents=True, exist_ok=True)
@@ -59,11 +69,21 @@ def build_shared_library(prefix: str, files: dict[str, str], sources: list[str],
     try:
         for name, text in files.items():
             (workdir / name).write_text(text)
+        commands = [[cc, *common, *source_flags.get(source, flags), "-c", source, "-o",
+                     f"{source}.o"] for source in sources]
+        processes = [subprocess.Popen(command, cwd=workdir, stdout=subprocess.PIPE,
+                                      stderr=subprocess.PIPE, text=True)
+                     for command in commands]
+        errors = [process.communicate()[1] for process in processes]
+        for command, process, stderr in zip(commands, processes, errors):
+            if process.returncode != 0:
+                raise BuildError(f"compiling {prefix} failed: {' '.join(command)}\n{stderr}")
         output = workdir / library.name
-        command = [cc, *all_flags, "-o", str(output), *sources, "-lm"]
+        command = [cc, "-shared", "-o", str(output), *(f"{source}.o" for source in sources),
+                   "-lm"]
         result = subprocess.run(command, cwd=workdir, capture_output=True, text=True)
         if result.returncode != 0:
-            raise BuildError(f"compiling {prefix} failed: {' '.join(command)}\n{result.stderr}")
+            raise BuildError(f"linking {prefix} failed: {' '.join(command)}\n{result.stderr}")
         os.replace(output, library)   # atomic: a concurrent loader sees all or nothing
     finally:
         shutil.rmtree(workdir, ignore_errors=True)

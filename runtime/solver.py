@@ -199,6 +199,8 @@ class Solver:
     @classmethod
     def from_files(cls, files: dict[str, str], **build_options) -> "Solver":
         manifest = json.loads(files["chaingen.json"])
+        build_options.setdefault("source_flags", {
+            name: tuple(flags) for name, flags in manifest.get("source_flags", {}).items()})
         library = build_shared_library(manifest["prefix"], files, manifest["sources"],
                                        **build_options)
         return cls(library, manifest)

@@ -164,7 +164,7 @@ def test_harness_iterations_agree_with_simulate(variant):
     solver = Solver.from_files(package.files)
     steps, dt = 400, 0.01
     result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
-                             n_steps=steps, options=variant.newton_options())
+                             n_steps=steps, options=variant.newton_options(solver))
     x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
     with Harness(package) as harness:
         timings = harness.time(x0, dt, n_steps=steps, repeats=1, options=variant.options)

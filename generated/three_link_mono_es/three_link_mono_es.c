@@ -27,7 +27,6 @@ void three_link_mono_es_workspace_init(three_link_mono_es_workspace *workspace)
         workspace->history = 0;
         workspace->chained = 0;
         workspace->factors_valid = 0;
-        workspace->rate = 0.0;   /* unknown */
     }
 }
 
@@ -124,15 +123,17 @@ int three_link_mono_es_residual_jacobian(const double *z, const double *x0, doub
 
 /* Simplified Newton evaluates dF/dz anew when successive updates shrink by less than this. */
 #define REFRESH_RATE 0.1
+/* Simplified Newton stops with an estimated error this fraction of the tolerance: it converges
+ * linearly, so without the margin its error would sit at the tolerance, where full Newton's
+ * (quadratic) is far below it. */
+#define SIMPLIFIED_MARGIN 0.1
 
-/* The first Newton guess: the scheme's predictor from x0, or with warm_start, when this step
+/* The first Newton guess: the scheme's predictor from x0, or with `warm`, when this step
  * continues the workspace's previous one, the extrapolation of the previous solutions. */
-static int first_guess(const double *x0, double dt, const three_link_mono_es_options *options,
-                       three_link_mono_es_workspace *workspace)
+static int first_guess(const double *x0, double dt, int warm, three_link_mono_es_workspace *workspace)
 {
     int i;
-    workspace->chained = options->warm_start && workspace->history > 0
-                         && dt == workspace->previous_dt
+    workspace->chained = warm && workspace->history > 0 && dt == workspace->previous_dt
                          && !memcmp(x0, workspace->previous_x1, sizeof(double) * NX);
     if (workspace->chained) {
         const double (*previous)[NZ] = (const double (*)[NZ])workspace->previous_z;
@@ -159,20 +160,12 @@ static int first_guess(const double *x0, double dt, const three_link_mono_es_opt
 /* Newton's method on F(z; x0, dt) = 0 from the first guess, full or simplified (see the
  * options in the header), dense LU with partial pivoting, at most options->max_iterations
  * linear solves. Leaves z in workspace->z. */
-static int solve_step(const double *x0, double dt, const three_link_mono_es_options *options,
-                      three_link_mono_es_workspace *workspace, int *iterations)
+static int newton(const double *x0, double dt, const three_link_mono_es_options *options, int warm,
+                  three_link_mono_es_workspace *workspace, int *iterations)
 {
-    three_link_mono_es_options defaults;
     double *z, *dz, *residual, *jacobian;
     double previous_update = -1.0;   /* update norm of the previous iteration, < 0: none */
-    int i, iteration = 0, status;
-    if (!x0 || !workspace || !(dt > 0.0) || !isfinite(dt)) {
-        return THREE_LINK_MONO_ES_BAD_ARGUMENT;
-    }
-    if (!options) {
-        three_link_mono_es_default_options(&defaults);
-        options = &defaults;
-    }
+    int i, iteration = 0, status, fresh = 0;   /* fresh: dF/dz evaluated within this call */
     z = workspace->z;
     dz = workspace->dz;
     residual = workspace->residual;
@@ -180,7 +173,7 @@ static int solve_step(const double *x0, double dt, const three_link_mono_es_opti
     if (!options->reuse_jacobian || workspace->factors_dt != dt) {
         workspace->factors_valid = 0;
     }
-    status = first_guess(x0, dt, options, workspace);
+    status = first_guess(x0, dt, warm, workspace);
     if (status == THREE_LINK_MONO_ES_OK) {
         status = THREE_LINK_MONO_ES_NOT_CONVERGED;
     }
@@ -216,6 +209,7 @@ static int solve_step(const double *x0, double dt, const three_link_mono_es_opti
             }
             workspace->factors_valid = 1;
             workspace->factors_dt = dt;
+            fresh = 1;
             previous_update = -1.0;   /* a new Jacobian: contraction is measured afresh */
         }
         chaingen_lu_solve(NZ, jacobian, workspace->pivot, dz);
@@ -234,25 +228,53 @@ static int solve_step(const double *x0, double dt, const three_link_mono_es_opti
                 status = THREE_LINK_MONO_ES_OK;
             }
         } else {
-            /* The contraction of this iteration, else the last one measured; 0 is unknown. */
-            double rate = previous_update > 0.0 ? update_norm / previous_update : workspace->rate;
-            if (previous_update > 0.0) {
-                workspace->rate = rate;
-            }
-            if (!(rate > 0.0)) {
-                rate = 1.0;
-            }
-            if ((update_norm == 0.0 || (rate < 1.0 && rate / (1.0 - rate) * update_norm <= 1.0))
-                && residual_norm <= options->residual_tol) {
+            /* With contraction rate theta the new iterate's error is at most theta / (1 - theta)
+             * times the update. The rate is measured within this step only (a rate carried
+             * over from earlier steps would go stale with the Jacobian, unnoticed); before
+             * it is known, the update itself must be within tolerance, as for full Newton
+             * (the error is then below it while theta <= 1/2). */
+            int measured = previous_update > 0.0;
+            double rate = measured ? update_norm / previous_update : 1.0;
+            int contracted = measured ? rate < 1.0 && rate / (1.0 - rate) * update_norm <= SIMPLIFIED_MARGIN
+                                      : update_norm <= SIMPLIFIED_MARGIN;
+            /* A Jacobian evaluated within this step that no longer contracts an update already
+             * within tolerance: the iterate is at the round-off floor, where the margin cannot
+             * be met. */
+            int floor = measured && fresh && rate > REFRESH_RATE && update_norm <= 1.0;
+            if (residual_norm <= options->residual_tol && (contracted || floor)) {
                 status = THREE_LINK_MONO_ES_OK;
-            } else if (previous_update > 0.0 && rate > REFRESH_RATE) {
+            } else if (measured && rate > REFRESH_RATE) {
                 workspace->factors_valid = 0;
             }
             previous_update = update_norm;
         }
     }
+    *iterations = iteration;
+    return status;
+}
+
+/* Newton from the first guess; a warm start that fails is retried once from the scheme's
+ * predictor with a fresh Jacobian (an extrapolated guess can be poor where the motion changes
+ * abruptly), so a step does at most 2 max_iterations linear solves. */
+static int solve_step(const double *x0, double dt, const three_link_mono_es_options *options,
+                      three_link_mono_es_workspace *workspace, int *iterations)
+{
+    three_link_mono_es_options defaults;
+    int status, spent = 0, retried = 0;
+    if (!x0 || !workspace || !(dt > 0.0) || !isfinite(dt)) {
+        return THREE_LINK_MONO_ES_BAD_ARGUMENT;
+    }
+    if (!options) {
+        three_link_mono_es_default_options(&defaults);
+        options = &defaults;
+    }
+    status = newton(x0, dt, options, options->warm_start, workspace, &spent);
+    if (status != THREE_LINK_MONO_ES_OK && workspace->chained) {
+        workspace->factors_valid = 0;
+        status = newton(x0, dt, options, 0, workspace, &retried);
+    }
     if (iterations) {
-        *iterations = iteration;
+        *iterations = spent + retried;
     }
     return status;
 }

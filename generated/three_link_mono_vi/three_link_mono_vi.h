@@ -83,24 +83,27 @@ extern "C" {
  *
  * Simplified Newton (reuse_jacobian = 1) keeps the factorised dF/dz in the workspace and
  * reuses it over iterations and steps, evaluating only F. It converges linearly: with theta the
- * ratio of successive update norms (from the previous step on a step's first iteration), it has
- * converged when theta / (1 - theta) times the update norm above is <= 1, the estimated error
- * of the new iterate, and max_i |F_i| <= residual_tol. The Jacobian is evaluated anew when
- * there is none for this dt, or when theta exceeds 0.1 (slow contraction).
+ * ratio of successive update norms within the step, it has converged when theta / (1 - theta)
+ * times the update norm above, the estimated error of the new iterate, is <= 0.1 (a
+ * margin for its linear convergence), and max_i |F_i| <= residual_tol; on a step's first
+ * iteration, when the update norm itself is <= 0.1. The Jacobian is evaluated
+ * anew when there is none for this dt, or when theta exceeds 0.1 (slow contraction).
  *
  * Warm start (warm_start = 1): when x0 is bitwise the state the workspace's previous step
  * produced, with the same dt, the first guess extrapolates the previous steps' solutions z
  * (quadratically from three, linearly from two, constantly from one) instead of the scheme's predictor from x0 alone.
- * The solution then depends on the workspace's history within the Newton tolerances.
+ * The solution then depends on the workspace's history within the Newton tolerances. A warm
+ * start that fails is retried once from the predictor with a fresh Jacobian.
  *
- * Either way a step does at most max_iterations linear solves, which bounds its time. */
+ * A step does at most max_iterations linear solves per attempt (2 max_iterations when a warm
+ * start is retried), which bounds its time. */
 typedef struct {
     int max_iterations;  /* default 20; bounds the work of one step */
     double update_rtol;  /* default 1e-10 */
     double update_atol;  /* default 1e-13 */
     double residual_tol; /* default 1e-8 (units of F) */
     int warm_start;      /* default 1 */
-    int reuse_jacobian;  /* default 0 */
+    int reuse_jacobian;  /* default 1 */
 } three_link_mono_vi_options;
 
 /* Counters of one simulate call. */
@@ -129,7 +132,6 @@ typedef struct {
     double previous_z[3][THREE_LINK_MONO_VI_NZ]; /* solutions of the last three chained steps */
     double previous_x1[THREE_LINK_MONO_VI_NX];   /* the state the last step produced */
     double previous_dt;
-    double rate;                       /* last contraction estimate of simplified Newton */
     double factors_dt;                 /* dt of the factorised Jacobian in jacobian/pivot */
     int history;                       /* solutions in previous_z: 0 to 3 */
     int chained;                       /* this step continues the previous one */
