@@ -27,6 +27,7 @@ OPTION_KNOBS = (
     ("cold start: scheme predictor", {"warm_start": 0}),
     ("full Newton", {"reuse_jacobian": 0}),
     ("simplified Newton", {"reuse_jacobian": 1}),
+    ("Newton-chord: Jacobian once a step", {"reuse_jacobian": 2}),
     ("loose tolerances (1e-6)", {"update_rtol": 1e-6, "update_atol": 1e-9,
                                  "residual_tol": 1e-6}),
     ("tight tolerances (1e-12)", {"update_rtol": 1e-12, "update_atol": 1e-15,

@@ -21,6 +21,7 @@ import jinja2
 import sympy
 
 from . import __version__
+from chaingen_runtime import JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP
 from chaingen_runtime.trajectory import current_umask
 
 from .example import example_settings
@@ -62,14 +63,18 @@ SOLVER_FLAGS = ("-O3",)
 
 
 def newton_defaults(method: str) -> dict:
-    """The Newton defaults of a package: simplified Newton for "vi", whose Jacobian costs six
-    residuals while its energy error (O(dt^2)) hides the Newton tolerance; full Newton for
-    "es", whose energy balance holds to the Newton error, and "midpoint"."""
-    return {**NEWTON_DEFAULTS, "reuse_jacobian": 1 if method == "vi" else 0}
+    """The Newton defaults of a package. "vi" keeps its Jacobian across steps (simplified
+    Newton): it costs six residuals, and the scheme's energy error (O(dt^2)) hides the linear
+    convergence. "es" and "midpoint" evaluate it once a step and reuse it within the step: from
+    the warm start, the second iterate's chord update is already at round-off, so a step costs
+    one Jacobian, one factorisation and two residuals, with the energy balance of full Newton
+    (docs/benchmarks.md, speed knobs)."""
+    reuse = JACOBIAN_ACROSS_STEPS if method == "vi" else JACOBIAN_PER_STEP
+    return {**NEWTON_DEFAULTS, "reuse_jacobian": reuse}
 
-#: Simplified Newton evaluates dF/dz anew when successive updates shrink by less than this.
+#: A kept Jacobian (simplified Newton, Newton-chord) is evaluated anew when successive updates shrink by less than this.
 REFRESH_RATE = "0.1"
-#: Simplified Newton stops when its estimated error is this fraction of the tolerance.
+#: A kept Jacobian stops when its estimated error is this fraction of the tolerance.
 SIMPLIFIED_MARGIN = "0.1"
 
 METHOD_SUMMARIES = {

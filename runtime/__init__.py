@@ -3,9 +3,10 @@
 It needs neither SymPy nor CasADi: a generated package directory is all it reads.
 """
 from .build import BuildError, build_shared_library, cache_directory
-from .solver import (NewtonError, NewtonOptions, Sensitivities, SimulationResult, Solver,
+from .solver import (JACOBIAN_ACROSS_STEPS, JACOBIAN_EVERY_ITERATE, JACOBIAN_PER_STEP,
+                     NewtonError, NewtonOptions, Sensitivities, SimulationResult, Solver,
                      StepResult)
 from .trajectory import write_trajectory
 
-__all__ = ["BuildError", "NewtonError", "NewtonOptions", "Sensitivities", "SimulationResult",
+__all__ = ["JACOBIAN_ACROSS_STEPS", "JACOBIAN_EVERY_ITERATE", "JACOBIAN_PER_STEP", "BuildError", "NewtonError", "NewtonOptions", "Sensitivities", "SimulationResult",
            "Solver", "StepResult", "build_shared_library", "cache_directory", "write_trajectory"]

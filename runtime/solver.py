@@ -53,16 +53,29 @@ class _Stats(ctypes.Structure):
                 ("max_newton_iterations", ctypes.c_int), ("failed_iterations", ctypes.c_int)]
 
 
+#: NewtonOptions.reuse_jacobian: when dF/dz is evaluated (the header's <PREFIX>_JACOBIAN_*).
+JACOBIAN_EVERY_ITERATE = 0  # full Newton
+JACOBIAN_ACROSS_STEPS = 1   # simplified Newton: kept over iterations and steps
+JACOBIAN_PER_STEP = 2       # Newton-chord: at each step's first iterate, kept within the step
+_JACOBIAN_MODES = (JACOBIAN_EVERY_ITERATE, JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP)
+
+
 @dataclass(frozen=True)
 class NewtonOptions:
-    """Newton settings of the generated step (see the generated header for their meaning)."""
+    """Newton settings of the generated step (see the generated header for their meaning).
+    The defaults here are full Newton; a Solver's `default_options` are its package's."""
 
     max_iterations: int = 20
     update_rtol: float = 1e-10
     update_atol: float = 1e-13
     residual_tol: float = 1e-8
     warm_start: bool = True       # continue from the previous step's solutions (chained steps)
-    reuse_jacobian: bool = False  # simplified Newton: keep the factorised dF/dz across steps
+    reuse_jacobian: int = JACOBIAN_EVERY_ITERATE  # one of the JACOBIAN_* modes above
+
+    def __post_init__(self):
+        if self.reuse_jacobian not in _JACOBIAN_MODES:
+            raise ValueError(f"NewtonOptions.reuse_jacobian: must be one of {_JACOBIAN_MODES} "
+                             f"(every iterate, across steps, per step), got {self.reuse_jacobian!r}")
 
     def _as_c(self) -> _Options:
         return _Options(self.max_iterations, self.update_rtol, self.update_atol,

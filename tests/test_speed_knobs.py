@@ -13,7 +13,7 @@ import subprocess
 import pytest
 
 import codegen.package as package_module
-from chaingen_runtime import NewtonOptions, Solver
+from chaingen_runtime import JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP, NewtonOptions, Solver
 from codegen.bench_knobs import KnobRow, knob_table, newton_options, with_source_flags
 from codegen.package import generate_package, write_package
 
@@ -53,15 +53,18 @@ def test_a_large_model_is_compiled_with_o1(monkeypatch, tmp_path):
     assert "-O1" in commands and "-O3" in commands
 
 
-@pytest.mark.parametrize("method, reuse", [("es", False), ("vi", True), ("midpoint", False)])
+@pytest.mark.parametrize("method, reuse", [("es", JACOBIAN_PER_STEP),
+                                           ("vi", JACOBIAN_ACROSS_STEPS),
+                                           ("midpoint", JACOBIAN_PER_STEP)])
 def test_newton_defaults_per_scheme(method, reuse):
     package = generate_package(load("three_link_mono"), method, 3, sensitivities=False)
     defaults = package.manifest["newton_defaults"]
-    assert defaults["warm_start"] == 1 and defaults["reuse_jacobian"] == int(reuse)
+    assert defaults["warm_start"] == 1 and defaults["reuse_jacobian"] == reuse
     header = package.files[f"{package.prefix}.h"]
-    assert f"int reuse_jacobian;  /* default {int(reuse)} */" in header
+    assert f"int reuse_jacobian;  /* default {reuse}: one of " in header
+    assert f"#define {package.prefix.upper()}_JACOBIAN_PER_STEP {JACOBIAN_PER_STEP} " in header
     solver = Solver.from_files(package.files)
-    assert solver.default_options.reuse_jacobian is reuse
+    assert solver.default_options.reuse_jacobian == reuse
     assert json.loads(package.files["chaingen.json"])["newton_defaults"] == defaults
 
 
@@ -70,7 +73,8 @@ def test_knob_options_start_from_the_package_defaults():
                                                 sensitivities=False).files)
     assert newton_options(solver, {}) == solver.default_options
     options = newton_options(solver, {"warm_start": 0, "update_rtol": 1e-6, "unknown": 3})
-    assert options == NewtonOptions(warm_start=False, reuse_jacobian=True, update_rtol=1e-6)
+    assert options == NewtonOptions(warm_start=False, reuse_jacobian=JACOBIAN_ACROSS_STEPS,
+                                    update_rtol=1e-6)
 
 
 def test_with_source_flags_changes_one_source_only():

@@ -38,7 +38,7 @@ void four_link_actuated_es_default_options(four_link_actuated_es_options *option
     options->update_atol = 1e-13;
     options->residual_tol = 1e-8;
     options->warm_start = 1;
-    options->reuse_jacobian = 0;
+    options->reuse_jacobian = 2;
 }
 
 /* Evaluate a generated function: inputs and outputs by position, NULL outputs skipped. */
@@ -133,9 +133,9 @@ int four_link_actuated_es_residual_jacobian(const double *z, const double *x0, c
 /* Solutions of chained steps kept for the warm start: extrapolation of degree HISTORY - 1. */
 #define HISTORY 3
 
-/* Simplified Newton evaluates dF/dz anew when successive updates shrink by less than this. */
+/* A kept Jacobian (simplified Newton, Newton-chord) is evaluated anew when successive updates shrink by less than this. */
 #define REFRESH_RATE 0.1
-/* Simplified Newton stops with an estimated error this fraction of the tolerance: it converges
+/* A kept Jacobian stops with an estimated error this fraction of the tolerance: it converges
  * linearly, so without the margin its error would sit at the tolerance, where full Newton's
  * (quadratic) is far below it. */
 #define SIMPLIFIED_MARGIN 0.1
@@ -182,7 +182,7 @@ static int newton(const double *x0, const double *u, double dt, const four_link_
     dz = workspace->dz;
     residual = workspace->residual;
     jacobian = workspace->jacobian;
-    if (!options->reuse_jacobian || workspace->factors_dt != dt) {
+    if (options->reuse_jacobian != FOUR_LINK_ACTUATED_ES_JACOBIAN_ACROSS_STEPS || workspace->factors_dt != dt) {
         workspace->factors_valid = 0;
     }
     status = first_guess(x0, dt, warm, workspace);
@@ -234,7 +234,7 @@ static int newton(const double *x0, const double *u, double dt, const four_link_
         }
         if (!isfinite(update_norm)) {
             status = FOUR_LINK_ACTUATED_ES_NONFINITE;
-        } else if (!options->reuse_jacobian) {
+        } else if (options->reuse_jacobian == FOUR_LINK_ACTUATED_ES_JACOBIAN_EVERY_ITERATE) {
             workspace->factors_valid = 0;
             if (update_norm <= 1.0 && residual_norm <= options->residual_tol) {
                 status = FOUR_LINK_ACTUATED_ES_OK;
@@ -279,6 +279,10 @@ static int solve_step(const double *x0, const double *u, double dt, const four_l
     if (!options) {
         four_link_actuated_es_default_options(&defaults);
         options = &defaults;
+    }
+    if (options->reuse_jacobian < FOUR_LINK_ACTUATED_ES_JACOBIAN_EVERY_ITERATE
+        || options->reuse_jacobian > FOUR_LINK_ACTUATED_ES_JACOBIAN_PER_STEP) {
+        return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
     }
     status = newton(x0, u, dt, options, options->warm_start, workspace, &spent);
     if (status != FOUR_LINK_ACTUATED_ES_OK && workspace->chained) {

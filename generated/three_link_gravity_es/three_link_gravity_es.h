@@ -80,19 +80,27 @@ extern "C" {
 #define THREE_LINK_GRAVITY_ES_EVALUATION_FAILED 5 /* a generated function reported an error */
 
 
+#define THREE_LINK_GRAVITY_ES_JACOBIAN_EVERY_ITERATE 0 /* full Newton */
+#define THREE_LINK_GRAVITY_ES_JACOBIAN_ACROSS_STEPS 1  /* simplified Newton */
+#define THREE_LINK_GRAVITY_ES_JACOBIAN_PER_STEP 2      /* Newton-chord: once a step */
+
 /* Newton options. A step solves F(z; x0, dt) = 0 for z by Newton's method with dense LU.
  *
- * Full Newton (reuse_jacobian = 0) evaluates and factorises dF/dz at every iterate. It has
- * converged when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and max_i |F_i| <=
- * residual_tol at the iterate the update was computed from.
- *
- * Simplified Newton (reuse_jacobian = 1) keeps the factorised dF/dz in the workspace and
- * reuses it over iterations and steps, evaluating only F. It converges linearly: with theta the
- * ratio of successive update norms within the step, it has converged when theta / (1 - theta)
- * times the update norm above, the estimated error of the new iterate, is <= 0.1 (a
- * margin for its linear convergence), and max_i |F_i| <= residual_tol; on a step's first
- * iteration, when the update norm itself is <= 0.1. The Jacobian is evaluated
- * anew when there is none for this dt, or when theta exceeds 0.1 (slow contraction).
+ * reuse_jacobian chooses when dF/dz is evaluated and factorised:
+ * - THREE_LINK_GRAVITY_ES_JACOBIAN_EVERY_ITERATE (0), full Newton: at every iterate. It has converged
+ *   when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and max_i |F_i| <= residual_tol
+ *   at the iterate the update was computed from.
+ * - THREE_LINK_GRAVITY_ES_JACOBIAN_ACROSS_STEPS (1), simplified Newton: kept in the workspace over
+ *   iterations and steps, evaluating only F.
+ * - THREE_LINK_GRAVITY_ES_JACOBIAN_PER_STEP (2), Newton-chord: evaluated at each step's first iterate
+ *   and kept within the step. From a good first guess the second (chord) update is already at
+ *   round-off, so a step costs one dF/dz, one factorisation and two F.
+ * With a kept Jacobian the iteration converges linearly: with theta the ratio of successive
+ * update norms within the step, it has converged when theta / (1 - theta) times the update norm
+ * above, the estimated error of the new iterate, is <= 0.1 (a margin for
+ * the linear convergence), and max_i |F_i| <= residual_tol; on a step's first iteration, when
+ * the update norm itself is <= 0.1. The Jacobian is evaluated anew when
+ * there is none for this dt, or when theta exceeds 0.1 (slow contraction).
  *
  * Warm start (warm_start = 1): when x0 is bitwise the state the workspace's previous step
  * produced, with the same dt, the first guess extrapolates the previous steps' solutions z
@@ -108,7 +116,7 @@ typedef struct {
     double update_atol;  /* default 1e-13 */
     double residual_tol; /* default 1e-8 (units of F) */
     int warm_start;      /* default 1 */
-    int reuse_jacobian;  /* default 0 */
+    int reuse_jacobian;  /* default 2: one of THREE_LINK_GRAVITY_ES_JACOBIAN_* */
 } three_link_gravity_es_options;
 
 /* Counters of one simulate call. */
@@ -152,7 +160,8 @@ size_t three_link_gravity_es_workspace_size(void);
 /* Forget the Newton state carried between steps (warm start, reused Jacobian). Call it once
  * on a new workspace before stepping with warm_start or reuse_jacobian set (a zero-filled
  * workspace, e.g. a static one, is already in this state), and whenever the model's
- * trajectory is restarted. The default options never read that state. */
+ * trajectory is restarted. (The warm start uses that state only when x0 is bitwise the state
+ * it recorded, and the kept Jacobian only with reuse_jacobian = 1 and the recorded dt.) */
 THREE_LINK_GRAVITY_ES_API
 void three_link_gravity_es_workspace_init(three_link_gravity_es_workspace *workspace);
 

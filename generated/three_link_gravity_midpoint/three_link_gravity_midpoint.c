@@ -36,7 +36,7 @@ void three_link_gravity_midpoint_default_options(three_link_gravity_midpoint_opt
     options->update_atol = 1e-13;
     options->residual_tol = 1e-8;
     options->warm_start = 1;
-    options->reuse_jacobian = 0;
+    options->reuse_jacobian = 2;
 }
 
 /* Evaluate a generated function: inputs and outputs by position, NULL outputs skipped. */
@@ -120,9 +120,9 @@ int three_link_gravity_midpoint_residual_jacobian(const double *z, const double 
 /* Solutions of chained steps kept for the warm start: extrapolation of degree HISTORY - 1. */
 #define HISTORY 3
 
-/* Simplified Newton evaluates dF/dz anew when successive updates shrink by less than this. */
+/* A kept Jacobian (simplified Newton, Newton-chord) is evaluated anew when successive updates shrink by less than this. */
 #define REFRESH_RATE 0.1
-/* Simplified Newton stops with an estimated error this fraction of the tolerance: it converges
+/* A kept Jacobian stops with an estimated error this fraction of the tolerance: it converges
  * linearly, so without the margin its error would sit at the tolerance, where full Newton's
  * (quadratic) is far below it. */
 #define SIMPLIFIED_MARGIN 0.1
@@ -169,7 +169,7 @@ static int newton(const double *x0, double dt, const three_link_gravity_midpoint
     dz = workspace->dz;
     residual = workspace->residual;
     jacobian = workspace->jacobian;
-    if (!options->reuse_jacobian || workspace->factors_dt != dt) {
+    if (options->reuse_jacobian != THREE_LINK_GRAVITY_MIDPOINT_JACOBIAN_ACROSS_STEPS || workspace->factors_dt != dt) {
         workspace->factors_valid = 0;
     }
     status = first_guess(x0, dt, warm, workspace);
@@ -221,7 +221,7 @@ static int newton(const double *x0, double dt, const three_link_gravity_midpoint
         }
         if (!isfinite(update_norm)) {
             status = THREE_LINK_GRAVITY_MIDPOINT_NONFINITE;
-        } else if (!options->reuse_jacobian) {
+        } else if (options->reuse_jacobian == THREE_LINK_GRAVITY_MIDPOINT_JACOBIAN_EVERY_ITERATE) {
             workspace->factors_valid = 0;
             if (update_norm <= 1.0 && residual_norm <= options->residual_tol) {
                 status = THREE_LINK_GRAVITY_MIDPOINT_OK;
@@ -266,6 +266,10 @@ static int solve_step(const double *x0, double dt, const three_link_gravity_midp
     if (!options) {
         three_link_gravity_midpoint_default_options(&defaults);
         options = &defaults;
+    }
+    if (options->reuse_jacobian < THREE_LINK_GRAVITY_MIDPOINT_JACOBIAN_EVERY_ITERATE
+        || options->reuse_jacobian > THREE_LINK_GRAVITY_MIDPOINT_JACOBIAN_PER_STEP) {
+        return THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT;
     }
     status = newton(x0, dt, options, options->warm_start, workspace, &spent);
     if (status != THREE_LINK_GRAVITY_MIDPOINT_OK && workspace->chained) {

@@ -8,14 +8,16 @@
 
 #include <math.h>
 
-/* Factorise a in place into L (unit lower, below the diagonal) and U, with row swaps in pivot.
+/* Factorise a in place into L (unit lower, below the diagonal) and U (on and above it), with
+ * row swaps in pivot. The diagonal holds the reciprocals 1 / u_kk, so that a solve multiplies
+ * instead of dividing (a chain of divisions is most of a small solve's latency).
  * Returns 0, or k + 1 if column k has no usable pivot (zero or not finite). */
 static int chaingen_lu_factor(int n, double *a, int *pivot)
 {
     int i, j, k;
     for (k = 0; k < n; ++k) {
         int p = k;
-        double largest = fabs(a[k + k * n]);
+        double largest = fabs(a[k + k * n]), reciprocal;
         for (i = k + 1; i < n; ++i) {
             double magnitude = fabs(a[i + k * n]);
             if (magnitude > largest) {
@@ -34,15 +36,15 @@ static int chaingen_lu_factor(int n, double *a, int *pivot)
                 a[p + j * n] = swap;
             }
         }
+        reciprocal = 1.0 / a[k + k * n];
+        a[k + k * n] = reciprocal;
         for (i = k + 1; i < n; ++i) {
-            a[i + k * n] /= a[k + k * n];
+            a[i + k * n] *= reciprocal;
         }
         for (j = k + 1; j < n; ++j) {
             double ukj = a[k + j * n];
-            if (ukj != 0.0) {
-                for (i = k + 1; i < n; ++i) {
-                    a[i + j * n] -= a[i + k * n] * ukj;
-                }
+            for (i = k + 1; i < n; ++i) {
+                a[i + j * n] -= a[i + k * n] * ukj;
             }
         }
     }
@@ -62,19 +64,15 @@ static void chaingen_lu_solve(int n, const double *lu, const int *pivot, double 
     }
     for (j = 0; j < n; ++j) {
         double bj = b[j];
-        if (bj != 0.0) {
-            for (i = j + 1; i < n; ++i) {
-                b[i] -= lu[i + j * n] * bj;
-            }
+        for (i = j + 1; i < n; ++i) {
+            b[i] -= lu[i + j * n] * bj;
         }
     }
     for (j = n - 1; j >= 0; --j) {
-        b[j] /= lu[j + j * n];
-        {
-            double bj = b[j];
-            for (i = 0; i < j; ++i) {
-                b[i] -= lu[i + j * n] * bj;
-            }
+        double bj = b[j] * lu[j + j * n];
+        b[j] = bj;
+        for (i = 0; i < j; ++i) {
+            b[i] -= lu[i + j * n] * bj;
         }
     }
 }

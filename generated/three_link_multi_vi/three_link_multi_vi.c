@@ -121,9 +121,9 @@ int three_link_multi_vi_residual_jacobian(const double *z, const double *x0, dou
 /* Solutions of chained steps kept for the warm start: extrapolation of degree HISTORY - 1. */
 #define HISTORY 3
 
-/* Simplified Newton evaluates dF/dz anew when successive updates shrink by less than this. */
+/* A kept Jacobian (simplified Newton, Newton-chord) is evaluated anew when successive updates shrink by less than this. */
 #define REFRESH_RATE 0.1
-/* Simplified Newton stops with an estimated error this fraction of the tolerance: it converges
+/* A kept Jacobian stops with an estimated error this fraction of the tolerance: it converges
  * linearly, so without the margin its error would sit at the tolerance, where full Newton's
  * (quadratic) is far below it. */
 #define SIMPLIFIED_MARGIN 0.1
@@ -170,7 +170,7 @@ static int newton(const double *x0, double dt, const three_link_multi_vi_options
     dz = workspace->dz;
     residual = workspace->residual;
     jacobian = workspace->jacobian;
-    if (!options->reuse_jacobian || workspace->factors_dt != dt) {
+    if (options->reuse_jacobian != THREE_LINK_MULTI_VI_JACOBIAN_ACROSS_STEPS || workspace->factors_dt != dt) {
         workspace->factors_valid = 0;
     }
     status = first_guess(x0, dt, warm, workspace);
@@ -222,7 +222,7 @@ static int newton(const double *x0, double dt, const three_link_multi_vi_options
         }
         if (!isfinite(update_norm)) {
             status = THREE_LINK_MULTI_VI_NONFINITE;
-        } else if (!options->reuse_jacobian) {
+        } else if (options->reuse_jacobian == THREE_LINK_MULTI_VI_JACOBIAN_EVERY_ITERATE) {
             workspace->factors_valid = 0;
             if (update_norm <= 1.0 && residual_norm <= options->residual_tol) {
                 status = THREE_LINK_MULTI_VI_OK;
@@ -267,6 +267,10 @@ static int solve_step(const double *x0, double dt, const three_link_multi_vi_opt
     if (!options) {
         three_link_multi_vi_default_options(&defaults);
         options = &defaults;
+    }
+    if (options->reuse_jacobian < THREE_LINK_MULTI_VI_JACOBIAN_EVERY_ITERATE
+        || options->reuse_jacobian > THREE_LINK_MULTI_VI_JACOBIAN_PER_STEP) {
+        return THREE_LINK_MULTI_VI_BAD_ARGUMENT;
     }
     status = newton(x0, dt, options, options->warm_start, workspace, &spent);
     if (status != THREE_LINK_MULTI_VI_OK && workspace->chained) {
