@@ -127,6 +127,9 @@ int three_link_multi_midpoint_residual_jacobian(const double *z, const double *x
  * linearly, so without the margin its error would sit at the tolerance, where full Newton's
  * (quadratic) is far below it. */
 #define SIMPLIFIED_MARGIN 0.1
+/* Newton-chord's margin: it replaces full Newton, whose error at the stop is far below the
+ * tolerance (quadratic convergence), so it must stop there too. */
+#define CHORD_MARGIN 1e-3
 
 /* The first Newton guess: the scheme's predictor from x0, or with `warm`, when this step
  * continues the workspace's previous one, the extrapolation of the previous solutions. */
@@ -235,8 +238,9 @@ static int newton(const double *x0, double dt, const three_link_multi_midpoint_o
              * (the error is then below it while theta <= 1/2). */
             int measured = previous_update > 0.0;
             double rate = measured ? update_norm / previous_update : 1.0;
-            int contracted = measured ? rate < 1.0 && rate / (1.0 - rate) * update_norm <= SIMPLIFIED_MARGIN
-                                      : update_norm <= SIMPLIFIED_MARGIN;
+            double margin = options->reuse_jacobian == THREE_LINK_MULTI_MIDPOINT_JACOBIAN_PER_STEP ? CHORD_MARGIN : SIMPLIFIED_MARGIN;
+            int contracted = measured ? rate < 1.0 && rate / (1.0 - rate) * update_norm <= margin
+                                      : update_norm <= margin;
             /* A Jacobian evaluated within this step that no longer contracts an update already
              * within tolerance: the iterate is at the round-off floor, where the margin cannot
              * be met. */

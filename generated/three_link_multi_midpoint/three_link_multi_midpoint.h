@@ -89,10 +89,11 @@ extern "C" {
  *   round-off, so a step costs one dF/dz, one factorisation and two F.
  * With a kept Jacobian the iteration converges linearly: with theta the ratio of successive
  * update norms within the step, it has converged when theta / (1 - theta) times the update norm
- * above, the estimated error of the new iterate, is <= 0.1 (a margin for
- * the linear convergence), and max_i |F_i| <= residual_tol; on a step's first iteration, when
- * the update norm itself is <= 0.1. The Jacobian is evaluated anew when
- * there is none for this dt, or when theta exceeds 0.1 (slow contraction).
+ * above, the estimated error of the new iterate, is <= a margin (simplified Newton
+ * 0.1; Newton-chord 1e-3, which stands in for full Newton and keeps its error far
+ * below the tolerance), and max_i |F_i| <= residual_tol; on a step's first iteration, when the
+ * update norm itself is <= the margin. The Jacobian is evaluated anew when there is none for
+ * this dt, or when theta exceeds 0.1 (slow contraction).
  *
  * Warm start (warm_start = 1): when x0 is bitwise the state the workspace's previous step
  * produced, with the same dt, the first guess extrapolates the previous steps' solutions z
