@@ -63,6 +63,7 @@ from chaingen_runtime.trajectory import current_umask
 from . import bench_knobs
 from .bench_harness import Harness, HarnessError
 from .package import generate_package, render_package, uses_quadrature
+from .progress import Progress
 from .scene import ChaingenError, Scene, load_scene, parse_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -1397,10 +1398,14 @@ def run_bench(config: BenchConfig, *, progress=None, emit=print) -> BenchReport:
     """Run every part of `config`, then write the figures and the document (in that order, so
     that a failure leaves the previous document in place)."""
     started = time.perf_counter()
-    if progress is None:
-        def progress(message: str) -> None:
-            print(f"[{time.perf_counter() - started:6.0f} s] {message}", file=sys.stderr,
-                  flush=True)
+    with Progress("bench", total=0) as bar:
+        if progress is None:   # a status line on a terminal; silent in logs, in CI, --quiet
+            def progress(message: str) -> None:
+                bar.stage(message)
+        return _run_bench(config, progress, emit, started)
+
+
+def _run_bench(config: BenchConfig, progress, emit, started: float) -> BenchReport:
     machine = machine_description()
     reference = reference_study(config, progress, emit) if config.run_reference else {}
     scaling = scaling_study(config, progress, emit) if config.run_scaling else None

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from chaingen_runtime import NewtonError
+
 from . import __version__
 from .model import UnsupportedSceneError
 from .scene import ChaingenError, load_scene
@@ -42,13 +44,30 @@ def _add_scheme_options(parser: argparse.ArgumentParser) -> None:
                              "(default: the scene's)")
 
 
+def _dimension(text: str) -> int:
+    value = _positive_int(text)
+    if not 100 <= value <= 4000:
+        raise argparse.ArgumentTypeError(f"must be between 100 and 4000 pixels, got {value}")
+    return value
+
+
 def parser() -> argparse.ArgumentParser:
     main = argparse.ArgumentParser(
         prog="chaingen",
         description="Structure-preserving solvers for planar elastic robot arms: SymPy derives "
                     "the model, CasADi generates C, and the C solver simulates.")
     main.add_argument("--version", action="version", version=f"chaingen {__version__}")
+    main.add_argument("-q", "--quiet", action="store_true",
+                      help="no progress bars (they appear only on a terminal, never in CI)")
+    quiet = argparse.ArgumentParser(add_help=False)
+    quiet.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                       help="no progress bars (they appear only on a terminal, never in CI)")
     commands = main.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_parser = commands.add_parser
+
+    def add_command(name, **kwargs):
+        return add_parser(name, parents=[quiet], **kwargs)
+    commands.add_parser = add_command
 
     generate = commands.add_parser("generate", help="write the C package of a scene's solver")
     _add_scheme_options(generate)
@@ -64,7 +83,37 @@ def parser() -> argparse.ArgumentParser:
     simulate.add_argument("--every", type=_positive_int, default=1, metavar="N",
                           help="write every N-th step (t = 0 always included; default 1)")
     simulate.add_argument("--out", type=Path, metavar="FILE.csv",
-                          help="write the trajectory file (scene-format.md)")
+                          help="write the trajectory file (scene-format.md) and its metadata "
+                               "FILE.csv.json")
+    simulate.add_argument("--plot", nargs="?", const="", metavar="FILE.png",
+                          help="also draw the run (chaingen plot); default file: beside --out, "
+                               "else ./<scene>_<method>.png")
+
+    plot = commands.add_parser(
+        "plot", help="figures of trajectory files: angles, energy and constraint errors")
+    plot.add_argument("trajectories", type=Path, nargs="+", metavar="TRAJ.csv",
+                      help="trajectory files; several overlay their error curves")
+    plot.add_argument("-o", "--output", type=Path, metavar="DIR|FILE.png",
+                      help="a .png file, or a directory (created; default: beside the first "
+                           "trajectory)")
+
+    animate = commands.add_parser(
+        "animate", help="animate the chain and its springs (GIF, or MP4 with ffmpeg)")
+    _add_scheme_options(animate)
+    animate.add_argument("trajectory", type=Path, nargs="?", metavar="TRAJ.csv",
+                         help="trajectory of the scene (default: simulate the scene first)")
+    animate.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.gif",
+                         help="the animation: .gif (Pillow) or .mp4 (needs ffmpeg)")
+    animate.add_argument("--dt", type=_number, help="step in s when simulating (default: the "
+                                                    "scene's)")
+    animate.add_argument("--t-end", type=_number,
+                         help="animate up to this time in s (default: the whole run)")
+    animate.add_argument("--fps", type=_number,
+                         help="frames per second (default 25, in real time)")
+    animate.add_argument("--every", type=_positive_int, metavar="N",
+                         help="draw every N-th sample (default: real time at --fps)")
+    animate.add_argument("--size", type=_dimension, default=480, metavar="PIXELS",
+                         help="width and height of the frames (default 480)")
 
     check = commands.add_parser(
         "check", help="compare the generated functions with finite differences and SymPy")
@@ -170,7 +219,7 @@ def _check_output_path(path: Path) -> None:
 
 
 def command_simulate(args) -> int:
-    from chaingen_runtime import NewtonError, write_trajectory
+    from chaingen_runtime import write_trajectory
 
     from .simulation import run_settings, simulate_scene
 
@@ -180,6 +229,12 @@ def command_simulate(args) -> int:
                             source=str(args.scene))
     if args.out is not None:
         _check_output_path(args.out)
+    figure = None
+    if args.plot is not None:
+        from .plots import check_png_path
+        figure = check_png_path(Path(args.plot) if args.plot else (
+            args.out.with_suffix(".png") if args.out is not None
+            else Path(f"{args.scene.stem}_{settings.method}.png")), "--plot")
     try:
         result = simulate_scene(scene, settings)
     except NewtonError as error:
@@ -189,6 +244,49 @@ def command_simulate(args) -> int:
     if args.out is not None:
         write_trajectory(result, args.out)
     print(summary(result, settings, args.out))
+    if figure is not None:
+        from .plots import plot_result
+        print(f"  figure                 {plot_result(result, figure)}")
+    return 0
+
+
+def command_plot(args) -> int:
+    from .plots import plot_files
+
+    print(f"wrote {plot_files(args.trajectories, args.output)}")
+    return 0
+
+
+def command_animate(args) -> int:
+    from .animate import animate
+    from .plots import load_run, run_from_result
+    from .simulation import run_settings, simulate_scene
+
+    scene = load_scene(args.scene)
+    if args.t_end is not None and not (np.isfinite(args.t_end) and args.t_end > 0):
+        raise ChaingenError(f"--t-end: must be > 0 and finite, got {args.t_end}")
+    if args.trajectory is not None:
+        if args.method is not None or args.quadrature is not None or args.dt is not None:
+            raise ChaingenError("--method/--quadrature/--dt: only when animate simulates; the "
+                                f"trajectory {args.trajectory} is already a run")
+        run = load_run(args.trajectory)
+    else:
+        from .animate import check_output
+        check_output(args.output)
+        settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
+                                dt=args.dt, t_end=args.t_end, source=str(args.scene))
+        try:
+            result = simulate_scene(scene, settings)
+        except NewtonError as error:
+            print(f"chaingen: simulation of {args.scene} failed: {error}", file=sys.stderr)
+            return EXIT_FAILED
+        run = run_from_result(result, args.scene)
+    if args.t_end is not None:
+        run = run.until(args.t_end)
+    out, plan = animate(scene, run, args.output, fps=args.fps, every=args.every,
+                        pixels=args.size)
+    print(f"wrote {out}: {plan.indices.size} frames at {plan.fps:g} fps, every "
+          f"{plan.every} samples ({plan.playback_speed:g} x real time)")
     return 0
 
 
@@ -223,12 +321,15 @@ def summary(result, settings, out: Path | None) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
+    from .progress import set_quiet
+    set_quiet(args.quiet)
     handlers = {"generate": command_generate, "simulate": command_simulate,
-                "check": command_check, "order": command_order, "bench": command_bench}
+                "check": command_check, "order": command_order, "bench": command_bench,
+                "plot": command_plot, "animate": command_animate}
     try:
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take
-        print(f"chaingen: error: {args.scene}: {error}", file=sys.stderr)
+        print(f"chaingen: error: {getattr(args, 'scene', '')}: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except ChaingenError as error:
         print(f"chaingen: error: {error}", file=sys.stderr)

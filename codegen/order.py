@@ -30,6 +30,7 @@ import numpy as np
 from chaingen_runtime import NewtonError, NewtonOptions, SimulationResult, Solver
 
 from .package import uses_quadrature
+from .progress import Progress
 from .scene import METHODS, ChaingenError, Scene, load_scene
 
 #: The thesis's step sizes (s), model.md section 8.
@@ -271,14 +272,21 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
             raise OrderStudyError(f"the given solver is for scene {manifest.get('scene')!r}, "
                                   f"not {scene.name!r}")
 
+    bar = Progress(f"order {scene.name} ({method})", total=len(dts) + 1, unit="runs")
+
     def run(dt: float) -> SimulationResult:
-        return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
-                               n_steps=round(t_end / dt), every=every[dt], options=options,
-                               scene=scene.name)
+        bar.update(bar.done, f"dt = {dt:g} s")
+        try:
+            return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
+                                   n_steps=round(t_end / dt), every=every[dt], options=options,
+                                   scene=scene.name)
+        finally:
+            bar.advance()
 
     try:
         reference = run(dt_ref)
     except NewtonError as error:
+        bar.close()
         raise OrderStudyError(f"{scene.name}: the reference run ({method}, dt_ref {dt_ref:g} s) "
                               f"failed: {error}") from error
     if not np.all(np.isfinite(reference.samples)):
@@ -323,6 +331,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
     energy_fit = fit_order(dts, energies, floor=energy_floor * scale, tolerance=slope_tolerance)
     trajectory_fit = fit_order(dts, trajectories, floor=trajectory_floor,
                                tolerance=slope_tolerance)
+    bar.close()
     return OrderStudy(
         scene=scene.name, method=method, quadrature=quadrature_used, t_end=float(t_end),
         dt_ref=dt_ref, sample_interval=float(sample_interval), rows=tuple(rows),

@@ -214,16 +214,26 @@ def _example_context(scene: Scene) -> dict:
     }
 
 
-def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True) -> GeneratedPackage:
+#: Stages of generate_package that report progress (a build adds one: compiling).
+GENERATE_STAGES = 3
+
+
+def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
+                   progress=None) -> GeneratedPackage:
     """The C package of `scheme`: CasADi code for its functions and the templates around it.
 
     sensitivities=False leaves out step_sensitivities and its generated functions (a package
-    only run forward, as `chaingen simulate` does, builds faster without them).
+    only run forward, as `chaingen simulate` does, builds faster without them). progress: a
+    codegen.progress.Progress told of each stage.
     """
     scene = scheme.scene
     prefix = package_prefix(scene, scheme.method)
     digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities)
+    if progress is not None:
+        progress.update(1, "CasADi functions and derivatives")
     functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
+    if progress is not None:
+        progress.update(2, "C code of the model")
     model_source, model_header = casadi_c_source(functions.all(), prefix)
     sizes = work_sizes(functions.all())
     model_flags = LARGE_MODEL_FLAGS if len(model_source) > LARGE_MODEL_BYTES else ()
@@ -294,9 +304,15 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True) -> Gen
 
 
 def generate_package(scene: Scene, method: str, quadrature: int, *,
-                     sensitivities: bool = True) -> GeneratedPackage:
-    """Scene -> scheme -> C package, all in memory."""
-    return render_package(build_scheme(scene, method, quadrature), sensitivities=sensitivities)
+                     sensitivities: bool = True, progress=None) -> GeneratedPackage:
+    """Scene -> scheme -> C package, all in memory. progress: see render_package."""
+    if progress is not None:
+        progress.update(0, "deriving the model and the scheme (SymPy)")
+    package = render_package(build_scheme(scene, method, quadrature),
+                             sensitivities=sensitivities, progress=progress)
+    if progress is not None:
+        progress.update(GENERATE_STAGES)
+    return package
 
 
 def write_package(package: GeneratedPackage, directory: str | os.PathLike) -> Path:

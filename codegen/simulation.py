@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 from chaingen_runtime import NewtonOptions, SimulationResult, Solver
 
-from .package import generate_package
+from .package import GENERATE_STAGES, generate_package
+from .progress import Progress
 from .schemes import METHODS
 from .scene import ChaingenError, Scene
 
@@ -79,16 +80,25 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
 
 def build_solver(scene: Scene, method: str, quadrature: int, *,
                  sensitivities: bool = True) -> Solver:
-    return Solver.from_files(generate_package(scene, method, quadrature,
-                                              sensitivities=sensitivities).files)
+    """Generate and build (or load from the cache) a scene's solver; on a terminal a progress
+    bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while."""
+    with Progress(f"generate {scene.name} ({method})", total=GENERATE_STAGES + 1,
+                  unit="stages") as progress:
+        package = generate_package(scene, method, quadrature, sensitivities=sensitivities,
+                                   progress=progress)
+        progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
+        return Solver.from_files(package.files)
 
 
 def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None = None,
                    options: NewtonOptions | None = None) -> SimulationResult:
-    """Simulate `scene` from its initial state; raises NewtonError if a step fails."""
+    """Simulate `scene` from its initial state; raises NewtonError if a step fails. On a
+    terminal a progress bar follows the run (the samples do not depend on it)."""
     # A forward run needs no step sensitivities: leaving them out builds faster.
     solver = solver or build_solver(scene, settings.method, settings.quadrature,
                                     sensitivities=False)
-    return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=settings.dt,
-                           n_steps=settings.n_steps, every=settings.every, options=options,
-                           scene=scene.name)
+    with Progress(f"simulate {scene.name}", total=settings.n_steps, unit="steps") as progress:
+        return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=settings.dt,
+                               n_steps=settings.n_steps, every=settings.every, options=options,
+                               scene=scene.name,
+                               progress=progress.update if progress.enabled else None)

@@ -22,12 +22,18 @@ STATUS_MESSAGES = {
     3: "NaN or Inf in the residual or the Newton iterate",
     4: "bad argument",
     5: "a generated function reported an evaluation error",
+    7: "interrupted by the observer of the run",
     6: "a spring segment came within 1e-6 of the geometry's size of zero length or passed "
        "through it (turned by 90 degrees or more in one step), where its direction is "
        "undefined (model.md 2)",
 }
 
 _double_p = ctypes.POINTER(ctypes.c_double)
+#: <prefix>_observer: int (*)(long steps, void *context).
+_OBSERVER = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_long, ctypes.c_void_p)
+#: Observer calls per simulate call with a progress callback (at most): a Python call every
+#: 1/200 of the run costs nothing measurable.
+PROGRESS_CALLS = 200
 
 
 class NewtonError(RuntimeError):
@@ -244,6 +250,10 @@ class Solver:
             "sample_count": (lng, [lng, lng]),
             "simulate": (i, [dp, d, d, lng, lng, *u, options, vp, dp, dp, stats]),
         }
+        self._observable = hasattr(self._lib, f"{self.prefix}_simulate_observed")
+        if self._observable:   # packages generated before chaingen 0.1's observer lack it
+            signatures["simulate_observed"] = (
+                i, [dp, d, d, lng, lng, *u, options, vp, dp, dp, stats, _OBSERVER, vp, lng])
         if self.nu:
             signatures["holding_torques"] = (i, [dp, dp, vp])
         if self.has_sensitivities:
@@ -348,12 +358,14 @@ class Solver:
 
     def simulate(self, phi0, omega0, *, dt: float, n_steps: int, every: int = 1,
                  torques=None, options: NewtonOptions | None = None, scene: str = "",
-                 quadrature: int | None = None) -> SimulationResult:
+                 quadrature: int | None = None, progress=None) -> SimulationResult:
         """Run n_steps steps from joint space (phi0, omega0) in one C call.
 
         torques: (n_steps, nu) inputs of the actuated joints, row k held over step k (zero if
-        None). Raises NewtonError naming the failing step and time; the rows written before it
-        are in its `result`.
+        None). progress: called as progress(steps_done) about 200 times during the run (the
+        run's samples do not depend on it); Ctrl-C in it stops the run and raises
+        KeyboardInterrupt. Raises NewtonError naming the failing step and time; the rows
+        written before it are in its `result`.
         """
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
@@ -373,10 +385,23 @@ class Solver:
         samples = np.zeros((rows, self.nsample))
         stats = _Stats()
         c_options = (options or self.default_options)._as_c()
+        arguments = [_pointer(x0), 0.0, dt, n_steps, every, *inputs, ctypes.byref(c_options),
+                     self._workspace, _pointer(samples), None, ctypes.byref(stats)]
+        interrupted = []
         started = time.perf_counter()
-        status = self._c("simulate")(_pointer(x0), 0.0, dt, n_steps, every, *inputs,
-                                     ctypes.byref(c_options), self._workspace,
-                                     _pointer(samples), None, ctypes.byref(stats))
+        if progress is not None and self._observable:
+            def observe(steps, _context):
+                try:
+                    progress(int(steps))
+                except KeyboardInterrupt:
+                    interrupted.append(True)
+                    return 1
+                return 0
+            observer = _OBSERVER(observe)
+            interval = max(1, n_steps // PROGRESS_CALLS)
+            status = self._c("simulate_observed")(*arguments, observer, None, interval)
+        else:
+            status = self._c("simulate")(*arguments)
         wall = time.perf_counter() - started
         valid = stats.steps // every + 1
         result = SimulationResult(
@@ -386,6 +411,8 @@ class Solver:
             samples=samples[:valid] if status else samples, wall_time=wall,
             newton_iterations=int(stats.newton_iterations),
             max_newton_iterations=int(stats.max_newton_iterations))
+        if interrupted:
+            raise KeyboardInterrupt(f"simulation interrupted after {stats.steps} steps")
         if status:
             failed = stats.steps + 1
             raise NewtonError(

@@ -410,7 +410,10 @@ def test_simulate_writes_the_trajectory_file(tmp_path):
     for fragment in ("steps", "50", "51 samples", "wall time", "t_realtime", "energy error",
                      "constraint error", "Newton iterations", str(out)):
         assert fragment in summary, f"{fragment!r} not in stdout:\n{summary}"
-    assert snapshot(tmp_path) == {"traj.csv"}
+    # The trajectory and its metadata (scene, method, K, dt for `chaingen plot`), nothing else.
+    assert snapshot(tmp_path) == {"traj.csv", "traj.csv.json"}
+    meta = json.loads((tmp_path / "traj.csv.json").read_text())
+    assert (meta["method"], meta["dt"], meta["n_steps"]) == ("es", 0.01, 50)
 
 
 def test_simulate_every_n(tmp_path):

@@ -478,6 +478,16 @@ int four_link_actuated_es_simulate(const double *x0, double t0, double dt, long 
                           four_link_actuated_es_workspace *workspace, double *samples, double *x_final,
                           four_link_actuated_es_stats *stats)
 {
+    return four_link_actuated_es_simulate_observed(x0, t0, dt, n_steps, every, u, options, workspace,
+                                          samples, x_final, stats, NULL, NULL, 1);
+}
+
+int four_link_actuated_es_simulate_observed(const double *x0, double t0, double dt, long n_steps, long every,
+                                   const double *u, const four_link_actuated_es_options *options,
+                                   four_link_actuated_es_workspace *workspace, double *samples,
+                                   double *x_final, four_link_actuated_es_stats *stats,
+                                   four_link_actuated_es_observer observer, void *context, long interval)
+{
     four_link_actuated_es_options defaults;
     four_link_actuated_es_stats counters = {0, 0, 0, 0};
     compensated_sum totals[2] = {{0.0, 0.0}, {0.0, 0.0}};
@@ -485,7 +495,7 @@ int four_link_actuated_es_simulate(const double *x0, double t0, double dt, long 
     long k;
     int status;
     if (!x0 || !u || !workspace || !samples || n_steps < 0 || every < 1 || !(dt > 0.0)
-        || !isfinite(dt) || !isfinite(t0)) {
+        || !isfinite(dt) || !isfinite(t0) || interval < 1) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
     }
     if (!options) {
@@ -523,6 +533,9 @@ int four_link_actuated_es_simulate(const double *x0, double t0, double dt, long 
         if (k % every == 0) {
             status = write_sample(current, t0 + (double)k * dt, totals, 
                                   samples + (k / every) * FOUR_LINK_ACTUATED_ES_NSAMPLE, workspace);
+        }
+        if (observer && status == FOUR_LINK_ACTUATED_ES_OK && k % interval == 0 && observer(k, context)) {
+            status = FOUR_LINK_ACTUATED_ES_INTERRUPTED;
         }
     }
     if (x_final) {

@@ -100,6 +100,7 @@ extern "C" {
 #define FOUR_LINK_ACTUATED_ES_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0 or every < 1 */
 #define FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED 5 /* a generated function reported an error */
+#define FOUR_LINK_ACTUATED_ES_INTERRUPTED 7       /* simulate_observed: the observer asked to stop */
 #define FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                           * geometry's size of zero length, or passed through it
                                           * (turned by 90 degrees or more in one step): its
@@ -255,6 +256,20 @@ int four_link_actuated_es_simulate(const double *x0, double t0, double dt, long 
                           const double *u, const four_link_actuated_es_options *options,
                           four_link_actuated_es_workspace *workspace, double *samples, double *x_final,
                           four_link_actuated_es_stats *stats);
+
+/* An observer of a long simulate: called with the steps completed so far and the caller's
+ * context; a nonzero return stops the run (status FOUR_LINK_ACTUATED_ES_INTERRUPTED) after that step. */
+typedef int (*four_link_actuated_es_observer)(long steps, void *context);
+
+/* simulate, calling observer(steps, context) after every `interval` completed steps (interval
+ * >= 1; observer NULL: never), for a progress display or to cancel a long run. The samples are
+ * those of simulate: observing does not change the run. */
+FOUR_LINK_ACTUATED_ES_API
+int four_link_actuated_es_simulate_observed(const double *x0, double t0, double dt, long n_steps, long every,
+                                   const double *u, const four_link_actuated_es_options *options,
+                                   four_link_actuated_es_workspace *workspace, double *samples,
+                                   double *x_final, four_link_actuated_es_stats *stats,
+                                   four_link_actuated_es_observer observer, void *context, long interval);
 
 #ifdef __cplusplus
 }

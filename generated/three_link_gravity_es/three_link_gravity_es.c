@@ -420,13 +420,23 @@ int three_link_gravity_es_simulate(const double *x0, double t0, double dt, long 
                           three_link_gravity_es_workspace *workspace, double *samples, double *x_final,
                           three_link_gravity_es_stats *stats)
 {
+    return three_link_gravity_es_simulate_observed(x0, t0, dt, n_steps, every, options, workspace,
+                                          samples, x_final, stats, NULL, NULL, 1);
+}
+
+int three_link_gravity_es_simulate_observed(const double *x0, double t0, double dt, long n_steps, long every,
+                                   const three_link_gravity_es_options *options,
+                                   three_link_gravity_es_workspace *workspace, double *samples,
+                                   double *x_final, three_link_gravity_es_stats *stats,
+                                   three_link_gravity_es_observer observer, void *context, long interval)
+{
     three_link_gravity_es_options defaults;
     three_link_gravity_es_stats counters = {0, 0, 0, 0};
     double *current, *next;
     long k;
     int status;
     if (!x0 || !workspace || !samples || n_steps < 0 || every < 1 || !(dt > 0.0)
-        || !isfinite(dt) || !isfinite(t0)) {
+        || !isfinite(dt) || !isfinite(t0) || interval < 1) {
         return THREE_LINK_GRAVITY_ES_BAD_ARGUMENT;
     }
     if (!options) {
@@ -461,6 +471,9 @@ int three_link_gravity_es_simulate(const double *x0, double t0, double dt, long 
         if (k % every == 0) {
             status = write_sample(current, t0 + (double)k * dt, 
                                   samples + (k / every) * THREE_LINK_GRAVITY_ES_NSAMPLE, workspace);
+        }
+        if (observer && status == THREE_LINK_GRAVITY_ES_OK && k % interval == 0 && observer(k, context)) {
+            status = THREE_LINK_GRAVITY_ES_INTERRUPTED;
         }
     }
     if (x_final) {

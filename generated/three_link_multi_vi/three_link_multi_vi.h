@@ -69,6 +69,7 @@ extern "C" {
 #define THREE_LINK_MULTI_VI_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define THREE_LINK_MULTI_VI_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0 or every < 1 */
 #define THREE_LINK_MULTI_VI_EVALUATION_FAILED 5 /* a generated function reported an error */
+#define THREE_LINK_MULTI_VI_INTERRUPTED 7       /* simulate_observed: the observer asked to stop */
 #define THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                           * geometry's size of zero length, or passed through it
                                           * (turned by 90 degrees or more in one step): its
@@ -216,6 +217,20 @@ int three_link_multi_vi_simulate(const double *x0, double t0, double dt, long n_
                           const three_link_multi_vi_options *options,
                           three_link_multi_vi_workspace *workspace, double *samples, double *x_final,
                           three_link_multi_vi_stats *stats);
+
+/* An observer of a long simulate: called with the steps completed so far and the caller's
+ * context; a nonzero return stops the run (status THREE_LINK_MULTI_VI_INTERRUPTED) after that step. */
+typedef int (*three_link_multi_vi_observer)(long steps, void *context);
+
+/* simulate, calling observer(steps, context) after every `interval` completed steps (interval
+ * >= 1; observer NULL: never), for a progress display or to cancel a long run. The samples are
+ * those of simulate: observing does not change the run. */
+THREE_LINK_MULTI_VI_API
+int three_link_multi_vi_simulate_observed(const double *x0, double t0, double dt, long n_steps, long every,
+                                   const three_link_multi_vi_options *options,
+                                   three_link_multi_vi_workspace *workspace, double *samples,
+                                   double *x_final, three_link_multi_vi_stats *stats,
+                                   three_link_multi_vi_observer observer, void *context, long interval);
 
 #ifdef __cplusplus
 }
