@@ -348,3 +348,17 @@ def test_generation_reports_its_stages():
                          progress=progress)
     assert [done for done, _ in notes] == [0, 1, 2, GENERATE_STAGES]
     assert "SymPy" in notes[0][1] and "CasADi" in notes[1][1]
+
+
+@pytest.mark.skipif(__import__("shutil").which("ffmpeg") is None, reason="ffmpeg not installed")
+def test_animation_as_mp4_with_ffmpeg(runs, tmp_path):
+    out, plan = animate(load("three_link_multi"), load_run(runs["es"]), tmp_path / "chain.mp4",
+                        pixels=240)
+    assert out.read_bytes()[4:8] == b"ftyp" and plan.indices.size == 51
+
+
+def test_mp4_without_ffmpeg_is_refused_with_the_way_out(runs, tmp_path, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path))   # no ffmpeg here
+    with pytest.raises(PlotError, match="MP4 needs ffmpeg on the PATH.*write a .gif instead"):
+        animate(load("three_link_multi"), load_run(runs["es"]), tmp_path / "chain.mp4")
+    assert not list(tmp_path.iterdir())
