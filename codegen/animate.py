@@ -24,7 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from .kinematics import chain_geometry, spring_geometry
-from .plots import PlotError, TrajectoryRun, _umask
+from chaingen_runtime.trajectory import current_umask
+
+from .plots import PlotError, TrajectoryRun
 from .progress import Progress
 from .scene import Scene
 
@@ -200,7 +202,7 @@ def check_matches(scene: Scene, run: TrajectoryRun) -> None:
     if run.n != scene.n:
         raise PlotError(f"{run.path}: {run.n} joints (phi1..phi{run.n}), but the scene "
                         f"{scene.name} has {scene.n} links")
-    if run.scene != run.path.stem and run.scene != scene.name:
+    if run.scene is not None and run.scene != scene.name:
         raise PlotError(f"{run.path}: written for scene {run.scene!r} (its metadata file), "
                         f"not {scene.name!r}")
 
@@ -246,7 +248,7 @@ def animate(scene: Scene, run: TrajectoryRun, out: Path, *, fps: float | None = 
                 _write_gif(frames, temporary, plan.fps)
             else:
                 _write_mp4(frames, temporary, plan.fps, ffmpeg)
-        os.chmod(temporary, 0o666 & ~_umask())
+        os.chmod(temporary, 0o666 & ~current_umask())
         os.replace(temporary, out)
     except BaseException:
         Path(temporary).unlink(missing_ok=True)

@@ -37,7 +37,6 @@ entry there.
 """
 from __future__ import annotations
 
-import dataclasses
 import importlib.metadata
 import importlib.util
 import json

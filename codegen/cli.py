@@ -63,20 +63,18 @@ def parser() -> argparse.ArgumentParser:
     quiet.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
                        help="no progress bars (they appear only on a terminal, never in CI)")
     commands = main.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    add_parser = commands.add_parser
 
-    def add_command(name, **kwargs):
-        return add_parser(name, parents=[quiet], **kwargs)
-    commands.add_parser = add_command
+    def command(name, **kwargs):   # every command also takes --quiet after its name
+        return commands.add_parser(name, parents=[quiet], **kwargs)
 
-    generate = commands.add_parser("generate", help="write the C package of a scene's solver")
+    generate = command("generate", help="write the C package of a scene's solver")
     _add_scheme_options(generate)
     generate.add_argument("-o", "--output", type=Path, metavar="DIR",
                           help="package directory (default: ./<scene>_<method>)")
     generate.add_argument("--no-sensitivities", dest="sensitivities", action="store_false",
                           help="leave out step_sensitivities (smaller code, faster build)")
 
-    simulate = commands.add_parser("simulate", help="simulate a scene with a generated solver")
+    simulate = command("simulate", help="simulate a scene with a generated solver")
     _add_scheme_options(simulate)
     simulate.add_argument("--dt", type=_number, help="step in s (default: the scene's)")
     simulate.add_argument("--t-end", type=_number, help="duration in s (default: the scene's)")
@@ -89,7 +87,7 @@ def parser() -> argparse.ArgumentParser:
                           help="also draw the run (chaingen plot); default file: beside --out, "
                                "else ./<scene>_<method>.png")
 
-    plot = commands.add_parser(
+    plot = command(
         "plot", help="figures of trajectory files: angles, energy and constraint errors")
     plot.add_argument("trajectories", type=Path, nargs="+", metavar="TRAJ.csv",
                       help="trajectory files; several overlay their error curves")
@@ -97,7 +95,7 @@ def parser() -> argparse.ArgumentParser:
                       help="a .png file, or a directory (created; default: beside the first "
                            "trajectory)")
 
-    animate = commands.add_parser(
+    animate = command(
         "animate", help="animate the chain and its springs (GIF, or MP4 with ffmpeg)")
     _add_scheme_options(animate)
     animate.add_argument("trajectory", type=Path, nargs="?", metavar="TRAJ.csv",
@@ -115,7 +113,7 @@ def parser() -> argparse.ArgumentParser:
     animate.add_argument("--size", type=_dimension, default=480, metavar="PIXELS",
                          help="width and height of the frames (default 480)")
 
-    check = commands.add_parser(
+    check = command(
         "check", help="compare the generated functions with finite differences and SymPy")
     _add_scheme_options(check)
     check.add_argument("--samples", type=_positive_int, default=5, metavar="N",
@@ -123,7 +121,7 @@ def parser() -> argparse.ArgumentParser:
     check.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     check.add_argument("--dt", type=_number, help="step in s (default: the scene's)")
 
-    order = commands.add_parser(
+    order = command(
         "order", help="time-step study: energy and trajectory error per dt, fitted orders")
     _add_scheme_options(order)
     order.add_argument("--t-end", type=_number, default=10.0,
@@ -131,7 +129,7 @@ def parser() -> argparse.ArgumentParser:
     order.add_argument("--plot", type=Path, metavar="FILE.png",
                        help="write the log-log order plot (needs matplotlib)")
 
-    bench = commands.add_parser(
+    bench = command(
         "bench", help="speed/accuracy benchmark against MuJoCo and SciPy (docs/benchmarks.md)")
     bench.add_argument("--quick", action="store_true",
                        help="a smoke run of about a minute: one scene, short runs, n = 2, 3")

@@ -290,6 +290,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
         raise OrderStudyError(f"{scene.name}: the reference run ({method}, dt_ref {dt_ref:g} s) "
                               f"failed: {error}") from error
     if not np.all(np.isfinite(reference.samples)):
+        bar.close()
         raise OrderStudyError(f"{scene.name}: the reference run ({method}, dt_ref {dt_ref:g} s) "
                               "has non-finite samples")
     reference_index = _sample_indices(reference, sample_interval)

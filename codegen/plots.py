@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from chaingen_runtime.trajectory import metadata_path, read_trajectory
+from chaingen_runtime.trajectory import current_umask, metadata_path, read_trajectory
 
 from .scene import ChaingenError
 
@@ -46,7 +46,7 @@ class TrajectoryRun:
     columns: tuple[str, ...]
     rows: np.ndarray
     n: int
-    scene: str
+    scene: str | None   # None: no metadata names it
     method: str | None
     quadrature: int | None
     dt: float | None
@@ -127,7 +127,7 @@ def load_run(path) -> TrajectoryRun:
         dt = float(np.median(steps)) if np.allclose(steps, steps[0], rtol=1e-9) else None
     quadrature = meta.get("quadrature")
     return TrajectoryRun(path=path, columns=tuple(columns), rows=rows, n=n,
-                         scene=str(meta.get("scene") or path.stem),
+                         scene=meta.get("scene"),
                          method=meta.get("method"),
                          quadrature=int(quadrature) if quadrature is not None else None,
                          dt=float(dt) if dt is not None else None)
@@ -164,7 +164,7 @@ def read_metadata(path: Path) -> dict:
     return meta if isinstance(meta, dict) else {}
 
 
-def unwrapped_breaks(angle: np.ndarray) -> np.ndarray:
+def broken_at_wraps(angle: np.ndarray) -> np.ndarray:
     """The wrapped angle with NaN at the sample after each jump of more than pi (a wrap at
     +-pi), so that a plot line breaks there instead of striking across the panel."""
     shown = np.array(angle, dtype=float)
@@ -207,9 +207,10 @@ def _styles(count: int) -> list[dict]:
 
 
 def title_of(runs: list[TrajectoryRun]) -> str:
-    scenes = ", ".join(sorted({run.scene for run in runs}))
+    names = [run.scene or run.path.stem for run in runs]
+    scenes = ", ".join(sorted(set(names)))
     if len(runs) == 1:
-        return f"{runs[0].scene}: {runs[0].label}"
+        return f"{names[0]}: {runs[0].label}"
     dts = {run.dt for run in runs}
     if len(dts) == 1 and None not in dts:
         methods = [run.label.rsplit(", dt = ", 1)[0] for run in runs]
@@ -229,7 +230,7 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
     line_styles = ("-", "--", ":", "-.")
     for run, style in zip(runs, _styles(len(runs))):
         for joint in range(run.n):
-            angles.plot(run.t, unwrapped_breaks(run.phi[:, joint]),
+            angles.plot(run.t, broken_at_wraps(run.phi[:, joint]),
                         color=f"C{joint % 10}" if single else style["color"],
                         linestyle="-" if single else line_styles[joint % 4], linewidth=1.0,
                         label=f"phi{joint + 1}" if single else None)
@@ -264,18 +265,12 @@ def save_figure(figure, out: Path) -> Path:
     os.close(handle)
     try:
         figure.savefig(temporary, format="png")
-        os.chmod(temporary, 0o666 & ~_umask())
+        os.chmod(temporary, 0o666 & ~current_umask())
         os.replace(temporary, out)
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
     return out
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def output_path(paths: list[Path], out: Path | None) -> Path:

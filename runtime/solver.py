@@ -251,7 +251,7 @@ class Solver:
             "simulate": (i, [dp, d, d, lng, lng, *u, options, vp, dp, dp, stats]),
         }
         self._observable = hasattr(self._lib, f"{self.prefix}_simulate_observed")
-        if self._observable:   # packages generated before chaingen 0.1's observer lack it
+        if self._observable:   # packages generated before simulate_observed existed lack it
             signatures["simulate_observed"] = (
                 i, [dp, d, d, lng, lng, *u, options, vp, dp, dp, stats, _OBSERVER, vp, lng])
         if self.nu:

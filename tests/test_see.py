@@ -20,7 +20,7 @@ from chaingen_runtime import write_trajectory
 from chaingen_runtime.trajectory import metadata_path, read_trajectory
 from codegen.animate import ChainDrawing, animate, frame_plan
 from codegen.model import com_model, joint_space_positions
-from codegen.plots import DPI, FIGURE_SIZE, PlotError, load_run, plot_files, unwrapped_breaks
+from codegen.plots import DPI, FIGURE_SIZE, PlotError, load_run, plot_files, broken_at_wraps
 from codegen.progress import Progress, progress_enabled, set_quiet
 from codegen.simulation import run_settings, simulate_scene
 
@@ -140,7 +140,8 @@ def test_a_trajectory_without_metadata_still_plots(runs, tmp_path):
     bare = tmp_path / "bare.csv"
     bare.write_text(runs["es"].read_text())
     run = load_run(bare)
-    assert run.method is None and run.dt == pytest.approx(0.01) and run.label.startswith("bare")
+    assert run.method is None and run.scene is None and run.dt == pytest.approx(0.01)
+    assert run.label.startswith("bare")
     assert png_size(plot_files([bare], tmp_path)) == PNG_SIZE
 
 
@@ -169,7 +170,7 @@ def test_bad_trajectory_files_are_refused_by_name(tmp_path, text, message):
 
 def test_wrapped_angles_break_the_line_instead_of_striking_across():
     angle = np.array([3.0, 3.1, -3.1, -3.0])
-    shown = unwrapped_breaks(angle)
+    shown = broken_at_wraps(angle)
     assert np.isnan(shown[2]) and np.array_equal(shown[[0, 1, 3]], angle[[0, 1, 3]])
 
 
@@ -362,3 +363,13 @@ def test_mp4_without_ffmpeg_is_refused_with_the_way_out(runs, tmp_path, monkeypa
     with pytest.raises(PlotError, match="MP4 needs ffmpeg on the PATH.*write a .gif instead"):
         animate(load("three_link_multi"), load_run(runs["es"]), tmp_path / "chain.mp4")
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_quiet_is_taken_before_or_after_the_command(tmp_path, where):
+    scene = scene_path("three_link_gravity")
+    args = (["--quiet", "simulate", scene] if where == "before"
+            else ["simulate", scene, "--quiet"])
+    result = chaingen(*args, "--t-end", "0.1", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "three-link-gravity: method es" in result.stdout

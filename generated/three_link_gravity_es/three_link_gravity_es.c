@@ -120,7 +120,8 @@ int three_link_gravity_es_residual_jacobian(const double *z, const double *x0, d
 /* Solutions of chained steps kept for the warm start: extrapolation of degree HISTORY - 1. */
 #define HISTORY 3
 
-/* A kept Jacobian (simplified Newton, Newton-chord) is evaluated anew when successive updates shrink by less than this. */
+/* A kept Jacobian (simplified Newton, Newton-chord) is evaluated anew when successive updates
+ * shrink by less than this. */
 #define REFRESH_RATE 0.1
 /* A kept Jacobian stops with an estimated error this fraction of the tolerance: it converges
  * linearly, so without the margin its error would sit at the tolerance, where full Newton's
@@ -159,8 +160,8 @@ static int first_guess(const double *x0, double dt, int warm, three_link_gravity
     return evaluate(three_link_gravity_es_model_predictor, workspace);
 }
 
-/* Newton's method on F(z; x0, dt) = 0 from the first guess, full or simplified (see the
- * options in the header), dense LU with partial pivoting, at most options->max_iterations
+/* Newton's method on F(z; x0, dt) = 0 from the first guess, full, simplified or chord (see
+ * the options in the header), dense LU with partial pivoting, at most options->max_iterations
  * linear solves. Leaves z in workspace->z. */
 static int newton(const double *x0, double dt, const three_link_gravity_es_options *options, int warm,
                   three_link_gravity_es_workspace *workspace, int *iterations)

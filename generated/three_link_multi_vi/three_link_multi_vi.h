@@ -67,7 +67,8 @@ extern "C" {
 #define THREE_LINK_MULTI_VI_NOT_CONVERGED 1     /* Newton: max_iterations reached without convergence */
 #define THREE_LINK_MULTI_VI_SINGULAR_JACOBIAN 2 /* Newton: no usable pivot in the LU factorisation */
 #define THREE_LINK_MULTI_VI_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
-#define THREE_LINK_MULTI_VI_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0 or every < 1 */
+#define THREE_LINK_MULTI_VI_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0, every < 1,
+                                          * interval < 1 or an unknown reuse_jacobian */
 #define THREE_LINK_MULTI_VI_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define THREE_LINK_MULTI_VI_INTERRUPTED 7       /* simulate_observed: the observer asked to stop */
 #define THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
