@@ -7,12 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from chaingen_runtime import NewtonError
-
-from . import __version__
-from .model import UnsupportedSceneError
-from .scene import ChaingenError, load_scene
-from .scene import METHODS as SCENE_METHODS
+from .errors import ChaingenError, NewtonError, UnsupportedSceneError
+from .scene import METHODS, load_scene
+from .version import VERSION
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -36,8 +33,8 @@ def _number(text: str) -> float:
 
 
 def _add_scheme_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format)")
-    parser.add_argument("--method", choices=SCENE_METHODS,
+    parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format.md)")
+    parser.add_argument("--method", choices=METHODS,
                         help="time-stepping scheme (default: the scene's [simulation].method)")
     parser.add_argument("--quadrature", type=_positive_int, metavar="K",
                         help="Gauss-Legendre points for the spring terms of 'es' "
@@ -56,7 +53,7 @@ def parser() -> argparse.ArgumentParser:
         prog="chaingen",
         description="Structure-preserving solvers for planar elastic robot arms: SymPy derives "
                     "the model, CasADi generates C, and the C solver simulates.")
-    main.add_argument("--version", action="version", version=f"chaingen {__version__}")
+    main.add_argument("--version", action="version", version=f"chaingen {VERSION}")
     main.add_argument("-q", "--quiet", action="store_true",
                       help="no progress bars (they appear only on a terminal, never in CI)")
     quiet = argparse.ArgumentParser(add_help=False)
@@ -134,7 +131,7 @@ def parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true",
                        help="a smoke run of about a minute: one scene, short runs, n = 2, 3")
     bench.add_argument("--out", type=Path, metavar="FILE.md",
-                       help="the document to write (default: docs/benchmarks.md)")
+                       help="the document to write (default: ./benchmarks.md)")
     bench.add_argument("--figures", type=Path, metavar="DIR",
                        help="directory of the figures (default: figures/ next to --out)")
     bench.add_argument("--dts", metavar="DT,DT,...",
@@ -150,26 +147,34 @@ def parser() -> argparse.ArgumentParser:
 
 
 def command_generate(args) -> int:
-    from .package import generate_package, write_package
     from .simulation import run_settings
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                             source=str(args.scene))
+    # The generation stage (SymPy, CasADi) is imported once the input is known to be good.
+    from .generate.package import (
+        check_package_target,
+        generate_package,
+        package_prefix,
+        write_package,
+    )
+
+    target = args.output or Path(package_prefix(scene, settings.method))
+    check_package_target(target)
     package = generate_package(scene, settings.method, settings.quadrature,
                                sensitivities=args.sensitivities)
-    directory = write_package(package, args.output or Path(package.prefix))
+    directory = write_package(package, target)
     print(f"wrote {directory}/: {', '.join(package.files)}")
     return 0
 
 
 def command_check(args) -> int:
-    from chaingen_runtime import Solver
-
-    from .check import check_solver
-    from .package import render_package
-    from .schemes import build_scheme
+    from .generate.package import render_package
+    from .runtime import Solver
     from .simulation import run_settings
+    from .studies.check import check_solver
+    from .symbolic.schemes import build_scheme
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature, dt=args.dt,
@@ -182,8 +187,9 @@ def command_check(args) -> int:
 
 
 def command_order(args) -> int:
-    from .order import format_table, order_study, plot_order
     from .simulation import run_settings
+    from .studies.order import format_table, order_study
+    from .views.order_plot import plot_order
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
@@ -198,7 +204,7 @@ def command_order(args) -> int:
 
 
 def command_bench(args) -> int:
-    from .bench import bench_config, run_bench
+    from .studies.bench import bench_config, run_bench
 
     config = bench_config(quick=args.quick, dts=args.dts, scaling_n=args.scaling_n,
                           timeout=args.timeout, skip_scaling=args.skip_scaling,
@@ -217,8 +223,7 @@ def _check_output_path(path: Path) -> None:
 
 
 def command_simulate(args) -> int:
-    from chaingen_runtime import write_trajectory
-
+    from .runtime import write_trajectory
     from .simulation import run_settings, simulate_scene
 
     scene = load_scene(args.scene)
@@ -229,7 +234,7 @@ def command_simulate(args) -> int:
         _check_output_path(args.out)
     figure = None
     if args.plot is not None:
-        from .plots import check_png_path
+        from .views.plots import check_png_path
         figure = check_png_path(Path(args.plot) if args.plot else (
             args.out.with_suffix(".png") if args.out is not None
             else Path(f"{args.scene.stem}_{settings.method}.png")), "--plot")
@@ -243,24 +248,25 @@ def command_simulate(args) -> int:
         write_trajectory(result, args.out)
     print(summary(result, settings, args.out))
     if figure is not None:
-        from .plots import plot_result
+        from .views.plots import plot_result
         print(f"  figure                 {plot_result(result, figure)}")
     return 0
 
 
 def command_plot(args) -> int:
-    from .plots import plot_files
+    from .views.plots import plot_files
 
     print(f"wrote {plot_files(args.trajectories, args.output)}")
     return 0
 
 
 def command_animate(args) -> int:
-    from .animate import animate
-    from .plots import load_run, run_from_result
     from .simulation import run_settings, simulate_scene
+    from .views.animate import animate, check_fps
+    from .views.plots import load_run, run_from_result
 
     scene = load_scene(args.scene)
+    check_fps(args.fps)
     if args.t_end is not None and not (np.isfinite(args.t_end) and args.t_end > 0):
         raise ChaingenError(f"--t-end: must be > 0 and finite, got {args.t_end}")
     if args.trajectory is not None:
@@ -269,7 +275,7 @@ def command_animate(args) -> int:
                                 f"trajectory {args.trajectory} is already a run")
         run = load_run(args.trajectory)
     else:
-        from .animate import check_output
+        from .views.animate import check_output
         check_output(args.output)
         settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                                 dt=args.dt, t_end=args.t_end, source=str(args.scene))
@@ -303,7 +309,8 @@ def summary(result, settings, out: Path | None) -> str:
     ]
     if "dissipated" in result.columns:
         lines += [
-            f"  input work, dissipated {result.input_work[-1]:.6g} J, {result.dissipated[-1]:.6g} J",
+            f"  input work, dissipated {result.input_work[-1]:.6g} J, "
+            f"{result.dissipated[-1]:.6g} J",
             f"  max |balance error|    {np.abs(result.balance_error).max():.3e} J "
             "(H - H_0 - work + dissipated)",
         ]

@@ -131,7 +131,7 @@ class Progress:
             self.stream.flush()
             self._width = 0
 
-    def __enter__(self) -> "Progress":
+    def __enter__(self) -> Progress:
         if self.enabled:
             self._draw(time.monotonic())
         return self

@@ -1,20 +1,17 @@
-"""Scene -> generated package -> built solver -> simulation, in one call."""
+"""Scene -> generated package -> built solver -> simulation, in one call.
+
+The generation stage (SymPy, CasADi, Jinja2) is imported only when a solver is built, so that
+reading scenes and checking settings stay quick.
+"""
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-from chaingen_runtime import NewtonOptions, SimulationResult, Solver
-
-from .package import GENERATE_STAGES, generate_package
+from .errors import SettingsError
 from .progress import Progress
-from .schemes import METHODS
-from .scene import ChaingenError, Scene
-
-
-class SettingsError(ChaingenError):
-    pass
-
+from .runtime import NewtonOptions, SimulationResult, Solver
+from .scene import METHODS, QUADRATURE_RANGE, Scene
 
 #: A run of more steps is refused: at about 1 us a step it would take days.
 MAX_STEPS = 10 ** 12
@@ -71,8 +68,10 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
             f"--every: {settings.n_steps} steps sampled every {settings.every} would hold "
             f"{samples / 2 ** 30:.1f} GiB of samples (limit {MAX_SAMPLE_BYTES / 2 ** 30:.0f} GiB); "
             "sample less often with a larger --every")
-    if not 1 <= settings.quadrature <= 20:
-        raise SettingsError(f"--quadrature: must be between 1 and 20, got {settings.quadrature}")
+    low, high = QUADRATURE_RANGE
+    if not low <= settings.quadrature <= high:
+        raise SettingsError(f"--quadrature: must be between {low} and {high}, got "
+                            f"{settings.quadrature}")
     if settings.every < 1:
         raise SettingsError(f"--every: must be >= 1, got {settings.every}")
     return settings
@@ -82,6 +81,8 @@ def build_solver(scene: Scene, method: str, quadrature: int, *,
                  sensitivities: bool = True) -> Solver:
     """Generate and build (or load from the cache) a scene's solver; on a terminal a progress
     bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while."""
+    from .generate.package import GENERATE_STAGES, generate_package
+
     with Progress(f"generate {scene.name} ({method})", total=GENERATE_STAGES + 1,
                   unit="stages") as progress:
         package = generate_package(scene, method, quadrature, sensitivities=sensitivities,

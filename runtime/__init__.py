@@ -1,12 +1,19 @@
-"""Thin runtime of chaingen: build, load and run generated C packages (numpy only).
+"""The thin runtime of chaingen: build, load and run generated C packages (numpy only).
 
-It needs neither SymPy nor CasADi: a generated package directory is all it reads.
+It needs neither SymPy nor CasADi, and imports nothing of the rest of chaingen: a generated
+package directory is all it reads. `contract` states the C interface once; `interface` makes
+ctypes of it; `build` compiles a package into the cache; `solver` loads and drives it;
+`trajectory` writes and reads trajectory files; `files` writes all or nothing.
 """
-from .build import BuildError, build_shared_library, cache_directory
-from .solver import (JACOBIAN_ACROSS_STEPS, JACOBIAN_EVERY_ITERATE, JACOBIAN_PER_STEP,
-                     NewtonError, NewtonOptions, Sensitivities, SimulationResult, Solver,
-                     StepResult)
-from .trajectory import write_trajectory
+from .build import build_shared_library, cache_directory
+from .contract import JACOBIAN_ACROSS_STEPS, JACOBIAN_EVERY_ITERATE, JACOBIAN_PER_STEP
+from .errors import BuildError, ChaingenError, NewtonError, RunFailedError
+from .interface import NewtonOptions
+from .results import Sensitivities, SimulationResult, StepResult
+from .solver import Solver
+from .trajectory import read_trajectory, write_trajectory
 
-__all__ = ["JACOBIAN_ACROSS_STEPS", "JACOBIAN_EVERY_ITERATE", "JACOBIAN_PER_STEP", "BuildError", "NewtonError", "NewtonOptions", "Sensitivities", "SimulationResult",
-           "Solver", "StepResult", "build_shared_library", "cache_directory", "write_trajectory"]
+__all__ = ["JACOBIAN_ACROSS_STEPS", "JACOBIAN_EVERY_ITERATE", "JACOBIAN_PER_STEP",
+           "BuildError", "ChaingenError", "NewtonError", "NewtonOptions", "RunFailedError",
+           "Sensitivities", "SimulationResult", "Solver", "StepResult", "build_shared_library",
+           "cache_directory", "read_trajectory", "write_trajectory"]

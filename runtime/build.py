@@ -13,13 +13,11 @@ import subprocess
 import tempfile
 from pathlib import Path
 
+from .errors import BuildError
+
 #: Flags of every build: the generated code must stay clean under all of them.
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 DEFAULT_OPTIMISATION = ("-O2",)
-
-
-class BuildError(RuntimeError):
-    """The C compiler failed; the message carries its command and stderr."""
 
 
 def cache_directory() -> Path:

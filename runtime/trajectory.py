@@ -1,4 +1,4 @@
-"""The trajectory file of scene-format.md: a header row, then one row per sample.
+"""The trajectory file (docs/scene-format.md): a header row, then one row per sample.
 
 Beside it, FILE.csv.json records the run that wrote it (scene, method, quadrature, dt, every,
 steps): the CSV stays exactly the contract's columns, and `chaingen plot` and `animate` label
@@ -7,19 +7,12 @@ their figures from the metadata.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from .solver import SimulationResult
-
-
-def current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+from .files import staged_files
+from .results import SimulationResult
 
 
 def metadata_path(path) -> Path:
@@ -34,43 +27,21 @@ def run_metadata(result: SimulationResult) -> dict:
             "columns": list(result.columns)}
 
 
-def _staged(path: Path, write) -> str:
-    """Write to a temporary file beside `path`; returns its name (the caller renames it)."""
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or ".")
-    try:
-        os.chmod(temporary, 0o666 & ~current_umask())   # mkstemp's 0600 is not what users expect
-        with os.fdopen(handle, "w") as stream:
-            write(stream)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-    return temporary
-
-
 def write_trajectory(result: SimulationResult, path, *, metadata: bool = True) -> Path:
     """Write `result` as CSV with %.17g numbers (round-trip exact) and, with `metadata`, its
     metadata file beside it.
 
-    Both are staged in temporary files beside `path` and renamed into place only when both are
-    complete, so an interrupted write never leaves a truncated trajectory or a metadata file
-    without its trajectory.
+    Both are staged beside their targets and renamed into place only when both are complete
+    (the metadata first, the CSV last), so an interrupted write never leaves a truncated
+    trajectory or a metadata file without its trajectory.
     """
     path = Path(path)
-    staged = []
-    try:
-        staged.append((_staged(path, lambda stream: np.savetxt(
-            stream, result.samples, fmt="%.17g", delimiter=",",
-            header=",".join(result.columns), comments="")), path))
+    targets = [path] + ([metadata_path(path)] if metadata else [])
+    with staged_files(targets) as staged:
+        np.savetxt(staged[0], result.samples, fmt="%.17g", delimiter=",",
+                   header=",".join(result.columns), comments="")
         if metadata:
-            meta = metadata_path(path)
-            staged.append((_staged(meta, lambda stream: json.dump(
-                run_metadata(result), stream, indent=2)), meta))
-        for temporary, target in reversed(staged):   # the metadata first, the CSV last
-            os.replace(temporary, target)
-    except BaseException:
-        for temporary, _ in staged:
-            Path(temporary).unlink(missing_ok=True)
-        raise
+            staged[1].write_text(json.dumps(run_metadata(result), indent=2))
     return path
 
 

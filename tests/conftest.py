@@ -1,4 +1,15 @@
-"""Shared fixtures: scenes, and generated solvers built once per session.
+"""The test tiers, and a build cache of the session's own.
+
+Tiers are markers (pyproject.toml registers them; the README names the command of each):
+
+- compile: needs a C compiler (builds generated packages, runs them);
+- tools: needs cmake, clang, valgrind or the sanitizers beside the compiler;
+- heavy: no compiler, but too slow for the fast tier (SymPy on longer chains);
+- benchmark, slow: long runs, not in the default run;
+- fast: every test that has none of the above, given the marker here.
+
+Fast and heavy tests run with CC pointing at no compiler, so one that builds by mistake fails
+instead of passing slowly.
 
 Builds go to a per-session cache directory (CHAINGEN_CACHE_DIR), so the tests neither read nor
 fill the user's cache, and subprocesses of CLI tests share it.
@@ -6,23 +17,19 @@ fill the user's cache, and subprocesses of CLI tests share it.
 from __future__ import annotations
 
 import os
-from functools import lru_cache
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-REFERENCE_SCENES = ("three_link_gravity", "three_link_mono", "three_link_multi")
-OWN_SCENES = ("four_link_antagonist", "five_link_biarticular")
+SLOW_TIERS = ("compile", "tools", "heavy", "benchmark", "slow")
+NO_COMPILER = "chaingen-fast-tier-has-no-c-compiler"
 
 
-def scene_path(name: str) -> Path:
-    """A reference scene (scenes/) or one of the test suite's own (tests/scenes/)."""
-    for folder in (ROOT / "scenes", ROOT / "tests" / "scenes"):
-        path = folder / f"{name}.toml"
-        if path.exists():
-            return path
-    raise FileNotFoundError(name)
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(items):
+    """Mark every test outside the slow tiers `fast` (before -m selects)."""
+    for item in items:
+        if not any(item.get_closest_marker(tier) for tier in SLOW_TIERS):
+            item.add_marker(pytest.mark.fast)
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -36,24 +43,16 @@ def isolated_build_cache(tmp_path_factory):
         os.environ["CHAINGEN_CACHE_DIR"] = previous
 
 
-@lru_cache(maxsize=None)
-def load(name: str):
-    from codegen.scene import load_scene
-    return load_scene(scene_path(name))
+_ORIGINAL_CC = os.environ.get("CC")
 
 
-_solvers: dict = {}
-
-
-def solver_for(name: str, method: str = "es", quadrature: int = 3, *,
-               sensitivities: bool = False):
-    """The built solver of a scene, generated and compiled once per session.
-
-    Without step sensitivities unless asked: they are the largest generated functions, and
-    most tests only step forward.
-    """
-    key = (name, method, quadrature, sensitivities)
-    if key not in _solvers:
-        from codegen.simulation import build_solver
-        _solvers[key] = build_solver(load(name), method, quadrature, sensitivities=sensitivities)
-    return _solvers[key]
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item):
+    """A compiler-free test (fast, heavy), and the fixtures it sets up, see no compiler; the
+    others the real one."""
+    if item.get_closest_marker("fast") or item.get_closest_marker("heavy"):
+        os.environ["CC"] = NO_COMPILER
+    elif _ORIGINAL_CC is None:
+        os.environ.pop("CC", None)
+    else:
+        os.environ["CC"] = _ORIGINAL_CC

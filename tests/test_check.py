@@ -8,9 +8,10 @@ import sys
 import numpy as np
 import pytest
 
-from codegen.check import check_solver
-from codegen.schemes import build_scheme
-from conftest import REFERENCE_SCENES, load, scene_path, solver_for
+from chaingen.studies.check import check_solver
+from chaingen.symbolic.schemes import build_scheme
+
+from helpers import REFERENCE_SCENES, load, scene_path, solver_for
 
 
 def report_for(name, method, solver=None, scheme=None, samples=3):
@@ -19,6 +20,7 @@ def report_for(name, method, solver=None, scheme=None, samples=3):
     return check_solver(scheme, solver, samples=samples)
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
 @pytest.mark.parametrize("name", REFERENCE_SCENES + ("four_link_underactuated",))
 def test_check_passes_on_the_generated_packages(name, method):
@@ -42,6 +44,7 @@ class Perturbed:
         return getattr(self._solver, name)
 
 
+@pytest.mark.compile
 def test_check_catches_a_wrong_jacobian_entry():
     good = solver_for("three_link_mono", "es", 3, sensitivities=True)
 
@@ -58,6 +61,7 @@ def test_check_catches_a_wrong_jacobian_entry():
     assert failed == ["residual Jacobian"], report.table()
 
 
+@pytest.mark.compile
 def test_check_catches_wrong_sensitivities():
     good = solver_for("four_link_underactuated", "vi", 3, sensitivities=True)
 
@@ -70,6 +74,7 @@ def test_check_catches_wrong_sensitivities():
     assert [row.quantity for row in report.rows if not row.passed] == ["d s1 / d u"]
 
 
+@pytest.mark.compile
 def test_check_catches_a_generated_energy_that_differs_from_the_model():
     """The C energy against a model whose energy is off by 1e-7: the energy row fails."""
     scheme = build_scheme(load("three_link_multi"), "midpoint", 3)
@@ -78,8 +83,9 @@ def test_check_catches_a_generated_energy_that_differs_from_the_model():
     assert [row.quantity for row in report.rows if not row.passed] == ["energy"]
 
 
+@pytest.mark.compile
 def test_check_command_exits_0_on_success_and_prints_the_table():
-    result = subprocess.run([sys.executable, "-m", "codegen", "check",
+    result = subprocess.run([sys.executable, "-m", "chaingen", "check",
                              str(scene_path("three_link_gravity")), "--method", "midpoint",
                              "--samples", "2"], capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -87,7 +93,7 @@ def test_check_command_exits_0_on_success_and_prints_the_table():
 
 
 def test_check_command_refuses_bad_options_with_status_2(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "codegen", "check",
+    result = subprocess.run([sys.executable, "-m", "chaingen", "check",
                              str(scene_path("three_link_gravity")), "--dt", "-1"],
                             capture_output=True, text=True)
     assert result.returncode == 2

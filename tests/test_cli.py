@@ -13,13 +13,13 @@ import math
 import os
 import re
 import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from helpers import ROOT, chaingen, chaingen_in_process
+
 MONO = ROOT / "scenes" / "three_link_mono.toml"
 GRAVITY = ROOT / "scenes" / "three_link_gravity.toml"
 MONO_TEXT = MONO.read_text()
@@ -30,12 +30,6 @@ EXIT_FAILED = 1
 
 
 # -- helpers ---------------------------------------------------------------------------------
-
-def chaingen(*args, cwd: Path) -> subprocess.CompletedProcess:
-    """Run `python -m codegen ARGS` in `cwd` (so a default output directory lands there)."""
-    return subprocess.run([sys.executable, "-m", "codegen", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
-
 
 def edited(*edits) -> str:
     """three_link_mono.toml with text edits (old, new), old unique, or (old, new, occurrence)."""
@@ -105,7 +99,8 @@ BAD_SCENES = [
      "initial.accel", ["unknown key"]),
     ("unknown key in simulation", [("t_end = 50.0", "t_end = 50.0\nsteps = 100")],
      "simulation.steps", ["unknown key"]),
-    ("actuated joint beyond the chain", [("[initial]", "[actuation]\njoints = [1, 4]\n\n[initial]")],
+    ("actuated joint beyond the chain",
+     [("[initial]", "[actuation]\njoints = [1, 4]\n\n[initial]")],
      "actuation.joints[1]", ["joint 4 does not exist", "3 joints"]),
     # wrong types
     ("string mass", [("mass = 1.0", 'mass = "1.0"', 0)], "links[0].mass",
@@ -193,7 +188,7 @@ def test_bad_scene_simulate(tmp_path, edits, key, fragments):
     scene = write_scene(tmp_path, edited(*edits))
     out = tmp_path / "out.csv"
     before = snapshot(tmp_path)
-    message = error_line(chaingen("simulate", scene, "--out", out, cwd=tmp_path))
+    message = error_line(chaingen_in_process("simulate", scene, "--out", out, cwd=tmp_path))
     assert_names(message, f"{scene}: {key}", *fragments)
     assert not out.exists()
     assert snapshot(tmp_path) == before
@@ -202,6 +197,7 @@ def test_bad_scene_simulate(tmp_path, edits, key, fragments):
 GENERATE_CASES = ["unknown key in a link", "bool gravity", "nan inertia", "mass zero",
                   "two angles for three links", "spring over a joint that does not exist",
                   "zero-length spring segment", "unknown method"]
+assert set(GENERATE_CASES) <= {case[0] for case in BAD_SCENES}
 
 
 @pytest.mark.parametrize("edits, key, fragments",
@@ -211,15 +207,10 @@ def test_bad_scene_generate(tmp_path, edits, key, fragments):
     scene = write_scene(tmp_path, edited(*edits))
     package = tmp_path / "pkg"
     before = snapshot(tmp_path)
-    message = error_line(chaingen("generate", scene, "-o", package, cwd=tmp_path))
+    message = error_line(chaingen_in_process("generate", scene, "-o", package, cwd=tmp_path))
     assert_names(message, f"{scene}: {key}", *fragments)
     assert not package.exists()
     assert snapshot(tmp_path) == before
-
-
-def test_generate_case_ids_exist():
-    ids = {case[0] for case in BAD_SCENES}
-    assert set(GENERATE_CASES) <= ids
 
 
 def toml_syntax_error_scene() -> tuple[str, int]:
@@ -259,6 +250,7 @@ def test_scene_file_that_is_a_directory(tmp_path):
     assert snapshot(tmp_path) == set()
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("method", ["vi", "midpoint"])
 def test_scene_method_selects_the_scheme(tmp_path, method):
     """[simulation].method picks the scheme; the trajectory file keeps its contract."""
@@ -275,6 +267,7 @@ def test_scene_method_selects_the_scheme(tmp_path, method):
     assert max(errors) <= (1e-13 if method == "vi" else 0.0)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("method", ["vi", "midpoint"])
 def test_generate_method_option(tmp_path, method):
     result = chaingen("generate", MONO, "--method", method, "-o", "pkg", cwd=tmp_path)
@@ -307,7 +300,7 @@ BAD_OPTIONS = [
                          [pytest.param(*case[1:], id=case[0]) for case in BAD_OPTIONS])
 def test_bad_simulate_option(tmp_path, options, option, argparse_error, fragments):
     out = tmp_path / "out.csv"
-    result = chaingen("simulate", MONO, *options, "--out", out, cwd=tmp_path)
+    result = chaingen_in_process("simulate", MONO, *options, "--out", out, cwd=tmp_path)
     message = error_line(result, usage_allowed=argparse_error)
     assert_names(message, option, *fragments)
     assert snapshot(tmp_path) == set()
@@ -320,7 +313,7 @@ def test_bad_simulate_option(tmp_path, options, option, argparse_error, fragment
 ])
 def test_bad_generate_option(tmp_path, options, option, fragments):
     package = tmp_path / "pkg"
-    result = chaingen("generate", MONO, *options, "-o", package, cwd=tmp_path)
+    result = chaingen_in_process("generate", MONO, *options, "-o", package, cwd=tmp_path)
     assert_names(error_line(result, usage_allowed=True), option, *fragments)
     assert snapshot(tmp_path) == set()
 
@@ -376,6 +369,7 @@ def read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
     return rows[0], rows[1:]
 
 
+@pytest.mark.compile
 def test_simulate_writes_the_trajectory_file(tmp_path):
     out = tmp_path / "traj.csv"
     result = chaingen("simulate", GRAVITY, "--t-end", "0.5", "--out", out, cwd=tmp_path)
@@ -391,7 +385,7 @@ def test_simulate_writes_the_trajectory_file(tmp_path):
         for field in row:
             value = float(field)
             assert math.isfinite(value), row
-            assert "%.17g" % value == field, f"{field!r} is not written as %.17g"
+            assert f"{value:.17g}" == field, f"{field!r} is not written as %.17g"
     values = [[float(field) for field in row] for row in rows]
 
     scene = tomllib.loads(GRAVITY.read_text())
@@ -416,6 +410,7 @@ def test_simulate_writes_the_trajectory_file(tmp_path):
     assert (meta["method"], meta["dt"], meta["n_steps"]) == ("es", 0.01, 50)
 
 
+@pytest.mark.compile
 def test_simulate_every_n(tmp_path):
     every_1, every_10 = tmp_path / "every1.csv", tmp_path / "every10.csv"
     for out, every in ((every_1, "1"), (every_10, "10")):
@@ -432,6 +427,7 @@ def test_simulate_every_n(tmp_path):
     assert "every 10" in result.stdout
 
 
+@pytest.mark.compile
 def test_simulate_without_out_writes_nothing(tmp_path):
     result = chaingen("simulate", GRAVITY, "--t-end", "0.1", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
@@ -457,17 +453,20 @@ def test_generate_writes_the_package(tmp_path):
     assert {"README.md", "example.c"} <= names
     assert manifest["sensitivities"] is True
     assert "three_link_mono_es_step_sensitivities" in (package / "three_link_mono_es.h").read_text()
+    # The package directory gets the permissions of an ordinary new directory (umask).
+    assert package.stat().st_mode & 0o777 == 0o777 & ~current_umask()
 
 
 def test_generate_without_sensitivities(tmp_path):
-    result = chaingen("generate", MONO, "--no-sensitivities", "-o", tmp_path / "pkg",
-                      cwd=tmp_path)
+    result = chaingen_in_process("generate", MONO, "--no-sensitivities", "-o", tmp_path / "pkg",
+                                 cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     manifest = json.loads((tmp_path / "pkg" / "chaingen.json").read_text())
     assert manifest["sensitivities"] is False
     assert "step_sensitivities" not in (tmp_path / "pkg" / "three_link_mono_es.h").read_text()
 
 
+@pytest.mark.compile
 def test_newton_failure_exits_1_and_writes_nothing(tmp_path):
     # A huge stiffness with a 1 s step: Newton's method cannot converge on the first step.
     scene = write_scene(tmp_path, MONO_TEXT.replace("stiffness = 1.0", "stiffness = 1e9"))
@@ -492,6 +491,7 @@ def current_umask() -> int:
     return mask
 
 
+@pytest.mark.compile
 def test_trajectory_file_permissions_follow_umask(tmp_path):
     if 0o666 & ~current_umask() == 0o600:
         pytest.skip("the umask gives 0600 anyway")
@@ -501,15 +501,7 @@ def test_trajectory_file_permissions_follow_umask(tmp_path):
     assert out.stat().st_mode & 0o777 == 0o666 & ~current_umask()
 
 
-def test_package_directory_permissions_follow_umask(tmp_path):
-    if 0o777 & ~current_umask() == 0o700:
-        pytest.skip("the umask gives 0700 anyway")
-    package = tmp_path / "pkg"
-    result = chaingen("generate", MONO, "-o", package, cwd=tmp_path)
-    assert result.returncode == 0, result.stderr
-    assert package.stat().st_mode & 0o777 == 0o777 & ~current_umask()
-
-
+@pytest.mark.compile
 def test_com_at_the_proximal_joint_is_refused_by_es_only(tmp_path):
     scene = write_scene(tmp_path, edited(("com = 0.5", "com = 0.0", 0)))
     out = tmp_path / "out.csv"
@@ -520,6 +512,7 @@ def test_com_at_the_proximal_joint_is_refused_by_es_only(tmp_path):
     assert result.returncode == 0, result.stderr
 
 
+@pytest.mark.compile
 def test_order_prints_the_study_and_writes_the_plot(tmp_path):
     result = chaingen("order", MONO, "--method", "midpoint", "--plot", tmp_path / "order.png",
                       cwd=tmp_path)

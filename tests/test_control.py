@@ -10,11 +10,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from chaingen_runtime import NewtonOptions
-from codegen import kinematics
-from codegen.package import generate_package
-from codegen.simulation import build_solver
-from conftest import REFERENCE_SCENES, load, solver_for
+from chaingen.generate.package import generate_package
+from chaingen.runtime import NewtonOptions
+from chaingen.scene import kinematics
+from chaingen.simulation import build_solver
+
+from helpers import REFERENCE_SCENES, load, solver_for
+
+pytestmark = pytest.mark.compile
 
 METHODS = ("es", "vi", "midpoint")
 UNDERACTUATED = "four_link_underactuated"
@@ -96,7 +99,7 @@ def test_joint_space_schemes_balance_energy_to_their_order(method):
 @pytest.mark.parametrize("method", METHODS)
 def test_constant_torques_agree_with_mujoco(method):
     """Joint torques on the underactuated scene against MuJoCo's qfrc_applied (RK4)."""
-    from codegen.mujoco_reference import simulate_mujoco
+    from chaingen.reference.mujoco_runs import simulate_mujoco
     pytest.importorskip("mujoco")
     scene = load(UNDERACTUATED)
     torques = np.array([3.0, -1.5, 0.4])

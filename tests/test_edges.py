@@ -7,8 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from chaingen_runtime import NewtonError
-from conftest import load, solver_for
+from chaingen.runtime import NewtonError
+
+from helpers import load, solver_for
+
+pytestmark = pytest.mark.compile
 
 
 @pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
@@ -27,7 +30,6 @@ def test_a_spring_segment_passing_through_zero_length_stops_the_run(method):
 
 
 def test_the_same_spring_runs_when_it_stays_clear_of_zero_length():
-    scene = load("collapsing_spring")
     result = solver_for("collapsing_spring", "es", 3).simulate(
         [0.5], [-1.0], dt=0.01, n_steps=100)     # spinning away from theta*
     assert np.all(np.isfinite(result.samples))

@@ -7,17 +7,37 @@ import subprocess
 
 import pytest
 
-from codegen.reference_packages import GENERATED, REFERENCE_PACKAGES, differences, reference_package
+from chaingen.studies.reference_packages import REFERENCE_PACKAGES, differences, reference_package
 
+from helpers import ROOT, require_tools
+
+GENERATED = ROOT / "generated"
 STRICT = "-std=c99 -Wall -Wextra -Werror -pedantic"
 
 
-@pytest.mark.parametrize("scene_file,method,quadrature", REFERENCE_PACKAGES)
-def test_generated_package_is_reproduced_byte_for_byte(scene_file, method, quadrature):
-    package = reference_package(scene_file, method, quadrature)
+@pytest.mark.parametrize("scene,method,quadrature", [
+    pytest.param(*package, marks=pytest.mark.heavy if package[1] == "vi" else ())
+    for package in REFERENCE_PACKAGES])
+def test_generated_package_is_reproduced_byte_for_byte(scene, method, quadrature):
+    """vi's packages take a few seconds each to derive: heavy."""
+    package = reference_package(scene, method, quadrature)
     assert differences(package, GENERATED / package.prefix) == []
 
 
+def test_differences_name_what_changed(tmp_path):
+    package = reference_package("three_link_gravity", "es", 1)
+    assert len(differences(package, tmp_path / "none")) == len(package.files)
+    copy = tmp_path / package.prefix
+    copy.mkdir()
+    for name, text in package.files.items():
+        (copy / name).write_text(text)
+    (copy / "stale.c").write_text("")
+    (copy / "Makefile").write_text(package.files["Makefile"] + "\n")
+    assert differences(package, copy) == [f"{package.prefix}/stale.c: not generated any more",
+                                           f"{package.prefix}/Makefile: differs"]
+
+
+@pytest.mark.compile
 def test_makefile_builds_the_package_with_strict_flags(tmp_path):
     source = GENERATED / "three_link_mono_es"
     shutil.copytree(source, tmp_path / "pkg")
@@ -28,8 +48,9 @@ def test_makefile_builds_the_package_with_strict_flags(tmp_path):
     assert (tmp_path / "pkg" / "libthree_link_mono_es.so").exists()
 
 
-@pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake not installed")
+@pytest.mark.tools
 def test_cmake_builds_and_installs_the_package(tmp_path):
+    require_tools("cmake")
     source = GENERATED / "three_link_multi_es"
     build, prefix = tmp_path / "build", tmp_path / "install"
     steps = [["cmake", "-S", str(source), "-B", str(build), f"-DCMAKE_C_FLAGS={STRICT}",
@@ -43,6 +64,7 @@ def test_cmake_builds_and_installs_the_package(tmp_path):
     assert list(prefix.rglob("libthree_link_multi_es.a"))
 
 
+@pytest.mark.compile
 def test_embedding_program_runs_without_python(tmp_path):
     """A C program using only the header and sources: simulate, then check constraints."""
     package = GENERATED / "three_link_gravity_es"
@@ -82,12 +104,13 @@ int main(void)
     assert abs(float(energy_change)) <= 1e-13 and float(constraint) <= 1e-13
 
 
+@pytest.mark.compile
 def test_runtime_loads_a_package_directory_and_round_trips_the_trajectory(tmp_path):
     """Solver.from_directory builds a checked-in package; write/read_trajectory round-trip."""
     import numpy as np
 
-    from chaingen_runtime import Solver, write_trajectory
-    from chaingen_runtime.trajectory import read_trajectory
+    from chaingen.runtime import Solver, write_trajectory
+    from chaingen.runtime.trajectory import read_trajectory
 
     solver = Solver.from_directory(GENERATED / "three_link_gravity_es")
     result = solver.simulate([0.7853981633974483, 0.3, 0.3], [0.0, 0.0, 0.0], dt=0.01,

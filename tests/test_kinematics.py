@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen import kinematics
-from codegen.scene import Link, Scene, Simulation, Spring, load_scene
+from chaingen.scene import Link, Scene, Simulation, Spring, kinematics, load_scene
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
@@ -99,7 +98,7 @@ def test_mono_segment_reaches_its_stated_minimum():
     for j, r_j, r_next, length in [(1, 0.4, 0.3, 1.0), (2, 0.3, -0.6, 0.7)]:
         spring = Spring(first=j, last=j, stiffness=1.0, rest_length=0.0, offsets=None)
 
-        def segment(angle):
+        def segment(angle, j=j, spring=spring):
             phi = [angle, 0.0] if j == 1 else [0.2, angle]
             return kinematics.spring_geometry(scene, spring, phi).segment_lengths[0]
 

@@ -10,8 +10,11 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from codegen.mujoco_reference import initial_energy_mujoco, simulate_mujoco  # noqa: E402
-from conftest import OWN_SCENES, REFERENCE_SCENES, load, solver_for  # noqa: E402
+from chaingen.reference.mujoco_runs import initial_energy_mujoco, simulate_mujoco  # noqa: E402
+
+from helpers import OWN_SCENES, REFERENCE_SCENES, load, solver_for  # noqa: E402
+
+pytestmark = pytest.mark.compile
 
 DT = 1e-4
 SAMPLE_TIMES = (1.0, 2.0)

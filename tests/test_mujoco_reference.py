@@ -15,13 +15,13 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco")
 
-from codegen.mjcf import mjcf_from_scene  # noqa: E402
-from codegen.mujoco_reference import (  # noqa: E402
+from chaingen.reference.mjcf import mjcf_from_scene  # noqa: E402
+from chaingen.reference.mujoco_runs import (  # noqa: E402
     MujocoTrajectory,
     initial_energy_mujoco,
     simulate_mujoco,
 )
-from codegen.scene import Scene, Spring, load_scene  # noqa: E402
+from chaingen.scene import Scene, Spring, load_scene  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 REFERENCE_SCENES = [ROOT / "scenes" / f"three_link_{kind}.toml"
@@ -130,7 +130,8 @@ def test_mjcf_fields_match_the_scene(path):
     np.testing.assert_array_equal(model.body_mass[1:], [link.mass for link in scene.links])
     np.testing.assert_array_equal(model.body_ipos[1:],
                                   [[link.com, link.com_normal, 0.0] for link in scene.links])
-    np.testing.assert_array_equal(model.body_inertia[1:], [[link.inertia] * 3 for link in scene.links])
+    np.testing.assert_array_equal(model.body_inertia[1:],
+                                  [[link.inertia] * 3 for link in scene.links])
     np.testing.assert_array_equal(model.body_iquat[1:], [[1.0, 0.0, 0.0, 0.0]] * n)
 
     # One spatial tendon per spring, through sites at P_first .. P_{last+1}: fastening P_j sits

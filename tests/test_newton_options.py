@@ -10,10 +10,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from chaingen_runtime import (JACOBIAN_ACROSS_STEPS, JACOBIAN_EVERY_ITERATE, JACOBIAN_PER_STEP,
-                              NewtonError, NewtonOptions)
+from chaingen.runtime import (
+    JACOBIAN_ACROSS_STEPS,
+    JACOBIAN_EVERY_ITERATE,
+    JACOBIAN_PER_STEP,
+    NewtonError,
+    NewtonOptions,
+)
 
-from conftest import load, solver_for
+from helpers import load, solver_for
+
+pytestmark = pytest.mark.compile
 
 COLD = NewtonOptions(warm_start=False, reuse_jacobian=JACOBIAN_EVERY_ITERATE)
 WARM = NewtonOptions(warm_start=True, reuse_jacobian=JACOBIAN_EVERY_ITERATE)

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import pytest
 
-from codegen import kinematics
-from codegen.scene import (
+from chaingen.errors import SceneError
+from chaingen.scene import (
     Link,
-    SceneError,
     Simulation,
     Spring,
     c_identifier,
+    kinematics,
     load_scene,
     parse_scene,
 )

@@ -25,23 +25,25 @@ import re
 import subprocess
 import sys
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, Phase, event, given, note, settings
 from hypothesis import strategies as st
 
-from codegen.scene import (
+from chaingen.errors import SceneError
+from chaingen.scene import (
     METHODS,
-    NAME_PATTERN,
     QUADRATURE_RANGE,
     Scene,
-    SceneError,
     Simulation,
     load_scene,
     parse_scene,
 )
+from chaingen.scene.reader import NAME_PATTERN
+
 from test_scene import ACTUATED, MINIMAL, VALID
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -348,7 +350,7 @@ strings = st.one_of(st.sampled_from(INTERESTING_STRINGS), st.text(max_size=12),
 dates = st.one_of(
     st.dates(),
     st.times(),   # naive: TOML local times have no offset
-    st.datetimes(timezones=st.sampled_from([None, datetime.timezone.utc,
+    st.datetimes(timezones=st.sampled_from([None, datetime.UTC,
                                             datetime.timezone(datetime.timedelta(hours=5,
                                                                                  minutes=30))])),
 )
@@ -760,7 +762,7 @@ def test_byte_mutations_of_scene_files_load_or_raise_a_clear_scene_error(seed, d
 
 def chaingen_simulate(path: Path) -> subprocess.CompletedProcess:
     # CHAINGEN_CACHE_DIR comes from conftest.py through os.environ.
-    return subprocess.run([sys.executable, "-m", "codegen", "simulate", str(path),
+    return subprocess.run([sys.executable, "-m", "chaingen", "simulate", str(path),
                            "--t-end", "0.01"], cwd=ROOT, capture_output=True, text=True,
                           timeout=300)
 
@@ -785,6 +787,7 @@ def check_cli(path: Path) -> subprocess.CompletedProcess:
 
 @budget(15, phases=[Phase.explicit, Phase.generate])   # no shrinking: each run is a process
 @given(seed=st.sampled_from(CLI_SEEDS), data=st.data())
+@pytest.mark.compile
 def test_cli_simulate_on_mutants_exits_cleanly(seed, data, mutant_dir):
     assert "CHAINGEN_CACHE_DIR" in os.environ, "conftest.py keeps builds out of the user's cache"
     if data.draw(st.booleans(), label="text mutation"):

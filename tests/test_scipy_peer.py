@@ -16,8 +16,16 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen.scipy_peer import ScipyPeerError, compile_ode, reference_solution, simulate_scipy
-from conftest import load
+from chaingen.reference.scipy_peer import (
+    ScipyPeerError,
+    compile_ode,
+    reference_solution,
+    simulate_scipy,
+)
+
+from helpers import load
+
+pytestmark = pytest.mark.compile
 
 RHS_SCENES = ("three_link_mono", "three_link_gravity", "three_link_multi", "five_link_biarticular")
 
@@ -100,7 +108,7 @@ def test_only_the_wrapper_is_exported():
 @pytest.fixture(scope="module")
 def mujoco_gravity():
     pytest.importorskip("mujoco")
-    from codegen.mujoco_reference import simulate_mujoco
+    from chaingen.reference.mujoco_runs import simulate_mujoco
     return simulate_mujoco(load("three_link_gravity"), dt=1e-4, t_end=2.0)
 
 
@@ -138,7 +146,7 @@ def test_sample_times_change_the_samples_only():
 def test_damped_chain_agrees_with_mujoco_and_loses_energy():
     """four_link_actuated has joint damping; the peer applies no input torques, nor here MuJoCo."""
     pytest.importorskip("mujoco")
-    from codegen.mujoco_reference import simulate_mujoco
+    from chaingen.reference.mujoco_runs import simulate_mujoco
     scene = load("four_link_actuated")
     run = simulate_scipy(scene, "DOP853", 1e-10, 1e-10, 1.0)
     reference = simulate_mujoco(scene, dt=1e-4, t_end=1.0)

@@ -1,9 +1,9 @@
 """Plots, the animation and progress (issue 7).
 
-The drawn geometry is checked against the symbolic model (codegen.model, COM coordinates), a
-path independent of the numpy kinematics the drawing uses. Figures and animations are checked
-for what a reader gets: the file exists, is a PNG/GIF of the expected pixel size and frame
-count, and carries content.
+The drawn geometry is checked against the symbolic model (chaingen.symbolic.com_model, COM
+coordinates), a path independent of the numpy kinematics the drawing uses. Figures and animations
+are checked for what a reader gets: the file exists, is a PNG/GIF of the expected pixel size
+and frame count, and carries content.
 """
 from __future__ import annotations
 
@@ -16,15 +16,16 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from chaingen_runtime import write_trajectory
-from chaingen_runtime.trajectory import metadata_path, read_trajectory
-from codegen.animate import ChainDrawing, animate, frame_plan
-from codegen.model import com_model, joint_space_positions
-from codegen.plots import DPI, FIGURE_SIZE, PlotError, load_run, plot_files, broken_at_wraps
-from codegen.progress import Progress, progress_enabled, set_quiet
-from codegen.simulation import run_settings, simulate_scene
+from chaingen.errors import PlotError
+from chaingen.progress import Progress, progress_enabled, set_quiet
+from chaingen.runtime import write_trajectory
+from chaingen.runtime.trajectory import metadata_path, read_trajectory
+from chaingen.simulation import run_settings, simulate_scene
+from chaingen.symbolic.com_model import com_model, joint_space_positions
+from chaingen.views.animate import ChainDrawing, animate, frame_plan
+from chaingen.views.plots import DPI, FIGURE_SIZE, broken_at_wraps, load_run, plot_files
 
-from conftest import ROOT, load, scene_path
+from helpers import load, scene_path
 
 PIL = pytest.importorskip("PIL.Image")
 PNG_SIZE = (int(FIGURE_SIZE[0] * DPI), int(FIGURE_SIZE[1] * DPI))
@@ -113,6 +114,7 @@ def png_size(path):
         return image.size
 
 
+@pytest.mark.compile
 def test_plot_of_one_run_is_a_png_of_the_expected_size(runs, tmp_path):
     out = plot_files([runs["es"]], tmp_path)
     assert out == tmp_path / "es.png"
@@ -120,6 +122,7 @@ def test_plot_of_one_run_is_a_png_of_the_expected_size(runs, tmp_path):
     assert out.stat().st_size > 30_000   # three panels of curves, not an empty canvas
 
 
+@pytest.mark.compile
 def test_plot_overlays_several_runs_in_one_figure(runs, tmp_path):
     single = plot_files([runs["es"]], tmp_path / "one.png")
     overlay = plot_files([runs["es"], runs["vi"], runs["midpoint"]], tmp_path)
@@ -128,6 +131,7 @@ def test_plot_overlays_several_runs_in_one_figure(runs, tmp_path):
     assert overlay.stat().st_size > single.stat().st_size   # more curves drawn
 
 
+@pytest.mark.compile
 def test_plot_labels_come_from_the_metadata(runs):
     meta = json.loads(metadata_path(runs["es"]).read_text())
     assert meta["method"] == "es" and meta["quadrature"] == 3 and meta["dt"] == 0.01
@@ -136,6 +140,7 @@ def test_plot_labels_come_from_the_metadata(runs):
     assert load_run(runs["vi"]).label == "vi, dt = 0.01 s"
 
 
+@pytest.mark.compile
 def test_a_trajectory_without_metadata_still_plots(runs, tmp_path):
     bare = tmp_path / "bare.csv"
     bare.write_text(runs["es"].read_text())
@@ -145,6 +150,7 @@ def test_a_trajectory_without_metadata_still_plots(runs, tmp_path):
     assert png_size(plot_files([bare], tmp_path)) == PNG_SIZE
 
 
+@pytest.mark.compile
 def test_the_csv_keeps_exactly_the_contract_columns(runs):
     columns, rows = read_trajectory(runs["es"])
     assert columns == ("t", "phi1", "phi2", "phi3", "omega1", "omega2", "omega3", "energy",
@@ -153,10 +159,12 @@ def test_the_csv_keeps_exactly_the_contract_columns(runs):
 
 
 @pytest.mark.parametrize("text, message", [
-    ("t,phi1,omega1,energy\n0,0,0,0\n0.1,0,0,0\n", "header must start with the columns t, phi1, omega1, energy, constraint_error"),
+    ("t,phi1,omega1,energy\n0,0,0,0\n0.1,0,0,0\n",
+     "header must start with the columns t, phi1, omega1, energy, constraint_error"),
     ("t,phi1,omega1,energy,constraint_error\n0,0,0,0,0\n", "at least two samples"),
     ("t,phi1,omega1,energy,constraint_error\n0,0,0,0,0\n0,0,0,0,0\n", "time column must increase"),
-    ("t,phi1,omega1,energy,constraint_error\n0,0,0,0,0\n1,nan,0,0,0\n", "row 3 holds a value that is not finite"),
+    ("t,phi1,omega1,energy,constraint_error\n0,0,0,0,0\n1,nan,0,0,0\n",
+     "row 3 holds a value that is not finite"),
     ("t,x\n0,a\n", "not a trajectory file"),
 ])
 def test_bad_trajectory_files_are_refused_by_name(tmp_path, text, message):
@@ -189,6 +197,7 @@ def test_frame_plan_plays_in_real_time_by_default():
         frame_plan(t, every=0)
 
 
+@pytest.mark.compile
 def test_animation_of_a_short_run_is_a_gif_of_the_expected_frames(runs, tmp_path):
     scene = load("three_link_multi")
     out, plan = animate(scene, load_run(runs["es"]), tmp_path / "chain.gif", pixels=240)
@@ -203,6 +212,7 @@ def test_animation_of_a_short_run_is_a_gif_of_the_expected_frames(runs, tmp_path
     assert out.stat().st_size > 20_000
 
 
+@pytest.mark.compile
 def test_animation_refuses_a_trajectory_of_another_scene(runs, tmp_path):
     with pytest.raises(PlotError, match="written for scene 'three-link-multi'"):
         animate(load("three_link_mono"), load_run(runs["es"]), tmp_path / "x.gif")
@@ -254,10 +264,11 @@ def test_progress_is_silent_in_logs_ci_and_quiet(monkeypatch, setting):
 # -- command line --------------------------------------------------------------------------
 
 def chaingen(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "codegen", *map(str, args)], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "chaingen", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True)
 
 
+@pytest.mark.compile
 def test_simulate_plot_and_animate_from_the_command_line(tmp_path):
     scene = scene_path("three_link_multi")
     run = chaingen("simulate", scene, "--t-end", "1", "--out", "multi.csv", "--plot", cwd=tmp_path)
@@ -274,6 +285,7 @@ def test_simulate_plot_and_animate_from_the_command_line(tmp_path):
         assert image.size == (200, 200) and image.n_frames == 26
 
 
+@pytest.mark.compile
 def test_animate_straight_from_a_scene(tmp_path):
     result = chaingen("animate", scene_path("three_link_gravity"), "--t-end", "0.4",
                       "-o", "gravity.gif", "--size", "160", cwd=tmp_path)
@@ -296,20 +308,24 @@ def test_bad_plot_and_animate_input_exits_2_without_traceback(tmp_path, args, me
     assert not [p for p in tmp_path.iterdir() if p.suffix in (".gif", ".png", ".mp4")]
 
 
-def test_reference_figures_are_in_the_readme():
-    readme = (ROOT / "README.md").read_text()
-    for name in ("three_link_gravity", "three_link_mono", "three_link_multi"):
-        assert f"docs/figures/{name}.png" in readme
-        assert (ROOT / "docs" / "figures" / f"{name}.png").is_file()
-    assert "docs/figures/three_link_multi.gif" in readme
-    with PIL.open(ROOT / "docs" / "figures" / "three_link_multi.gif") as image:
-        assert image.n_frames > 100
+@pytest.mark.compile
+def test_the_readme_figures_are_written_by_their_script(tmp_path):
+    from chaingen.views.readme_figures import write_figures
+
+    written = write_figures(tmp_path, t_end=0.4)
+    assert sorted(path.name for path in written) == [
+        "three_link_gravity.png", "three_link_mono.png", "three_link_multi.gif",
+        "three_link_multi.png"]
+    assert png_size(tmp_path / "three_link_mono.png") == PNG_SIZE
+    with PIL.open(tmp_path / "three_link_multi.gif") as image:
+        assert image.n_frames == 11      # 0.4 s at 25 frames a second, and t = 0
 
 
 # -- the observed simulation ---------------------------------------------------------------
 
+@pytest.mark.compile
 def test_observing_a_simulation_does_not_change_it():
-    from conftest import solver_for
+    from helpers import solver_for
     scene = load("three_link_mono")
     solver = solver_for("three_link_mono", "es")
     seen = []
@@ -321,8 +337,9 @@ def test_observing_a_simulation_does_not_change_it():
     assert seen == list(range(5, 1001, 5))   # every n_steps / 200 steps
 
 
+@pytest.mark.compile
 def test_ctrl_c_in_the_observer_stops_the_run():
-    from conftest import solver_for
+    from helpers import solver_for
     scene = load("three_link_mono")
     solver = solver_for("three_link_mono", "es")
 
@@ -336,7 +353,7 @@ def test_ctrl_c_in_the_observer_stops_the_run():
 
 
 def test_generation_reports_its_stages():
-    from codegen.package import GENERATE_STAGES, generate_package
+    from chaingen.generate.package import GENERATE_STAGES, generate_package
     notes = []
 
     class Recorder(Progress):
@@ -351,6 +368,7 @@ def test_generation_reports_its_stages():
     assert "SymPy" in notes[0][1] and "CasADi" in notes[1][1]
 
 
+@pytest.mark.compile
 @pytest.mark.skipif(__import__("shutil").which("ffmpeg") is None, reason="ffmpeg not installed")
 def test_animation_as_mp4_with_ffmpeg(runs, tmp_path):
     out, plan = animate(load("three_link_multi"), load_run(runs["es"]), tmp_path / "chain.mp4",
@@ -358,6 +376,7 @@ def test_animation_as_mp4_with_ffmpeg(runs, tmp_path):
     assert out.read_bytes()[4:8] == b"ftyp" and plan.indices.size == 51
 
 
+@pytest.mark.compile
 def test_mp4_without_ffmpeg_is_refused_with_the_way_out(runs, tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path))   # no ffmpeg here
     with pytest.raises(PlotError, match="MP4 needs ffmpeg on the PATH.*write a .gif instead"):
@@ -365,6 +384,7 @@ def test_mp4_without_ffmpeg_is_refused_with_the_way_out(runs, tmp_path, monkeypa
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.compile
 @pytest.mark.parametrize("where", ["before", "after"])
 def test_quiet_is_taken_before_or_after_the_command(tmp_path, where):
     scene = scene_path("three_link_gravity")

@@ -8,9 +8,13 @@ import subprocess
 import numpy as np
 import pytest
 
-from chaingen_runtime import NewtonError, NewtonOptions
-from codegen.reference_packages import GENERATED
-from conftest import OWN_SCENES, REFERENCE_SCENES, load, solver_for
+from chaingen.runtime import NewtonError, NewtonOptions
+
+from helpers import OWN_SCENES, REFERENCE_SCENES, ROOT, load, solver_for
+
+pytestmark = pytest.mark.compile
+
+GENERATED = ROOT / "generated"
 
 rng = np.random.default_rng(7)
 STANDARD = dict(dt=0.01, n_steps=5000)   # thesis Table 5.1: 50 s at dt = 0.01 s
@@ -134,7 +138,8 @@ def test_the_three_schemes_agree_at_small_steps(name):
 @pytest.mark.parametrize("method", ["vi", "midpoint"])
 def test_damped_joint_space_schemes_dissipate(method):
     import dataclasses
-    from codegen.simulation import build_solver
+
+    from chaingen.simulation import build_solver
     scene = load("three_link_mono")
     damped = dataclasses.replace(scene, links=tuple(
         dataclasses.replace(link, damping=0.5) for link in scene.links))
@@ -158,7 +163,8 @@ def test_energy_error_of_the_spring_terms_has_order_2k():
 
 def test_damped_energy_decreases_monotonically():
     import dataclasses
-    from codegen.simulation import build_solver
+
+    from chaingen.simulation import build_solver
     scene = load("three_link_mono")
     damped = dataclasses.replace(scene, links=tuple(
         dataclasses.replace(link, damping=0.2) for link in scene.links))
@@ -234,7 +240,7 @@ def test_nothing_is_allocated(name, method):
 
 def test_two_solvers_run_side_by_side():
     """No global mutable state: interleaved steps of two instances equal separate runs."""
-    from chaingen_runtime import Solver
+    from chaingen.runtime import Solver
     first = solver_for("three_link_mono", "es", 3)
     second = Solver(first.library_path, first.manifest)   # same library, own workspace
     scene = load("three_link_mono")

@@ -17,7 +17,11 @@ from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parent.parent / "generated" / "four_link_actuated_es"
+from helpers import ROOT, require_tools
+
+pytestmark = pytest.mark.tools
+
+PACKAGE = ROOT / "generated" / "four_link_actuated_es"
 PREFIX = "four_link_actuated_es"
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 SANITIZE = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer",
@@ -25,18 +29,6 @@ SANITIZE = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer",
 COMPILERS = ("gcc", "clang")
 # Defined in every shared object by some linkers (older GNU ld), not by the package's sources.
 LINKER_SYMBOLS = {"_init", "_fini", "_edata", "_end", "__bss_start"}
-
-
-def require_tools(*tools: str) -> None:
-    """Skip the calling test when a tool is not on PATH; fail instead when
-    CHAINGEN_REQUIRE_TOOLS=1, so CI cannot pass by skipping."""
-    missing = [tool for tool in tools if shutil.which(tool) is None]
-    if not missing:
-        return
-    message = f"required tool(s) not installed: {', '.join(missing)}"
-    if os.environ.get("CHAINGEN_REQUIRE_TOOLS") == "1":
-        pytest.fail(f"{message} (CHAINGEN_REQUIRE_TOOLS=1)", pytrace=False)
-    pytest.skip(message)
 
 
 def run(command, **kwargs) -> subprocess.CompletedProcess:

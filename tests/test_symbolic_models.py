@@ -1,21 +1,36 @@
-"""Fast tier (no compiler): the SymPy models and the three schemes, checked numerically against
-the independent numpy kinematics of codegen/kinematics.py (straight from model.md 1-3)."""
+"""No compiler: the SymPy models and the three schemes, checked numerically against the
+independent numpy kinematics of chaingen.scene.kinematics (straight from docs/model.md 1-3).
+
+The three-link scenes are in the fast tier; the four- and five-link chains, whose SymPy
+expressions take seconds each to derive and evaluate, are `heavy` (the default run has them)."""
 from __future__ import annotations
+
+import zlib
 
 import casadi as ca
 import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import kinematics
-from codegen.casadi_functions import SympyToCasadi, mark_parameters_used, scheme_functions
-from codegen.model import UnsupportedSceneError, com_model
-from codegen.quadrature import gauss_legendre_nodes
-from codegen.schemes import build_scheme
-from conftest import OWN_SCENES, REFERENCE_SCENES, load
+from chaingen.errors import UnsupportedSceneError
+from chaingen.generate.casadi_functions import SympyToCasadi, mark_parameters_used, scheme_functions
+from chaingen.scene import kinematics
+from chaingen.symbolic.com_model import com_model
+from chaingen.symbolic.quadrature import gauss_legendre_nodes
+from chaingen.symbolic.schemes import build_scheme
+
+from helpers import OWN_SCENES, REFERENCE_SCENES, load
 
 ALL_SCENES = REFERENCE_SCENES + OWN_SCENES
 rng = np.random.default_rng(20261122)
+
+
+@pytest.fixture(autouse=True)
+def reseed(request):
+    """Each test draws the same random states whichever tests ran before it (the tiers select
+    different ones): the generator restarts from a seed of the test's own id."""
+    global rng
+    rng = np.random.default_rng([20261122, zlib.crc32(request.node.nodeid.encode())])
 
 
 def numeric(expr_matrix, symbols, values):
@@ -23,10 +38,17 @@ def numeric(expr_matrix, symbols, values):
                     dtype=float).reshape(-1)
 
 
+HEAVY = pytest.mark.heavy
+
+
+def case(name: str, method: str, heavy: bool = False):
+    return pytest.param((name, method), id=f"{name}-{method}", marks=HEAVY if heavy else ())
+
+
 # "es" on every scene; "vi" and "midpoint" on the reference scenes and one of our own (their
 # SymPy expressions are large to lambdify for n = 5; n = 5 is covered by the compile tier).
-SCHEME_CASES = ([(name, "es") for name in ALL_SCENES]
-                + [(name, method) for method in ("vi", "midpoint")
+SCHEME_CASES = ([case(name, "es", name in OWN_SCENES) for name in ALL_SCENES]
+                + [case(name, method, name in OWN_SCENES) for method in ("vi", "midpoint")
                    for name in REFERENCE_SCENES + ("four_link_antagonist",)])
 
 
@@ -39,20 +61,22 @@ def built(name, method):
     return _schemes[name, method]
 
 
-@pytest.fixture(scope="module", params=SCHEME_CASES, ids=lambda case: f"{case[0]}-{case[1]}")
+@pytest.fixture(scope="module", params=SCHEME_CASES)
 def scheme(request):
     return built(*request.param)
 
 
-@pytest.fixture(scope="module", params=ALL_SCENES)
+@pytest.fixture(scope="module", params=[
+    pytest.param(name, marks=HEAVY if name in OWN_SCENES else ()) for name in ALL_SCENES])
 def es_scheme(request):
     return built(request.param, "es")
 
 
 # The CasADi translation is the same code for every scheme: n = 3 covers vi and midpoint,
-# whose n = 4 residuals take minutes to lambdify.
-TRANSLATION_CASES = [case for case in SCHEME_CASES
-                     if case[1] == "es" or case[0] != "four_link_antagonist"]
+# whose n = 4 residuals take minutes to lambdify. vi's n = 3 residuals take seconds: heavy.
+TRANSLATION_CASES = ([case(name, "es", name in OWN_SCENES) for name in ALL_SCENES]
+                     + [case(name, "midpoint") for name in REFERENCE_SCENES]
+                     + [case(name, "vi", heavy=True) for name in REFERENCE_SCENES])
 
 
 def output_values(scheme, x):
@@ -125,6 +149,7 @@ def test_joint_space_round_trip(scheme):
         np.testing.assert_allclose(rates, phidot, atol=1e-12)
 
 
+@pytest.mark.heavy
 def test_spring_segment_lengths_equal_the_kinematics():
     scene = load("five_link_biarticular")
     model = com_model(scene)
@@ -160,7 +185,7 @@ def test_gauss_legendre_is_exact_to_degree_2k_minus_1(points):
     assert integral != pytest.approx(1.0 / (2 * points + 1), abs=1e-14)
 
 
-@pytest.mark.parametrize("case", TRANSLATION_CASES, ids=lambda case: f"{case[0]}-{case[1]}")
+@pytest.mark.parametrize("case", TRANSLATION_CASES)
 def test_casadi_functions_equal_sympy(case):
     """The CasADi translation evaluates to the SymPy residual and state maps."""
     scheme = built(*case)
@@ -168,16 +193,15 @@ def test_casadi_functions_equal_sympy(case):
     n, nx, nz = scheme.scene.n, len(scheme.state), len(scheme.unknowns)
     for _ in range(3):
         z, x0, dt = rng.normal(0, 0.3, nz), rng.normal(0, 1.0, nx), 0.01
-        step_inputs = list(scheme.unknowns) + list(scheme.state) + [scheme.dt]
         values = list(z) + list(x0) + [dt]
-        # The scheme's definitions (intermediate symbols) inlined: SymPy sees the whole residual.
+        # SymPy evaluates the scheme's definitions (intermediate symbols) in order, then the
+        # residual: the same expressions, without CasADi.
         np.testing.assert_allclose(np.array(functions.residual(z, x0, dt)).ravel(),
-                                   numeric(scheme.inline(scheme.residual), step_inputs, values),
+                                   np.array(scheme.step_function(scheme.residual)(*values)),
                                    rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(np.array(functions.next_state(z, x0, dt)).ravel(),
-                                   numeric(scheme.inline(scheme.next_state), step_inputs,
-                                           values), rtol=1e-13,
-                                   atol=1e-14)
+                                   np.array(scheme.step_function(scheme.next_state)(*values)),
+                                   rtol=1e-13, atol=1e-14)
     for _ in range(3):
         phi, phidot = random_joint_state(n)
         x = initial(scheme, phi, phidot)
@@ -197,15 +221,15 @@ def test_translation_of_powers_and_functions():
     x, y = sp.symbols("x y")
     X, Y = ca.SX.sym("x"), ca.SX.sym("y")
     translate = SympyToCasadi({x: X, y: Y})
-    expr = sp.sqrt(x) + x ** -1 + 1 / sp.sqrt(y) + x ** 3 + x ** sp.Rational(3, 2) + sp.atan2(y, x) \
-        + sp.sin(x) * sp.cos(y)
+    expr = (sp.sqrt(x) + x ** -1 + 1 / sp.sqrt(y) + x ** 3 + x ** sp.Rational(3, 2)
+            + sp.atan2(y, x) + sp.sin(x) * sp.cos(y))
     f = ca.Function("f", [X, Y], [translate(expr)])
     for a, b in [(0.7, 1.3), (2.0, 0.2)]:
         assert float(f(a, b)) == pytest.approx(float(expr.subs({x: a, y: b})), rel=1e-14)
 
 
 def test_unbound_symbol_is_an_error():
-    from codegen.casadi_functions import MissingInputError, check_free_symbols
+    from chaingen.generate.casadi_functions import MissingInputError, check_free_symbols
     x, y = sp.symbols("x y")
     with pytest.raises(MissingInputError, match="y"):
         check_free_symbols("f", [x + y], [x])

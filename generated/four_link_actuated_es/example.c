@@ -27,7 +27,7 @@
 
 static const double initial_angles[N_JOINTS] = { 0.785, 0.3, 0.3, -0.2 };
 static const double initial_velocities[N_JOINTS] = { 0.0, 0.0, 0.0, 0.0 };
-static const double dt = 0.001;   /* s; the controller runs once a step */
+static const double dt = 1e-3;   /* s; the controller runs once a step */
 static const double default_target[N_JOINTS] = { 1.5707963267948966, 0.0, 0.0, 0.0 };
 static const int actuated[NU] = { 0, 1, 2, 3 };   /* 0-based joint of each input */
 static const double kp[NU] = { 130.3429305229866, 46.352597069716154, 9.711690730671927, 1.0264388577132926 };   /* N m / rad */
@@ -117,8 +117,7 @@ int main(int argc, char **argv)
         if (k % 500 == 0) {
             printf("%12.4f %18.6e %12d\n", (double)k * dt, error, iterations);
         }
-        status = four_link_actuated_es_step(e.x, e.u, dt, e.next, NULL, &e.options, &e.workspace,
-                                   &iterations);
+        status = four_link_actuated_es_step(e.x, e.u, dt, e.next, NULL, &e.options, &e.workspace, &iterations);
         if (status == FOUR_LINK_ACTUATED_ES_OK) {
             for (i = 0; i < NX; ++i) {
                 e.x[i] = e.next[i];

@@ -49,7 +49,7 @@ static int evaluate(int (*function)(const double **, double **, long long int *,
 }
 
 int four_link_actuated_es_initial_state(const double *phi, const double *phidot, double *x,
-                               four_link_actuated_es_workspace *workspace)
+                                        four_link_actuated_es_workspace *workspace)
 {
     if (!phi || !phidot || !x || !workspace) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
@@ -61,7 +61,8 @@ int four_link_actuated_es_initial_state(const double *phi, const double *phidot,
 }
 
 int four_link_actuated_es_outputs(const double *x, double *phi, double *omega, double *energy,
-                         double *constraint_error, four_link_actuated_es_workspace *workspace)
+                                  double *constraint_error,
+                                  four_link_actuated_es_workspace *workspace)
 {
     double constraint[NCONSTRAINT + 1];
     double largest = 0.0;
@@ -86,7 +87,8 @@ int four_link_actuated_es_outputs(const double *x, double *phi, double *omega, d
     return status;
 }
 
-int four_link_actuated_es_holding_torques(const double *phi, double *tau, four_link_actuated_es_workspace *workspace)
+int four_link_actuated_es_holding_torques(const double *phi, double *tau,
+                                          four_link_actuated_es_workspace *workspace)
 {
     if (!phi || !tau || !workspace) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
@@ -107,7 +109,7 @@ static void step_arguments(const double *z, const double *x0, const double *u, c
 }
 
 int four_link_actuated_es_residual(const double *z, const double *x0, const double *u, double dt,
-                          double *residual, four_link_actuated_es_workspace *workspace)
+                                   double *residual, four_link_actuated_es_workspace *workspace)
 {
     if (!z || !x0 || !u || !residual || !workspace) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
@@ -117,9 +119,9 @@ int four_link_actuated_es_residual(const double *z, const double *x0, const doub
     return evaluate(four_link_actuated_es_model_residual, workspace);
 }
 
-int four_link_actuated_es_residual_jacobian(const double *z, const double *x0, const double *u, double dt,
-                                   double *residual, double *jacobian,
-                                   four_link_actuated_es_workspace *workspace)
+int four_link_actuated_es_residual_jacobian(const double *z, const double *x0, const double *u,
+                                            double dt, double *residual, double *jacobian,
+                                            four_link_actuated_es_workspace *workspace)
 {
     if (!z || !x0 || !u || !residual || !jacobian || !workspace) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
@@ -173,10 +175,11 @@ static int first_guess(const double *x0, double dt, int warm, four_link_actuated
     return evaluate(four_link_actuated_es_model_predictor, workspace);
 }
 
-/* Newton's method on F(z; x0, u, dt) = 0 from the first guess, full, simplified or chord (see
+/* Newton's method on F(z, x0, u, dt) = 0 from the first guess, full, simplified or chord (see
  * the options in the header), dense LU with partial pivoting, at most options->max_iterations
  * linear solves. Leaves z in workspace->z. */
-static int newton(const double *x0, const double *u, double dt, const four_link_actuated_es_options *options, int warm,
+static int newton(const double *x0, const double *u, double dt,
+                  const four_link_actuated_es_options *options, int warm,
                   four_link_actuated_es_workspace *workspace, int *iterations)
 {
     double *z, *dz, *residual, *jacobian;
@@ -273,7 +276,8 @@ static int newton(const double *x0, const double *u, double dt, const four_link_
 /* Newton from the first guess; a warm start that fails is retried once from the scheme's
  * predictor with a fresh Jacobian (an extrapolated guess can be poor where the motion changes
  * abruptly), so a step does at most 2 max_iterations linear solves. */
-static int solve_step(const double *x0, const double *u, double dt, const four_link_actuated_es_options *options,
+static int solve_step(const double *x0, const double *u, double dt,
+                      const four_link_actuated_es_options *options,
                       four_link_actuated_es_workspace *workspace, int *iterations)
 {
     four_link_actuated_es_options defaults;
@@ -303,7 +307,8 @@ static int solve_step(const double *x0, const double *u, double dt, const four_l
 /* x1 (and the energy flows) from the converged z in the workspace. The candidate is checked
  * (finite, no spring segment collapsed) before it is copied out: a failed step leaves x1
  * untouched. */
-static int finish_step(const double *x0, const double *u, double dt, double *x1, double *flows, four_link_actuated_es_workspace *workspace)
+static int finish_step(const double *x0, const double *u, double dt, double *x1, double *flows,
+                       four_link_actuated_es_workspace *workspace)
 {
     double *candidate = workspace->candidate;
     double step_flows[2];
@@ -354,8 +359,9 @@ static int finish_step(const double *x0, const double *u, double dt, double *x1,
     return FOUR_LINK_ACTUATED_ES_OK;
 }
 
-int four_link_actuated_es_step(const double *x0, const double *u, double dt, double *x1, double *flows, const four_link_actuated_es_options *options,
-                      four_link_actuated_es_workspace *workspace, int *iterations)
+int four_link_actuated_es_step(const double *x0, const double *u, double dt, double *x1,
+                               double *flows, const four_link_actuated_es_options *options,
+                               four_link_actuated_es_workspace *workspace, int *iterations)
 {
     int status;
     if (!x1) {
@@ -368,9 +374,11 @@ int four_link_actuated_es_step(const double *x0, const double *u, double dt, dou
     return finish_step(x0, u, dt, x1, flows, workspace);
 }
 
-int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, double dt, double *x1,
-                                    double *ds_ds, double *ds_du, const four_link_actuated_es_options *options,
-                                    four_link_actuated_es_workspace *workspace, int *iterations)
+int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, double dt,
+                                             double *x1, double *ds_ds, double *ds_du,
+                                             const four_link_actuated_es_options *options,
+                                             four_link_actuated_es_workspace *workspace,
+                                             int *iterations)
 {
     double *rhs;
     int i, j, k, status;
@@ -385,8 +393,7 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
         return status;
     }
     /* dF/dz at the converged z, factorised once. */
-    if (four_link_actuated_es_residual_jacobian(workspace->z, x0, u, dt, workspace->residual,
-                                       workspace->jacobian, workspace)) {
+    if (four_link_actuated_es_residual_jacobian(workspace->z, x0, u, dt, workspace->residual, workspace->jacobian, workspace)) {
         return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
     }
     if (chaingen_lu_factor(NZ, workspace->jacobian, workspace->pivot)) {
@@ -464,30 +471,32 @@ static void add(compensated_sum *total, double value)
 }
 
 /* Write one sample row: t, phi, omega, energy, constraint error, input work, dissipated. */
-static int write_sample(const double *x, double t, const compensated_sum *flows, double *row,
+static int write_sample(const double *x, double t, const compensated_sum *totals, double *row,
                         four_link_actuated_es_workspace *workspace)
 {
     row[0] = t;
-    row[3 + 2 * N_JOINTS] = flows[0].sum + flows[0].compensation;
-    row[4 + 2 * N_JOINTS] = flows[1].sum + flows[1].compensation;
+    row[3 + 2 * N_JOINTS] = totals[0].sum + totals[0].compensation;
+    row[4 + 2 * N_JOINTS] = totals[1].sum + totals[1].compensation;
     return four_link_actuated_es_outputs(x, row + 1, row + 1 + N_JOINTS, row + 1 + 2 * N_JOINTS,
                                 row + 2 + 2 * N_JOINTS, workspace);
 }
 
 int four_link_actuated_es_simulate(const double *x0, double t0, double dt, long n_steps, long every,
-                          const double *u, const four_link_actuated_es_options *options,
-                          four_link_actuated_es_workspace *workspace, double *samples, double *x_final,
-                          four_link_actuated_es_stats *stats)
-{
-    return four_link_actuated_es_simulate_observed(x0, t0, dt, n_steps, every, u, options, workspace,
-                                          samples, x_final, stats, NULL, NULL, 1);
-}
-
-int four_link_actuated_es_simulate_observed(const double *x0, double t0, double dt, long n_steps, long every,
                                    const double *u, const four_link_actuated_es_options *options,
                                    four_link_actuated_es_workspace *workspace, double *samples,
-                                   double *x_final, four_link_actuated_es_stats *stats,
-                                   four_link_actuated_es_observer observer, void *context, long interval)
+                                   double *x_final, four_link_actuated_es_stats *stats)
+{
+    return four_link_actuated_es_simulate_observed(x0, t0, dt, n_steps, every, u, options, workspace, samples, x_final, stats, NULL, NULL, 1);
+}
+
+int four_link_actuated_es_simulate_observed(const double *x0, double t0, double dt, long n_steps,
+                                            long every, const double *u,
+                                            const four_link_actuated_es_options *options,
+                                            four_link_actuated_es_workspace *workspace,
+                                            double *samples, double *x_final,
+                                            four_link_actuated_es_stats *stats,
+                                            four_link_actuated_es_observer observer, void *context,
+                                            long interval)
 {
     four_link_actuated_es_options defaults;
     four_link_actuated_es_stats counters = {0, 0, 0, 0};
@@ -495,7 +504,8 @@ int four_link_actuated_es_simulate_observed(const double *x0, double t0, double 
     double *current, *next;
     long k;
     int status;
-    if (!x0 || !u || !workspace || !samples || n_steps < 0 || every < 1 || !(dt > 0.0)
+    if (!x0 || !u || !workspace || !samples
+        || n_steps < 0 || every < 1 || !(dt > 0.0)
         || !isfinite(dt) || !isfinite(t0) || interval < 1) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
     }
@@ -532,8 +542,7 @@ int four_link_actuated_es_simulate_observed(const double *x0, double t0, double 
             counters.max_newton_iterations = iterations;
         }
         if (k % every == 0) {
-            status = write_sample(current, t0 + (double)k * dt, totals, 
-                                  samples + (k / every) * FOUR_LINK_ACTUATED_ES_NSAMPLE, workspace);
+            status = write_sample(current, t0 + (double)k * dt, totals, samples + (k / every) * FOUR_LINK_ACTUATED_ES_NSAMPLE, workspace);
         }
         if (observer && status == FOUR_LINK_ACTUATED_ES_OK && k % interval == 0 && observer(k, context)) {
             status = FOUR_LINK_ACTUATED_ES_INTERRUPTED;

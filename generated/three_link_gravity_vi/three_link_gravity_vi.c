@@ -47,7 +47,7 @@ static int evaluate(int (*function)(const double **, double **, long long int *,
 }
 
 int three_link_gravity_vi_initial_state(const double *phi, const double *phidot, double *x,
-                               three_link_gravity_vi_workspace *workspace)
+                                        three_link_gravity_vi_workspace *workspace)
 {
     if (!phi || !phidot || !x || !workspace) {
         return THREE_LINK_GRAVITY_VI_BAD_ARGUMENT;
@@ -59,7 +59,8 @@ int three_link_gravity_vi_initial_state(const double *phi, const double *phidot,
 }
 
 int three_link_gravity_vi_outputs(const double *x, double *phi, double *omega, double *energy,
-                         double *constraint_error, three_link_gravity_vi_workspace *workspace)
+                                  double *constraint_error,
+                                  three_link_gravity_vi_workspace *workspace)
 {
     double constraint[NCONSTRAINT + 1];
     double largest = 0.0;
@@ -93,8 +94,8 @@ static void step_arguments(const double *z, const double *x0, const double *dt,
     workspace->arg[2] = dt;
 }
 
-int three_link_gravity_vi_residual(const double *z, const double *x0, double dt,
-                          double *residual, three_link_gravity_vi_workspace *workspace)
+int three_link_gravity_vi_residual(const double *z, const double *x0, double dt, double *residual,
+                                   three_link_gravity_vi_workspace *workspace)
 {
     if (!z || !x0 || !residual || !workspace) {
         return THREE_LINK_GRAVITY_VI_BAD_ARGUMENT;
@@ -105,8 +106,8 @@ int three_link_gravity_vi_residual(const double *z, const double *x0, double dt,
 }
 
 int three_link_gravity_vi_residual_jacobian(const double *z, const double *x0, double dt,
-                                   double *residual, double *jacobian,
-                                   three_link_gravity_vi_workspace *workspace)
+                                            double *residual, double *jacobian,
+                                            three_link_gravity_vi_workspace *workspace)
 {
     if (!z || !x0 || !residual || !jacobian || !workspace) {
         return THREE_LINK_GRAVITY_VI_BAD_ARGUMENT;
@@ -160,11 +161,11 @@ static int first_guess(const double *x0, double dt, int warm, three_link_gravity
     return evaluate(three_link_gravity_vi_model_predictor, workspace);
 }
 
-/* Newton's method on F(z; x0, dt) = 0 from the first guess, full, simplified or chord (see
+/* Newton's method on F(z, x0, dt) = 0 from the first guess, full, simplified or chord (see
  * the options in the header), dense LU with partial pivoting, at most options->max_iterations
  * linear solves. Leaves z in workspace->z. */
-static int newton(const double *x0, double dt, const three_link_gravity_vi_options *options, int warm,
-                  three_link_gravity_vi_workspace *workspace, int *iterations)
+static int newton(const double *x0, double dt, const three_link_gravity_vi_options *options,
+                  int warm, three_link_gravity_vi_workspace *workspace, int *iterations)
 {
     double *z, *dz, *residual, *jacobian;
     double previous_update = -1.0;   /* update norm of the previous iteration, < 0: none */
@@ -290,7 +291,8 @@ static int solve_step(const double *x0, double dt, const three_link_gravity_vi_o
 /* x1 (and the energy flows) from the converged z in the workspace. The candidate is checked
  * (finite) before it is copied out: a failed step leaves x1
  * untouched. */
-static int finish_step(const double *x0, double dt, double *x1, three_link_gravity_vi_workspace *workspace)
+static int finish_step(const double *x0, double dt, double *x1,
+                       three_link_gravity_vi_workspace *workspace)
 {
     double *candidate = workspace->candidate;
     int i, status;
@@ -321,8 +323,9 @@ static int finish_step(const double *x0, double dt, double *x1, three_link_gravi
     return THREE_LINK_GRAVITY_VI_OK;
 }
 
-int three_link_gravity_vi_step(const double *x0, double dt, double *x1, const three_link_gravity_vi_options *options,
-                      three_link_gravity_vi_workspace *workspace, int *iterations)
+int three_link_gravity_vi_step(const double *x0, double dt, double *x1,
+                               const three_link_gravity_vi_options *options,
+                               three_link_gravity_vi_workspace *workspace, int *iterations)
 {
     int status;
     if (!x1) {
@@ -335,9 +338,10 @@ int three_link_gravity_vi_step(const double *x0, double dt, double *x1, const th
     return finish_step(x0, dt, x1, workspace);
 }
 
-int three_link_gravity_vi_step_sensitivities(const double *x0, double dt, double *x1,
-                                    double *ds_ds, const three_link_gravity_vi_options *options,
-                                    three_link_gravity_vi_workspace *workspace, int *iterations)
+int three_link_gravity_vi_step_sensitivities(const double *x0, double dt, double *x1, double *ds_ds,
+                                             const three_link_gravity_vi_options *options,
+                                             three_link_gravity_vi_workspace *workspace,
+                                             int *iterations)
 {
     double *rhs;
     int i, j, k, status;
@@ -352,8 +356,7 @@ int three_link_gravity_vi_step_sensitivities(const double *x0, double dt, double
         return status;
     }
     /* dF/dz at the converged z, factorised once. */
-    if (three_link_gravity_vi_residual_jacobian(workspace->z, x0, dt, workspace->residual,
-                                       workspace->jacobian, workspace)) {
+    if (three_link_gravity_vi_residual_jacobian(workspace->z, x0, dt, workspace->residual, workspace->jacobian, workspace)) {
         return THREE_LINK_GRAVITY_VI_EVALUATION_FAILED;
     }
     if (chaingen_lu_factor(NZ, workspace->jacobian, workspace->pivot)) {
@@ -417,26 +420,29 @@ static int write_sample(const double *x, double t, double *row,
 }
 
 int three_link_gravity_vi_simulate(const double *x0, double t0, double dt, long n_steps, long every,
-                          const three_link_gravity_vi_options *options,
-                          three_link_gravity_vi_workspace *workspace, double *samples, double *x_final,
-                          three_link_gravity_vi_stats *stats)
-{
-    return three_link_gravity_vi_simulate_observed(x0, t0, dt, n_steps, every, options, workspace,
-                                          samples, x_final, stats, NULL, NULL, 1);
-}
-
-int three_link_gravity_vi_simulate_observed(const double *x0, double t0, double dt, long n_steps, long every,
                                    const three_link_gravity_vi_options *options,
                                    three_link_gravity_vi_workspace *workspace, double *samples,
-                                   double *x_final, three_link_gravity_vi_stats *stats,
-                                   three_link_gravity_vi_observer observer, void *context, long interval)
+                                   double *x_final, three_link_gravity_vi_stats *stats)
+{
+    return three_link_gravity_vi_simulate_observed(x0, t0, dt, n_steps, every, options, workspace, samples, x_final, stats, NULL, NULL, 1);
+}
+
+int three_link_gravity_vi_simulate_observed(const double *x0, double t0, double dt, long n_steps,
+                                            long every,
+                                            const three_link_gravity_vi_options *options,
+                                            three_link_gravity_vi_workspace *workspace,
+                                            double *samples, double *x_final,
+                                            three_link_gravity_vi_stats *stats,
+                                            three_link_gravity_vi_observer observer, void *context,
+                                            long interval)
 {
     three_link_gravity_vi_options defaults;
     three_link_gravity_vi_stats counters = {0, 0, 0, 0};
     double *current, *next;
     long k;
     int status;
-    if (!x0 || !workspace || !samples || n_steps < 0 || every < 1 || !(dt > 0.0)
+    if (!x0 || !workspace || !samples
+        || n_steps < 0 || every < 1 || !(dt > 0.0)
         || !isfinite(dt) || !isfinite(t0) || interval < 1) {
         return THREE_LINK_GRAVITY_VI_BAD_ARGUMENT;
     }
@@ -470,8 +476,7 @@ int three_link_gravity_vi_simulate_observed(const double *x0, double t0, double 
             counters.max_newton_iterations = iterations;
         }
         if (k % every == 0) {
-            status = write_sample(current, t0 + (double)k * dt, 
-                                  samples + (k / every) * THREE_LINK_GRAVITY_VI_NSAMPLE, workspace);
+            status = write_sample(current, t0 + (double)k * dt, samples + (k / every) * THREE_LINK_GRAVITY_VI_NSAMPLE, workspace);
         }
         if (observer && status == THREE_LINK_GRAVITY_VI_OK && k % interval == 0 && observer(k, context)) {
             status = THREE_LINK_GRAVITY_VI_INTERRUPTED;

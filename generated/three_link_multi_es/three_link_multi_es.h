@@ -18,7 +18,7 @@ extern "C" {
 #endif
 
 /* Solver for scene "three-link-multi": method "es", 3-point Gauss-Legendre quadrature of the spring terms.
- * Energy-stable discrete gradient scheme in COM coordinates with constraints (model.md section 4).
+ * Energy-stable discrete gradient scheme in COM coordinates with constraints (docs/model.md, section 4).
  *
  * Units: SI throughout (m, kg, s, rad, N m, J). All arrays are caller-owned; nothing here
  * allocates memory or keeps global state, so solvers can run side by side, each with its own
@@ -72,23 +72,26 @@ extern "C" {
  */
 
 /* Status codes returned by the functions below. */
-#define THREE_LINK_MULTI_ES_OK 0
-#define THREE_LINK_MULTI_ES_NOT_CONVERGED 1     /* Newton: max_iterations reached without convergence */
-#define THREE_LINK_MULTI_ES_SINGULAR_JACOBIAN 2 /* Newton: no usable pivot in the LU factorisation */
+#define THREE_LINK_MULTI_ES_OK 0                /* success */
+#define THREE_LINK_MULTI_ES_NOT_CONVERGED 1     /* Newton: max_iterations reached without
+                                                 * convergence */
+#define THREE_LINK_MULTI_ES_SINGULAR_JACOBIAN 2 /* Newton: no usable pivot in the LU
+                                                 * factorisation */
 #define THREE_LINK_MULTI_ES_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
-#define THREE_LINK_MULTI_ES_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0, every < 1,
-                                          * interval < 1 or an unknown reuse_jacobian */
+#define THREE_LINK_MULTI_ES_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0, every <
+                                                 * 1, interval < 1 or an unknown reuse_jacobian */
 #define THREE_LINK_MULTI_ES_EVALUATION_FAILED 5 /* a generated function reported an error */
-#define THREE_LINK_MULTI_ES_INTERRUPTED 7       /* simulate_observed: the observer asked to stop */
 #define THREE_LINK_MULTI_ES_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
-                                          * geometry's size of zero length, or passed through it
-                                          * (turned by 90 degrees or more in one step): its
-                                          * direction is undefined there (model.md 2) */
+                                                 * geometry's size of zero length, or passed
+                                                 * through it (turned by 90 degrees or more in
+                                                 * one step): its direction is undefined there
+                                                 * (docs/model.md, section 2) */
+#define THREE_LINK_MULTI_ES_INTERRUPTED 7       /* simulate_observed: the observer asked to stop */
 
-
-#define THREE_LINK_MULTI_ES_JACOBIAN_EVERY_ITERATE 0 /* full Newton */
-#define THREE_LINK_MULTI_ES_JACOBIAN_ACROSS_STEPS 1  /* simplified Newton */
-#define THREE_LINK_MULTI_ES_JACOBIAN_PER_STEP 2      /* Newton-chord: once a step */
+/* Values of the option reuse_jacobian. */
+#define THREE_LINK_MULTI_ES_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
+#define THREE_LINK_MULTI_ES_JACOBIAN_ACROSS_STEPS 1   /* simplified Newton */
+#define THREE_LINK_MULTI_ES_JACOBIAN_PER_STEP 2       /* Newton-chord: once a step */
 
 /* Newton options. A step solves F(z; x0, dt) = 0 for z by Newton's method with dense LU.
  *
@@ -118,20 +121,20 @@ extern "C" {
  * A step does at most max_iterations linear solves per attempt (2 max_iterations when a warm
  * start is retried), which bounds its time. */
 typedef struct {
-    int max_iterations;  /* default 20; bounds the work of one step */
-    double update_rtol;  /* default 1e-10 */
-    double update_atol;  /* default 1e-13 */
-    double residual_tol; /* default 1e-8 (units of F) */
-    int warm_start;      /* default 1 */
-    int reuse_jacobian;  /* default 2: one of THREE_LINK_MULTI_ES_JACOBIAN_* */
+    int max_iterations;     /* default 20; bounds the work of one step */
+    double update_rtol;     /* default 1e-10 */
+    double update_atol;     /* default 1e-13 */
+    double residual_tol;    /* default 1e-8; units of F */
+    int warm_start;         /* default 1; continue from the previous solutions */
+    int reuse_jacobian;     /* default 2; one of the JACOBIAN_* modes */
 } three_link_multi_es_options;
 
 /* Counters of one simulate call. */
 typedef struct {
-    long steps;                /* steps completed (the failing one excluded) */
-    long newton_iterations;    /* Newton iterations (linear solves) over all completed steps */
+    long steps;             /* steps completed (the failing one excluded) */
+    long newton_iterations; /* Newton iterations (linear solves) over all completed steps */
     int max_newton_iterations; /* the most a single completed step took */
-    int failed_iterations;     /* iterations spent in the failing step, 0 if none failed */
+    int failed_iterations;  /* iterations spent in the failing step, 0 if none failed */
 } three_link_multi_es_stats;
 
 /* Scratch memory of one solver instance: declare one (static, on the stack, or inside your own
@@ -149,7 +152,7 @@ typedef struct {
     double state[2][THREE_LINK_MULTI_ES_NX];
     double candidate[THREE_LINK_MULTI_ES_NX];
     /* Newton state carried from step to step (warm start, simplified Newton). */
-    double previous_z[3][THREE_LINK_MULTI_ES_NZ]; /* solutions of the last three chained steps */
+    double previous_z[3][THREE_LINK_MULTI_ES_NZ]; /* solutions of the last 3 chained steps */
     double previous_x1[THREE_LINK_MULTI_ES_NX];   /* the state the last step produced */
     double previous_dt;
     double factors_dt;                 /* dt of the factorised Jacobian in jacobian/pivot */
@@ -179,30 +182,31 @@ void three_link_multi_es_default_options(three_link_multi_es_options *options);
 /* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s). */
 THREE_LINK_MULTI_ES_API
 int three_link_multi_es_initial_state(const double *phi, const double *phidot, double *x,
-                               three_link_multi_es_workspace *workspace);
+                                      three_link_multi_es_workspace *workspace);
 
 /* Joint space and diagnostics of a state: phi[N_JOINTS] wrapped to (-pi, pi], omega[N_JOINTS],
  * energy H = T + V, and the largest structural error of the state's coordinates. Any output
  * pointer may be NULL. */
 THREE_LINK_MULTI_ES_API
 int three_link_multi_es_outputs(const double *x, double *phi, double *omega, double *energy,
-                         double *constraint_error, three_link_multi_es_workspace *workspace);
+                                double *constraint_error, three_link_multi_es_workspace *workspace);
 
 /* Residual F(z; x0, dt)[NZ] of one step, and with it the Jacobian dF/dz[NZ*NZ]
  * (jacobian[i + j*NZ] = dF_i/dz_j). For verification; step() calls them itself. */
 THREE_LINK_MULTI_ES_API
-int three_link_multi_es_residual(const double *z, const double *x0, double dt,
-                          double *residual, three_link_multi_es_workspace *workspace);
+int three_link_multi_es_residual(const double *z, const double *x0, double dt, double *residual,
+                                 three_link_multi_es_workspace *workspace);
 THREE_LINK_MULTI_ES_API
 int three_link_multi_es_residual_jacobian(const double *z, const double *x0, double dt,
-                                   double *residual, double *jacobian,
-                                   three_link_multi_es_workspace *workspace);
+                                          double *residual, double *jacobian,
+                                          three_link_multi_es_workspace *workspace);
 
 /* One step of length dt from x0 to x1 (x1 may not alias x0). options may be NULL
  * (defaults). iterations (may be NULL) receives the Newton iterations spent. On failure x1 is untouched. */
 THREE_LINK_MULTI_ES_API
-int three_link_multi_es_step(const double *x0, double dt, double *x1, const three_link_multi_es_options *options,
-                      three_link_multi_es_workspace *workspace, int *iterations);
+int three_link_multi_es_step(const double *x0, double dt, double *x1,
+                             const three_link_multi_es_options *options,
+                             three_link_multi_es_workspace *workspace, int *iterations);
 
 /* A step as step() does it, and the step map's Jacobians in the joint-space state
  * s = (phi[N_JOINTS], omega[N_JOINTS]) a controller sees (6 entries):
@@ -210,9 +214,10 @@ int three_link_multi_es_step(const double *x0, double dt, double *x1, const thre
  * by the implicit function theorem: one LU factorisation of dF/dz at the converged z, solved
  * for 6 right-hand sides. x0 is taken as the state of s0 = outputs(x0). */
 THREE_LINK_MULTI_ES_API
-int three_link_multi_es_step_sensitivities(const double *x0, double dt, double *x1,
-                                    double *ds_ds, const three_link_multi_es_options *options,
-                                    three_link_multi_es_workspace *workspace, int *iterations);
+int three_link_multi_es_step_sensitivities(const double *x0, double dt, double *x1, double *ds_ds,
+                                           const three_link_multi_es_options *options,
+                                           three_link_multi_es_workspace *workspace,
+                                           int *iterations);
 
 /* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1. */
 THREE_LINK_MULTI_ES_API
@@ -224,9 +229,9 @@ long three_link_multi_es_sample_count(long n_steps, long every);
  * returns the step's status; stats->steps tells how many steps (and so which rows) are valid. */
 THREE_LINK_MULTI_ES_API
 int three_link_multi_es_simulate(const double *x0, double t0, double dt, long n_steps, long every,
-                          const three_link_multi_es_options *options,
-                          three_link_multi_es_workspace *workspace, double *samples, double *x_final,
-                          three_link_multi_es_stats *stats);
+                                 const three_link_multi_es_options *options,
+                                 three_link_multi_es_workspace *workspace, double *samples,
+                                 double *x_final, three_link_multi_es_stats *stats);
 
 /* An observer of a long simulate: called with the steps completed so far and the caller's
  * context; a nonzero return stops the run (status THREE_LINK_MULTI_ES_INTERRUPTED) after that step. */
@@ -236,11 +241,12 @@ typedef int (*three_link_multi_es_observer)(long steps, void *context);
  * >= 1; observer NULL: never), for a progress display or to cancel a long run. The samples are
  * those of simulate: observing does not change the run. */
 THREE_LINK_MULTI_ES_API
-int three_link_multi_es_simulate_observed(const double *x0, double t0, double dt, long n_steps, long every,
-                                   const three_link_multi_es_options *options,
-                                   three_link_multi_es_workspace *workspace, double *samples,
-                                   double *x_final, three_link_multi_es_stats *stats,
-                                   three_link_multi_es_observer observer, void *context, long interval);
+int three_link_multi_es_simulate_observed(const double *x0, double t0, double dt, long n_steps,
+                                          long every, const three_link_multi_es_options *options,
+                                          three_link_multi_es_workspace *workspace, double *samples,
+                                          double *x_final, three_link_multi_es_stats *stats,
+                                          three_link_multi_es_observer observer, void *context,
+                                          long interval);
 
 #ifdef __cplusplus
 }

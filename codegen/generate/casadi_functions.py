@@ -1,0 +1,345 @@
+"""From a DiscreteScheme (SymPy) to CasADi Functions and their C code.
+
+SymPy expressions are translated node by node into CasADi SX, memoised on the expression so
+that a subexpression SymPy shares is built once; CasADi's CSE then shares the rest. The Newton
+Jacobian dF/dz comes from CasADi's algorithmic differentiation of the translated residual. This
+stage only translates: everything it needs is on the DiscreteScheme.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import casadi as ca
+import sympy as sp
+
+from ..symbolic.schemes import DiscreteScheme
+
+#: SymPy functions with a CasADi counterpart of the same meaning.
+_FUNCTIONS = {
+    sp.sin: ca.sin, sp.cos: ca.cos, sp.tan: ca.tan, sp.exp: ca.exp, sp.log: ca.log,
+    sp.atan: ca.atan, sp.Abs: ca.fabs, sp.atan2: ca.atan2,
+}
+
+
+class MissingInputError(ValueError):
+    """An expression has a free symbol that is not an input of the function being built."""
+
+
+def check_free_symbols(name: str, expressions, inputs) -> None:
+    """Every free symbol of `expressions` must be one of `inputs` (style.md), or raise."""
+    declared = set(inputs)
+    missing = set()
+    for expr in expressions:
+        missing |= set(expr.free_symbols) - declared
+    if missing:
+        names = ", ".join(sorted(map(str, missing)))
+        raise MissingInputError(f"{name}: free symbols {names} are not inputs of the function")
+
+
+class SympyToCasadi:
+    """Translate SymPy expressions into CasADi SX over given symbol -> SX bindings."""
+
+    def __init__(self, bindings: dict[sp.Symbol, ca.SX]):
+        self._memo: dict[sp.Basic, ca.SX] = dict(bindings)
+
+    def bind(self, symbol: sp.Symbol, value: ca.SX) -> None:
+        """Bind one more symbol (an intermediate defined by earlier bindings)."""
+        self._memo[symbol] = value
+
+    def __call__(self, expr: sp.Basic) -> ca.SX:
+        # Iterative post-order walk: deep recursive expressions (long chains) must not hit
+        # Python's recursion limit.
+        memo = self._memo
+        stack = [(expr, False)]
+        while stack:
+            node, expanded = stack.pop()
+            if node in memo:
+                continue
+            if node.is_Number:
+                memo[node] = ca.SX(float(node))
+                continue
+            if node.is_Symbol:
+                raise MissingInputError(f"symbol {node} has no binding")
+            if not expanded:
+                stack.append((node, True))
+                stack.extend((arg, False) for arg in node.args if arg not in memo)
+                continue
+            memo[node] = self._combine(node, [memo[arg] for arg in node.args])
+        return memo[expr]
+
+    @staticmethod
+    def _combine(node: sp.Basic, args: list[ca.SX]) -> ca.SX:
+        if node.is_Add:
+            total = args[0]
+            for term in args[1:]:
+                total = total + term
+            return total
+        if node.is_Mul:
+            product = args[0]
+            for factor in args[1:]:
+                product = product * factor
+            return product
+        if node.is_Pow:
+            base, exponent = args
+            e = node.exp
+            if e == sp.Rational(1, 2):
+                return ca.sqrt(base)
+            if e == -sp.Rational(1, 2):
+                return 1 / ca.sqrt(base)
+            if e == -1:
+                return 1 / base
+            if e.is_Integer and e > 0:
+                return ca.constpow(base, exponent)
+            return ca.power(base, exponent)
+        for sympy_function, casadi_function in _FUNCTIONS.items():
+            if isinstance(node, sympy_function):
+                return casadi_function(*args)
+        raise NotImplementedError(f"no CasADi translation for {type(node).__name__}: {node}")
+
+
+@dataclass(frozen=True)
+class SchemeFunctions:
+    """The CasADi Functions of one scheme, named with the package prefix.
+
+    Step functions take (z, x0, u, dt), u the torques of the actuated joints; an unactuated
+    scene's functions take (z, x0, dt): no input path at all.
+    """
+
+    residual: ca.Function            # -> F
+    residual_jacobian: ca.Function   # -> (F, dF/dz dense, column-major)
+    predictor: ca.Function           # (x0, dt) -> z
+    next_state: ca.Function          # -> x1, and flows = (input work, dissipated) if any
+    outputs: ca.Function             # (x) -> (phi, omega, energy, constraint residuals)
+    initial_state: ca.Function       # (phi, phidot) -> x
+    # Step-map sensitivities in joint space s = (phi, omega), by the implicit function theorem:
+    # (None when the package is generated without them.)
+    sensitivity_rhs: ca.Function | None  # -> R = [dF/dx0 dx0/ds0, dF/du]  (nz x (2n + nu))
+    sensitivity_map: ca.Function | None  # -> (ds1/dz, ds1/dx0 dx0/ds0, ds1/du) at fixed z
+    holding_torques: ca.Function | None  # (phi) -> dV/dphi, actuated scenes only
+    segment_margins: ca.Function | None  # (x0, x1) -> (s_j(x1) / tol_j, cos of each segment's
+                                         # turn over the step), scenes with springs only
+
+    def all(self) -> tuple[ca.Function, ...]:
+        functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
+                     self.outputs, self.initial_state, self.sensitivity_rhs,
+                     self.sensitivity_map, self.holding_torques, self.segment_margins)
+        return tuple(function for function in functions if function is not None)
+
+
+def _vector(translate: SympyToCasadi, matrix) -> ca.SX:
+    entries = [translate(e) for e in matrix]
+    return ca.vertcat(*entries) if entries else ca.SX(0, 1)
+
+
+def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
+                     sensitivities: bool = True) -> SchemeFunctions:
+    """CasADi Functions for the residual, its Jacobian, and the state maps of `scheme`.
+
+    sensitivities=False leaves out the step-map Jacobians, the largest generated functions
+    (for "vi" about three times the Newton Jacobian), when a package does not need them.
+    """
+    nz, nx, nu = scheme.unknowns.shape[0], scheme.state.shape[0], scheme.inputs.shape[0]
+    n = scheme.scene.n
+    z, x0, u = ca.SX.sym("z", nz), ca.SX.sym("x0", nx), ca.SX.sym("u", nu)
+    dt = ca.SX.sym("dt")
+    step_inputs = (list(scheme.unknowns) + list(scheme.state) + list(scheme.inputs)
+                   + [scheme.dt])
+    for symbol, expression in scheme.definitions:
+        check_free_symbols(f"definition of {symbol}", [expression], step_inputs)
+        step_inputs.append(symbol)
+    for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state),
+                        ("energy flows", [scheme.input_work, scheme.dissipated])):
+        check_free_symbols(name, exprs, step_inputs)
+    solve = scheme.output_solve
+    solved = list(solve.symbols) if solve else []
+    check_free_symbols("predictor", scheme.predictor, list(scheme.state) + solved + [scheme.dt])
+    if solve:
+        check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), scheme.state)
+    check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
+                       + [scheme.energy] + list(scheme.constraint_residuals),
+                       list(scheme.state) + solved)
+    check_free_symbols("segment_vectors", scheme.segment_vectors, scheme.state)
+    if scheme.holding_torques is not None:
+        check_free_symbols("holding_torques", scheme.holding_torques, scheme.initial_angles)
+    check_free_symbols("initial_state", scheme.initial_state,
+                       list(scheme.initial_angles) + list(scheme.initial_velocities))
+
+    bindings = dict(zip(scheme.unknowns, ca.vertsplit(z)))
+    bindings.update(zip(scheme.state, ca.vertsplit(x0)))
+    bindings.update(zip(scheme.inputs, ca.vertsplit(u)))
+    bindings[scheme.dt] = dt
+    step = SympyToCasadi(bindings)
+    for symbol, expression in scheme.definitions:
+        step.bind(symbol, step(expression))
+    residual = _vector(step, scheme.residual)
+    jacobian = ca.densify(ca.jacobian(residual, z))
+    x1 = _vector(step, scheme.next_state)
+    options = {"cse": True}
+
+    def state_translator(state: ca.SX, extra: dict | None = None) -> SympyToCasadi:
+        """Expressions in the state and the output_solve symbols, bound to `state`."""
+        state_bindings = dict(zip(scheme.state, ca.vertsplit(state)))
+        state_bindings.update(extra or {})
+        if solve:
+            bound = SympyToCasadi(state_bindings)
+            matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
+                                  for row in solve.matrix.tolist()])
+            solution = ca.solve(matrix, _vector(bound, solve.rhs))
+            state_bindings.update(zip(solve.symbols, ca.vertsplit(solution)))
+        return SympyToCasadi(state_bindings)
+
+    def joint_space(state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+        """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
+        translate = state_translator(state)
+        return (_vector(translate, scheme.joint_angles),
+                _vector(translate, scheme.joint_velocities), translate(scheme.energy),
+                _vector(translate, scheme.constraint_residuals))
+
+    x = ca.SX.sym("x", nx)
+    phi, phidot = ca.SX.sym("phi", n), ca.SX.sym("phidot", n)
+    initial = SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
+                             **dict(zip(scheme.initial_velocities, ca.vertsplit(phidot)))})
+    initial_state = _vector(initial, scheme.initial_state)
+
+    step_args = [z, x0] + ([u] if nu else []) + [dt]
+    step_names = ["z", "x0"] + (["u"] if nu else []) + ["dt"]
+    flows = ([ca.vertcat(step(scheme.input_work), step(scheme.dissipated))]
+             if scheme.has_energy_flows else [])
+
+    def fn(name, inputs, input_names, outputs, output_names):
+        return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
+                           options)
+
+    def sensitivity_functions() -> tuple[ca.Function, ca.Function]:
+        """The controller's state is s = (phi, omega); x0 = X(s0) (initial_state), s1 = S(x1)
+        (outputs). With F(z*, x0, u) = 0, dz*/d(s0, u) = -J^-1 [F_x0 X_s, F_u] (the C code
+        solves it with one LU of J at z*), and ds1/d(s0, u) = S_x1 (x1_z dz* + [x1_x0 X_s,
+        x1_u]). X_s is evaluated at s0 = S(x0), so the functions take x0 as the step does."""
+        s_of_x0 = ca.vertcat(*joint_space(x0)[:2])
+        state_jacobian = ca.Function("X_s", [phi, phidot],
+                                     [ca.jacobian(initial_state, ca.vertcat(phi, phidot))])
+        x_s = state_jacobian(s_of_x0[:n], s_of_x0[n:])
+        s1 = ca.vertcat(*joint_space(x1)[:2])
+        rhs = ca.densify(ca.horzcat(ca.mtimes(ca.jacobian(residual, x0), x_s),
+                                    ca.jacobian(residual, u)))
+        s1_z = ca.densify(ca.jacobian(s1, z))
+        s1_s0 = ca.densify(ca.mtimes(ca.jacobian(s1, x0), x_s))
+        s1_u = ca.densify(ca.jacobian(s1, u))
+        return (fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
+                fn("sensitivity_map", step_args, step_names,
+                   [s1_z, s1_s0] + ([s1_u] if nu else []),
+                   ["s1_z", "s1_s0"] + (["s1_u"] if nu else [])))
+
+    sensitivity_rhs = sensitivity_map = None
+    if sensitivities:
+        sensitivity_rhs, sensitivity_map = sensitivity_functions()
+    margins = None
+    if scheme.segment_vectors.shape[0]:
+        tolerances = ca.DM(list(scheme.segment_tolerances))
+        before = ca.reshape(_vector(SympyToCasadi(dict(zip(scheme.state, ca.vertsplit(x0)))),
+                                    scheme.segment_vectors), 2, -1)
+        after = ca.reshape(_vector(SympyToCasadi(dict(zip(scheme.state, ca.vertsplit(x)))),
+                                   scheme.segment_vectors), 2, -1)
+        lengths_before = ca.sqrt(ca.sum1(before ** 2)).T
+        lengths_after = ca.sqrt(ca.sum1(after ** 2)).T
+        turn = ca.sum1(before * after).T / (lengths_before * lengths_after)
+        margins = fn("segment_margins", [x0, x], ["x0", "x1"],
+                     [ca.vertcat(lengths_after / tolerances, turn)], ["margins"])
+    holding = None
+    if scheme.holding_torques is not None:
+        torques = _vector(SympyToCasadi(dict(zip(scheme.initial_angles, ca.vertsplit(phi)))),
+                          scheme.holding_torques)
+        holding = fn("holding_torques", [phi], ["phi"], [torques], ["tau"])
+    return SchemeFunctions(
+        residual=fn("residual", step_args, step_names, [residual], ["F"]),
+        residual_jacobian=fn("residual_jacobian", step_args, step_names,
+                             [residual, jacobian], ["F", "J"]),
+        predictor=fn("predictor", [x0, dt], ["x0", "dt"], [_predictor(scheme, x0, dt,
+                                                                      state_translator)],
+                     ["z"]),
+        next_state=fn("next_state", step_args, step_names, [x1] + flows,
+                      ["x1"] + (["flows"] if flows else [])),
+        outputs=fn("outputs", [x], ["x"], list(joint_space(x)),
+                   ["phi", "omega", "energy", "constraint"]),
+        initial_state=fn("initial_state", [phi, phidot], ["phi", "phidot"], [initial_state],
+                         ["x"]),
+        sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map,
+        holding_torques=holding, segment_margins=margins,
+    )
+
+
+def _predictor(scheme: DiscreteScheme, x0: ca.SX, dt: ca.SX, state_translator) -> ca.SX:
+    """The first Newton guess; it may use the output_solve symbols (vi: w = M^-1 p)."""
+    if not any(scheme.predictor):
+        return ca.SX.zeros(scheme.unknowns.shape[0], 1)
+    return _vector(state_translator(x0, {scheme.dt: dt}), scheme.predictor)
+
+
+@dataclass(frozen=True)
+class WorkSizes:
+    """Largest CasADi work arrays over a set of functions (the caller-owned workspace)."""
+
+    arg: int
+    res: int
+    iw: int
+    w: int
+
+
+def work_sizes(functions) -> WorkSizes:
+    functions = list(functions)
+    return WorkSizes(arg=max(f.sz_arg() for f in functions),
+                     res=max(f.sz_res() for f in functions),
+                     iw=max(f.sz_iw() for f in functions),
+                     w=max(f.sz_w() for f in functions))
+
+
+def casadi_c_source(functions, prefix: str) -> tuple[str, str]:
+    """C source and header of `functions` from CasADi's CodeGenerator, symbols prefixed.
+
+    Internal symbols get `prefix` through CasADi's own prefix option; the exported ones are
+    the function names, which already carry it. No export attributes: visibility is left to
+    the build.
+    """
+    generator = ca.CodeGenerator(f"{prefix}_model.c", {
+        "prefix": f"{prefix}_", "with_header": True, "with_export": False,
+        "casadi_int": "long long int"})
+    for function in functions:
+        generator.add(function)
+    source = mark_parameters_used(generator.dump())
+    header = _casadi_header(functions, prefix)
+    return source, header
+
+
+_DEFINITION = re.compile(r"^(?:static )?[A-Za-z_][\w \*]*\b(\w+)\(([^()]*)\) ?\{$")
+
+
+def mark_parameters_used(source: str) -> str:
+    """Add `(void)name;` for every parameter of every function CasADi defines.
+
+    CasADi's generated functions take (arg, res, iw, w, mem) whether they use them or not, which
+    -Wextra reports as unused parameters (CasADi issues 1875, 2014); acados patches the text
+    the same way. Casting a parameter to void changes no behaviour.
+    """
+    lines = []
+    for line in source.splitlines(keepends=True):
+        lines.append(line)
+        match = _DEFINITION.match(line.rstrip("\n"))
+        if not match or match.group(2).strip() in ("", "void"):
+            continue
+        names = [re.split(r"[\s\*]+", parameter.strip())[-1]
+                 for parameter in match.group(2).split(",")]
+        lines.append("  " + " ".join(f"(void){name};" for name in names) + "\n")
+    return "".join(lines)
+
+
+def _casadi_header(functions, prefix: str) -> str:
+    """Declarations of the evaluation entry points we call (CasADi's header declares many more
+    bookkeeping functions we never use)."""
+    guard = f"{prefix.upper()}_MODEL_H"
+    lines = [f"#ifndef {guard}", f"#define {guard}", ""]
+    for function in functions:
+        lines.append(f"int {function.name()}(const double** arg, double** res, "
+                     "long long int* iw, double* w, int mem);")
+    lines += ["", f"#endif /* {guard} */", ""]
+    return "\n".join(lines)

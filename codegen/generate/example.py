@@ -1,0 +1,85 @@
+"""The example program of a package: what it controls, and the PD gains it starts from.
+
+An actuated scene gets a joint-space PD controller with compensation of the potential,
+    u_j = tau_hold,j(phi) + kp_j wrap(phi*_j - phi_j) - kd_j omega_j,
+tau_hold = dV/dphi the torques that hold the chain still (gravity and springs). For a fully
+actuated chain this is PD control with gravity compensation, asymptotically stable for any
+positive gains (Takegaki and Arimoto 1981), with no steady-state error. The controller runs at
+CONTROL_RATE, once a step. Each joint's gains make a critically damped loop at BANDWIDTH for the
+joint's own inertia at the target, M_jj(phi*): kp_j = omega_c^2 M_jj, kd_j = 2 zeta omega_c M_jj.
+Sampled velocity feedback is stable only while dt * lambda_max(M^-1 Kd) stays well below 2 (the
+coupled chain can be far lighter than M_jj suggests), so omega_c is lowered until that number
+is at most SAMPLING_MARGIN.
+
+An unactuated scene gets an example that simulates the free motion and prints the energy and
+constraint errors.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..scene import Scene, kinematics
+from .interface import c_literal
+
+#: Closed-loop bandwidth (rad/s) and damping ratio the gains aim at.
+BANDWIDTH = 2 * math.pi * 0.5
+DAMPING_RATIO = 1.0
+#: The example's control and integration rate (Hz), and the bound on dt lambda_max(M^-1 Kd).
+CONTROL_RATE = 1000.0
+SAMPLING_MARGIN = 0.5
+#: How long the example runs by default (s), and how often it prints (steps).
+EXAMPLE_DURATION = 10.0
+
+
+@dataclass(frozen=True)
+class ExampleSettings:
+    target: tuple[float, ...]   # phi* for every joint (rad)
+    kp: tuple[float, ...]       # per actuated joint (N m / rad)
+    kd: tuple[float, ...]       # per actuated joint (N m s / rad)
+    dt: float
+    duration: float
+    print_every: int
+    bandwidth: float            # omega_c the gains were made for (rad/s)
+
+
+def example_settings(scene: Scene) -> ExampleSettings:
+    """The target posture and gains of the example: joint 1 raised to pi/2, the rest straight."""
+    target = (math.pi / 2,) + (0.0,) * (scene.n - 1)
+    if not scene.actuated_joints:   # free motion at the scene's own step
+        dt = scene.simulation.dt
+        return ExampleSettings(target=target, kp=(), kd=(), dt=dt, duration=EXAMPLE_DURATION,
+                               print_every=max(1, round(0.5 / dt)), bandwidth=0.0)
+    dt = 1 / CONTROL_RATE
+    mass = kinematics.mass_matrix(scene, target)
+    inertia = np.zeros(scene.n)
+    for joint in scene.actuated_joints:
+        inertia[joint - 1] = mass[joint - 1, joint - 1]
+    # Largest eigenvalue of M^-1 diag(inertia) (real and >= 0: similar to a symmetric matrix).
+    fastest = max(np.linalg.eigvals(np.linalg.solve(mass, np.diag(inertia))).real)
+    bandwidth = min(BANDWIDTH, SAMPLING_MARGIN / (2 * DAMPING_RATIO * dt * fastest))
+    chosen = [inertia[joint - 1] for joint in scene.actuated_joints]
+    return ExampleSettings(
+        target=target, kp=tuple(bandwidth ** 2 * i for i in chosen),
+        kd=tuple(2 * DAMPING_RATIO * bandwidth * i for i in chosen), dt=dt,
+        duration=EXAMPLE_DURATION, print_every=max(1, round(0.5 / dt)), bandwidth=bandwidth)
+
+
+def example_context(scene: Scene) -> dict:
+    """The example program's numbers as C text, for the templates."""
+    settings = example_settings(scene)
+
+    def doubles(values) -> str:
+        return ", ".join(c_literal(float(value)) for value in values)
+
+    return {
+        "initial_angles": doubles(scene.initial_angles),
+        "initial_velocities": doubles(scene.initial_velocities),
+        "dt": c_literal(settings.dt), "duration": c_literal(settings.duration),
+        "print_every": settings.print_every, "target": doubles(settings.target),
+        "actuated_indices": ", ".join(str(j - 1) for j in scene.actuated_joints),
+        "kp": doubles(settings.kp), "kd": doubles(settings.kd),
+        "bandwidth_hz": f"{settings.bandwidth / (2 * math.pi):.3g}",
+    }

@@ -1,0 +1,255 @@
+"""Render a scheme into a C package: {filename: text} in memory, written to disk separately.
+
+Templates are listed in one table (TEMPLATES); every decision is made here and handed to them as
+a context, rendered with StrictUndefined so a missing value fails instead of printing "". The
+facts of the C interface (status codes, options, entry points) come from the runtime's contract
+through chaingen.generate.interface, so the header, the Python loader and the manifest agree.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib.resources
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi
+import jinja2
+import sympy
+
+from ..errors import PackageWriteError
+from ..runtime import contract
+from ..runtime.contract import Features
+from ..runtime.files import write_directory
+from ..scene import Scene, quadrature_used
+from ..symbolic.schemes import DiscreteScheme, build_scheme
+from ..version import VERSION
+from .casadi_functions import casadi_c_source, scheme_functions, work_sizes
+from .example import example_context
+from .interface import CInterface, c_literal
+
+#: template -> file it renders ({prefix} is replaced by the package prefix)
+TEMPLATES = {
+    "solver.h.j2": "{prefix}.h",
+    "solver.c.j2": "{prefix}.c",
+    "Makefile.j2": "Makefile",
+    "CMakeLists.txt.j2": "CMakeLists.txt",
+    "example.c.j2": "example.c",
+    "README.md.j2": "README.md",
+}
+LU_HEADER = "chaingen_lu.h"
+
+#: A generated model source larger than this is compiled with LARGE_MODEL_FLAGS in place of the
+#: optimisation level: on a single function of some 10^5 lines gcc's -O2 takes minutes (n = 20:
+#: about 40 s unloaded against 5 s for -O1) for a per-step time within noise of -O1's.
+LARGE_MODEL_BYTES = 1_000_000
+LARGE_MODEL_FLAGS = ("-O1",)
+#: The solver source (Newton loop and the dense LU inlined in it) is compiled with -O3: gcc
+#: vectorises the LU's column updates only there, which halves the factorisation at n = 20
+#: (60 unknowns) and is neutral at n = 3 (docs/benchmarks.md).
+SOLVER_FLAGS = ("-O3",)
+
+#: Stages of generate_package that report progress (a build adds one: compiling).
+GENERATE_STAGES = 3
+
+
+@dataclass(frozen=True)
+class GeneratedPackage:
+    """A generated C package: its prefix, its files, and the manifest the runtime reads."""
+
+    prefix: str
+    files: dict[str, str]
+    manifest: dict
+
+    @property
+    def sources(self) -> tuple[str, ...]:
+        return tuple(name for name in sorted(self.files) if name.endswith(".c"))
+
+
+def package_prefix(scene: Scene, method: str) -> str:
+    """C prefix of every exported symbol: the scene's C name and the method."""
+    return f"{scene.c_name}_{method}"
+
+
+def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool = True) -> str:
+    """sha256 of everything the generated code depends on, and nothing else.
+
+    The initial state and the simulation defaults do not enter the code; the tool versions do.
+    """
+    code_relevant = dataclasses.asdict(scene)
+    for key in ("initial_angles", "initial_velocities", "simulation"):
+        code_relevant.pop(key)
+    payload = {
+        "scene": code_relevant, "method": method,
+        "quadrature": quadrature_used(scene, method, quadrature),
+        "sensitivities": sensitivities,
+        "chaingen": VERSION, "sympy": sympy.__version__, "casadi": casadi.__version__,
+    }
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def template_environment(interface: CInterface | None = None) -> jinja2.Environment:
+    """The Jinja2 environment of the templates (package data chaingen.templates); with an
+    interface, its functions are the templates' globals: prototype, call, signature, has and
+    null_check."""
+    loader = jinja2.FunctionLoader(
+        lambda name: importlib.resources.files("chaingen.templates").joinpath(name).read_text())
+    environment = jinja2.Environment(loader=loader, undefined=jinja2.StrictUndefined,
+                                     keep_trailing_newline=True, autoescape=False)
+    if interface is not None:
+        environment.globals.update(prototype=interface.prototype, call=interface.call,
+                                   signature=interface.signature, has=interface.has,
+                                   null_check=interface.null_check)
+    return environment
+
+
+def scheme_label(scheme: DiscreteScheme) -> str:
+    label = f'method "{scheme.method}"'
+    if scheme.quadrature is not None:
+        label += f", {scheme.quadrature}-point Gauss-Legendre quadrature of the spring terms"
+    return label
+
+
+def package_features(scheme: DiscreteScheme, sensitivities: bool) -> Features:
+    return Features(inputs=bool(scheme.inputs.shape[0]), flows=scheme.has_energy_flows,
+                    sensitivities=sensitivities, segments=bool(scheme.segment_tolerances))
+
+
+def newton_defaults(scheme: DiscreteScheme) -> dict:
+    """The package's Newton defaults: the contract's, with the scheme's Jacobian reuse."""
+    return {**contract.NEWTON_OPTION_DEFAULTS, "reuse_jacobian": scheme.jacobian_reuse}
+
+
+def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
+                   progress=None) -> GeneratedPackage:
+    """The C package of `scheme`: CasADi code for its functions and the templates around it.
+
+    sensitivities=False leaves out step_sensitivities and its generated functions (a package
+    only run forward, as `chaingen simulate` does, builds faster without them). progress: a
+    chaingen.progress.Progress told of each stage.
+    """
+    scene = scheme.scene
+    prefix = package_prefix(scene, scheme.method)
+    digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities)
+    if progress is not None:
+        progress.update(1, "CasADi functions and derivatives")
+    functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
+    if progress is not None:
+        progress.update(2, "C code of the model")
+    model_source, model_header = casadi_c_source(functions.all(), prefix)
+    sizes = work_sizes(functions.all())
+    model_flags = LARGE_MODEL_FLAGS if len(model_source) > LARGE_MODEL_BYTES else ()
+    source_flags = {f"{prefix}.c": list(SOLVER_FLAGS)}
+    if model_flags:
+        source_flags[f"{prefix}_model.c"] = list(model_flags)
+    defaults = newton_defaults(scheme)
+    features = package_features(scheme, sensitivities)
+    interface = CInterface(prefix, features)
+    segment_tolerance = f"{scheme.segment_relative_tolerance:g}"
+
+    banner_text = (f"Generated by chaingen {VERSION} (SymPy {sympy.__version__}, CasADi "
+                   f"{casadi.__version__}) for scene \"{scene.name}\", {scheme_label(scheme)}. "
+                   f"Do not edit. chaingen_input_hash={digest}")
+    c_banner = f"/* {banner_text} */"
+    n = scene.n
+    nu = len(scene.actuated_joints)
+    columns = contract.sample_columns(n, features.flows)
+    flows = scheme.flow_description
+    context = {
+        "nu": nu, "actuated_joints": scene.actuated_joints, "flows": features.flows,
+        "sensitivities": sensitivities, "segments": len(scheme.segment_tolerances),
+        "nsens": 2 * n + nu,
+        "flows_work": flows.input_work if flows else "",
+        "flows_dissipated": flows.dissipated if flows else "",
+        "flows_balance": flows.balance if flows else "",
+        **example_context(scene),
+        "banner": c_banner, "make_banner": f"# {banner_text}", "banner_text": banner_text,
+        "prefix": prefix, "PREFIX": prefix.upper(),
+        "scene_name": scene.name, "method": scheme.method,
+        "scheme_label": scheme_label(scheme), "method_summary": scheme.summary,
+        "n": n, "nx": len(scheme.state_layout), "nz": len(scheme.unknowns_layout),
+        "nsample": len(columns), "nconstraint": scheme.constraint_residuals.shape[0],
+        "state_entries": scheme.state_layout.entries,
+        "state_description": scheme.state_layout.description,
+        "unknowns_entries": scheme.unknowns_layout.entries,
+        "unknowns_description": scheme.unknowns_layout.description,
+        "residual_description": scheme.residual_description,
+        "sample_columns": columns,
+        "step_inputs": ["z", "x0"] + (["u"] if nu else []) + ["dt"],
+        "work": {key: max(1, value) for key, value in dataclasses.asdict(sizes).items()},
+        "defaults": {name: c_literal(value) for name, value in defaults.items()},
+        "status_macros": interface.status_macros(segment_tolerance),
+        "jacobian_mode_macros": interface.jacobian_mode_macros(),
+        "options_struct": interface.struct(contract.NEWTON_OPTIONS, "options", defaults),
+        "stats_struct": interface.struct(contract.STATS_FIELDS, "stats"),
+        "observer_typedef": interface.observer_typedef(),
+        "history": contract.WARM_START_HISTORY,
+        "refresh_rate": c_literal(contract.REFRESH_RATE),
+        "simplified_margin": c_literal(contract.SIMPLIFIED_MARGIN),
+        "chord_margin": c_literal(contract.CHORD_MARGIN),
+        "source_flags": {name: " ".join(flags) for name, flags in source_flags.items()},
+        "model_flags": " ".join(model_flags), "large_model_bytes": LARGE_MODEL_BYTES,
+        "sources": [f"{prefix}.c", f"{prefix}_model.c"],
+    }
+    environment = template_environment(interface)
+    files = {output.format(prefix=prefix): environment.get_template(template).render(context)
+             for template, output in TEMPLATES.items()}
+    files[f"{prefix}_model.c"] = f"{c_banner}\n{model_source}"
+    files[f"{prefix}_model.h"] = f"{c_banner}\n{model_header}"
+    files[LU_HEADER] = (importlib.resources.files("chaingen.runtime")
+                        .joinpath("c", LU_HEADER).read_text())
+    manifest = {
+        "chaingen_version": VERSION, "input_hash": digest, "prefix": prefix,
+        "scene": scene.name, "method": scheme.method, "quadrature": scheme.quadrature,
+        "n_joints": n, "nx": context["nx"], "nz": context["nz"], "nsample": context["nsample"],
+        "actuated_joints": list(scene.actuated_joints), "nu": nu,
+        "energy_flows": features.flows, "sensitivities": sensitivities,
+        "segment_tolerance": scheme.segment_relative_tolerance if features.segments else None,
+        "state": list(scheme.state_layout.entries),
+        "unknowns": list(scheme.unknowns_layout.entries),
+        "sample_columns": [name for name, _ in columns],
+        "files": sorted(files) + [contract.MANIFEST],
+        "sources": context["sources"],
+        "source_flags": source_flags,
+        "newton_defaults": defaults,
+        "entry_points": contract.manifest_entry_points(prefix, features),
+    }
+    files[contract.MANIFEST] = json.dumps(manifest, indent=2) + "\n"
+    return GeneratedPackage(prefix=prefix, files=dict(sorted(files.items())), manifest=manifest)
+
+
+def generate_package(scene: Scene, method: str, quadrature: int, *,
+                     sensitivities: bool = True, progress=None) -> GeneratedPackage:
+    """Scene -> scheme -> C package, all in memory. progress: see render_package."""
+    if progress is not None:
+        progress.update(0, "deriving the model and the scheme (SymPy)")
+    package = render_package(build_scheme(scene, method, quadrature),
+                             sensitivities=sensitivities, progress=progress)
+    if progress is not None:
+        progress.update(GENERATE_STAGES)
+    return package
+
+
+def check_package_target(directory: str | os.PathLike) -> Path:
+    """The directory a package may be written to, or PackageWriteError saying why not: an
+    existing directory is replaced only if it is a chaingen package (has a manifest) or empty,
+    so a typo in -o cannot wipe unrelated files. Checked before generating, and again when
+    writing."""
+    target = Path(directory)
+    if target.exists():
+        if not target.is_dir():
+            raise PackageWriteError(f"{target}: exists and is not a directory")
+        if any(target.iterdir()) and not (target / contract.MANIFEST).is_file():
+            raise PackageWriteError(
+                f"{target}: exists and is not a chaingen package (no {contract.MANIFEST}); "
+                "choose an empty or new directory")
+    return target
+
+
+def write_package(package: GeneratedPackage, directory: str | os.PathLike) -> Path:
+    """Write the package's files into `directory`, all or nothing (chaingen.runtime.files),
+    where check_package_target allows it."""
+    return write_directory(check_package_target(directory), package.files)

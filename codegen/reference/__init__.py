@@ -1,0 +1,6 @@
+"""Peers and references: the same chain in other simulators (docs/model.md, section 10).
+
+- mjcf: MuJoCo XML of a scene (text only);
+- mujoco_runs: simulating it with MuJoCo (needs the test extra's mujoco);
+- scipy_peer: the minimal-coordinate ODE, compiled, integrated by SciPy's solve_ivp.
+"""

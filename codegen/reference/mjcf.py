@@ -1,0 +1,154 @@
+"""MJCF (MuJoCo XML) of a scene's chain: the independent reference model of model.md section 10.
+
+MuJoCo represents the chain of model.md sections 1-3 exactly:
+
+- body i carries link i, with a hinge about z at its origin (joint i); body 1 sits at the world
+  origin, body i at (L_{i-1}, 0, 0) in body i-1, so qpos are the relative angles phi_i;
+- ``<inertial pos="a_i b_i 0" mass="m_i" diaginertia="J_i J_i J_i"/>``: the COM
+  c_i = (a_i, b_i) in the link frame and J_i about it (only the z entry acts on a planar chain);
+- one site per fastening: P_1 on the world body at (0, r_1, 0), P_{i+1} on body i at
+  (L_i, r_{i+1}, 0); a spring that overrides the offsets gets its own sites;
+- one spatial tendon per spring through the sites P_first .. P_{last+1}. Its length is the sum
+  of the segment lengths s_j, and ``stiffness="k" springlength="S_0"`` gives the energy
+  1/2 k (sum_j s_j - S_0)^2 of model.md section 2 (a single springlength value sets both ends
+  of MuJoCo's dead band to S_0, i.e. no dead band);
+- gravity (0, -g, 0), contacts disabled, the ``energy`` flag on, so that ``mjData.energy`` is
+  (V, T) of model.md section 3.
+
+This module only writes text; it does not import mujoco (see codegen.mujoco_reference).
+"""
+from __future__ import annotations
+
+from xml.sax.saxutils import quoteattr
+
+from ..scene import Scene
+
+# MuJoCo's mjMINVAL: the compiler rejects a moving body whose mass or principal inertia is not
+# larger than this ("mass and inertia of moving bodies must be larger than mjMINVAL").
+MUJOCO_MINIMUM_INERTIA = 1e-15
+
+# The values of <option integrator=...> that MuJoCo 4 accepts (it rejects e.g. "rk4").
+MUJOCO_INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
+
+
+def _number(x: float) -> str:
+    """A float as the shortest text that round-trips (repr), never rounded."""
+    return repr(float(x))
+
+
+def _vector(*xs: float) -> str:
+    return " ".join(_number(x) for x in xs)
+
+
+def chain_fastening_site(j: int) -> str:
+    """Name of the site of chain fastening P_j (1-based), shared by springs without offsets."""
+    return f"fastening{j}"
+
+
+def spring_fastening_site(spring_index: int, j: int) -> str:
+    """Name of the site of fastening P_j of spring `spring_index` (0-based) with own offsets."""
+    return f"spring{spring_index}_fastening{j}"
+
+
+def tendon_name(spring_index: int) -> str:
+    """Name of the tendon of spring `spring_index` (0-based, the scene's order)."""
+    return f"spring{spring_index}"
+
+
+def body_name(i: int) -> str:
+    """Name of the body of link i (1-based)."""
+    return f"link{i}"
+
+
+def joint_name(i: int) -> str:
+    """Name of the hinge of joint i (1-based)."""
+    return f"joint{i}"
+
+
+def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4") -> str:
+    """MJCF text of `scene`'s chain (model.md section 10), time step `dt`, MuJoCo `integrator`.
+
+    Bodies, joints and tendons are in the scene's order, so qpos[i-1] is phi_i and tendon k is
+    scene.springs[k]. Joint damping d_i becomes the hinge's ``damping``; nothing else (no
+    armature, limits or joint stiffness) is added.
+
+    Raises ValueError for a link with J_i = 0 (MuJoCo cannot represent a moving body without
+    rotational inertia), for dt that is not positive and finite, and for an unknown integrator.
+    """
+    if not (dt > 0.0 and dt < float("inf")):
+        raise ValueError(f"dt: must be > 0 and finite, got {dt!r}")
+    if integrator not in MUJOCO_INTEGRATORS:
+        raise ValueError(
+            f"integrator: must be one of {', '.join(MUJOCO_INTEGRATORS)}, got {integrator!r}")
+    for i, link in enumerate(scene.links, start=1):
+        if not link.inertia > MUJOCO_MINIMUM_INERTIA:
+            raise ValueError(
+                f"links[{i - 1}].inertia: MuJoCo cannot represent a link with inertia "
+                f"{link.inertia!r} (a moving body needs inertia > {MUJOCO_MINIMUM_INERTIA!r} "
+                f"kg m^2); give link {i} a positive moment of inertia to compare with MuJoCo")
+
+    # Sites per body: index 0 is the world body, index i the body of link i. The fastening
+    # P_j lies on body j-1 at (L_{j-1}, r_j, 0) (at (0, r_1, 0) on the world body).
+    sites: list[list[str]] = [[] for _ in range(scene.n + 1)]
+
+    def site_xml(name: str, j: int, r: float) -> str:
+        x = 0.0 if j == 1 else scene.links[j - 2].length
+        return f"<site name={quoteattr(name)} pos={quoteattr(_vector(x, r, 0.0))}/>"
+
+    for j, r in enumerate(scene.chain_fastenings(), start=1):
+        sites[j - 1].append(site_xml(chain_fastening_site(j), j, r))
+
+    tendons: list[str] = []
+    for k, spring in enumerate(scene.springs):
+        fastenings = range(spring.first, spring.last + 2)
+        if spring.offsets is None:
+            names = [chain_fastening_site(j) for j in fastenings]
+        else:
+            names = [spring_fastening_site(k, j) for j in fastenings]
+            for j, r in zip(fastenings, scene.spring_fastenings(spring)):
+                sites[j - 1].append(site_xml(spring_fastening_site(k, j), j, r))
+        path = "".join(f"\n      <site site={quoteattr(name)}/>" for name in names)
+        tendons.append(
+            f"    <spatial name={quoteattr(tendon_name(k))} "
+            f"stiffness={quoteattr(_number(spring.stiffness))} "
+            f"springlength={quoteattr(_number(spring.rest_length))}>"
+            f"{path}\n    </spatial>")
+
+    # Bodies nest: build from the tip inwards.
+    inner = ""
+    for i in range(scene.n, 0, -1):
+        link = scene.links[i - 1]
+        indent = "  " * (i + 1)
+        x = 0.0 if i == 1 else scene.links[i - 2].length
+        damping = (f" damping={quoteattr(_number(link.damping))}"
+                   if link.damping != 0.0 else "")
+        lines = [
+            f"{indent}<body name={quoteattr(body_name(i))} pos={quoteattr(_vector(x, 0.0, 0.0))}>",
+            f"{indent}  <joint name={quoteattr(joint_name(i))} type=\"hinge\" "
+            f"pos=\"0 0 0\" axis=\"0 0 1\"{damping}/>",
+            f"{indent}  <inertial pos={quoteattr(_vector(link.com, link.com_normal, 0.0))} "
+            f"mass={quoteattr(_number(link.mass))} "
+            f"diaginertia={quoteattr(_vector(link.inertia, link.inertia, link.inertia))}/>",
+        ]
+        lines += [f"{indent}  {site}" for site in sites[i]]
+        body = "\n".join(lines) + "\n"
+        body += inner
+        body += f"{indent}</body>\n"
+        inner = body
+
+    world_sites = "".join(f"    {site}\n" for site in sites[0])
+    tendon_block = ("  <tendon>\n" + "\n".join(tendons) + "\n  </tendon>\n") if tendons else ""
+    return (
+        f"<mujoco model={quoteattr(scene.name)}>\n"
+        f"  <compiler angle=\"radian\"/>\n"
+        f"  <option gravity={quoteattr(_vector(0.0, -scene.gravity, 0.0))} "
+        f"integrator={quoteattr(integrator)} timestep={quoteattr(_number(dt))}>\n"
+        f"    <flag contact=\"disable\" energy=\"enable\"/>\n"
+        f"  </option>\n"
+        f"  <worldbody>\n"
+        f"{world_sites}"
+        f"{inner}"
+        f"  </worldbody>\n"
+        f"{tendon_block}"
+        f"</mujoco>\n"
+    )

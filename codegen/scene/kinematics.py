@@ -1,0 +1,234 @@
+"""Numeric forward kinematics and energy of the chain, straight from model.md sections 1-3.
+
+This is plain numpy, independent of the symbolic model: scene validation uses it (a spring
+segment of zero length at the initial angles is refused), and tests use it as a reference for
+the symbolic and generated code.
+
+Conventions (model.md section 1): phi are the relative joint angles, theta_i = phi_1 + ... +
+phi_i the absolute ones, e_i = (cos theta_i, sin theta_i), n_i = S e_i with S = [[0, -1], [1, 0]],
+e_0 = (1, 0) and n_0 = (0, 1) for the base. Model indices are 1-based; array rows are 0-based,
+so row k of `joints` is X_{k+1}.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .values import Scene, Spring
+
+S = np.array([[0.0, -1.0], [1.0, 0.0]])
+"""Rotation by +90 degrees: n = S e."""
+
+ZERO_SEGMENT_RELATIVE_TOLERANCE = 1e-9
+"""A spring segment shorter than this times the chain's size counts as zero length."""
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+def _vector(scene: Scene, values, what: str) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if array.shape != (scene.n,):
+        raise ValueError(f"{what} must have shape ({scene.n},), one per link, got {array.shape}")
+    return array
+
+
+@dataclass(frozen=True, eq=False)  # numpy fields: compare them explicitly
+class ChainGeometry:
+    """Positions of the chain at relative angles phi (model.md section 1); read-only arrays."""
+
+    theta: np.ndarray       # (n,) absolute angles theta_1..theta_n
+    directions: np.ndarray  # (n, 2) e_1..e_n
+    normals: np.ndarray     # (n + 1, 2) n_0..n_n (row 0 is the base's n_0 = (0, 1))
+    joints: np.ndarray      # (n + 1, 2) X_1..X_{n+1}, X_1 = 0
+    coms: np.ndarray        # (n, 2) x_1..x_n
+    fastenings: np.ndarray  # (n + 1, 2) P_1..P_{n+1} with the chain's offsets r_1..r_{n+1}
+
+
+@dataclass(frozen=True, eq=False)  # numpy fields: compare them explicitly
+class SpringGeometry:
+    """The fastenings a spring runs through and its segment lengths (model.md section 2)."""
+
+    points: np.ndarray           # (last - first + 2, 2) P_first..P_{last+1}
+    segment_lengths: np.ndarray  # (last - first + 1,) s_first..s_last
+
+    @property
+    def total_length(self) -> float:
+        """sum_j s_j, the length that a spring's energy depends on."""
+        return float(np.sum(self.segment_lengths))
+
+
+@dataclass(frozen=True)
+class Energy:
+    """The parts of H = T + V (model.md section 3), in J."""
+
+    kinetic: float        # T = sum_i 1/2 m_i |xdot_i|^2 + 1/2 J_i thetadot_i^2
+    gravitational: float  # sum_i m_i g y_i
+    elastic: float        # sum over springs of 1/2 k (sum_j s_j - S_0)^2
+
+    @property
+    def potential(self) -> float:
+        return self.gravitational + self.elastic
+
+    @property
+    def total(self) -> float:
+        return self.kinetic + self.gravitational + self.elastic
+
+
+def absolute_angles(phi) -> np.ndarray:
+    """theta_i = phi_1 + ... + phi_i (model.md section 1)."""
+    return np.cumsum(np.asarray(phi, dtype=float))
+
+
+def chain_geometry(scene: Scene, phi) -> ChainGeometry:
+    """Joints, COMs and fastenings at relative angles phi (model.md section 1).
+
+    X_1 = 0, X_{i+1} = X_i + L_i e_i;  x_i = X_i + a_i e_i + b_i n_i;
+    P_1 = X_1 + r_1 n_0,  P_{i+1} = X_{i+1} + r_{i+1} n_i.
+    """
+    theta = absolute_angles(_vector(scene, phi, "phi"))
+    directions = np.column_stack([np.cos(theta), np.sin(theta)])
+    normals = np.vstack([[0.0, 1.0], directions @ S.T])
+    lengths = np.array([link.length for link in scene.links])
+    joints = np.vstack([[0.0, 0.0], np.cumsum(lengths[:, None] * directions, axis=0)])
+    a = np.array([link.com for link in scene.links])
+    b = np.array([link.com_normal for link in scene.links])
+    coms = joints[:-1] + a[:, None] * directions + b[:, None] * normals[1:]
+    r = np.array(scene.chain_fastenings())
+    fastenings = joints + r[:, None] * normals
+    return ChainGeometry(theta=_frozen(theta), directions=_frozen(directions),
+                         normals=_frozen(normals), joints=_frozen(joints),
+                         coms=_frozen(coms), fastenings=_frozen(fastenings))
+
+
+def spring_geometry(scene: Scene, spring: Spring, phi) -> SpringGeometry:
+    """P_first..P_{last+1} with the spring's offsets, and s_j = |P_{j+1} - P_j| (model.md 2).
+
+    The offsets are `scene.spring_fastenings(spring)`: the spring's own `offsets` when given,
+    otherwise the chain's r_first..r_{last+1}. Fastening j sits at X_j + r n_{j-1}.
+    """
+    chain = chain_geometry(scene, phi)
+    rows = slice(spring.first - 1, spring.last + 1)
+    r = np.array(scene.spring_fastenings(spring), dtype=float)
+    points = chain.joints[rows] + r[:, None] * chain.normals[rows]
+    segments = np.diff(points, axis=0)
+    # hypot, not the norm: it neither overflows nor underflows for extreme offsets.
+    segment_lengths = np.hypot(segments[:, 0], segments[:, 1])
+    return SpringGeometry(points=_frozen(points), segment_lengths=_frozen(segment_lengths))
+
+
+def spring_energy(scene: Scene, spring: Spring, phi) -> float:
+    """1/2 k (sum_j s_j - S_0)^2 (model.md section 2; one segment when mono-articular)."""
+    stretch = spring_geometry(scene, spring, phi).total_length - spring.rest_length
+    return 0.5 * spring.stiffness * stretch * stretch
+
+
+#: During a run, a segment shorter than this times the geometry's size stops the run: there the
+#: spring's direction turns within a step's motion and its force is no longer trustworthy.
+RUN_SEGMENT_RELATIVE_TOLERANCE = 1e-6
+
+
+def geometry_size(scene: Scene, spring: Spring) -> float:
+    """Sum of the link lengths, of |r| over the chain's fastenings and the spring's offsets."""
+    size = sum(link.length for link in scene.links)
+    size += sum(abs(r) for r in scene.chain_fastenings())
+    if spring.offsets is not None:
+        size += sum(abs(r) for r in spring.offsets)
+    return size
+
+
+def run_segment_tolerance(scene: Scene, spring: Spring) -> float:
+    """The length under which a segment of `spring` stops a run (RUN_SEGMENT_RELATIVE_TOLERANCE)."""
+    return RUN_SEGMENT_RELATIVE_TOLERANCE * geometry_size(scene, spring)
+
+
+def zero_segment_tolerance(scene: Scene, spring: Spring) -> float:
+    """The length under which a segment of `spring` counts as zero.
+
+    ZERO_SEGMENT_RELATIVE_TOLERANCE times the size of the geometry: the sum of the link lengths,
+    of |r| over the chain's fastenings and of |r| over the spring's own offsets (if any).
+    """
+    return ZERO_SEGMENT_RELATIVE_TOLERANCE * geometry_size(scene, spring)
+
+
+def joint_velocities(scene: Scene, phi, phidot) -> np.ndarray:
+    """Xdot_1..Xdot_{n+1}, shape (n + 1, 2): Xdot_1 = 0, Xdot_{i+1} = Xdot_i + thetadot_i L_i n_i.
+
+    From X_{i+1} = X_i + L_i e_i and d e_i/dt = thetadot_i S e_i = thetadot_i n_i.
+    """
+    chain = chain_geometry(scene, phi)
+    thetadot = absolute_angles(_vector(scene, phidot, "phidot"))
+    lengths = np.array([link.length for link in scene.links])
+    steps = (thetadot * lengths)[:, None] * chain.normals[1:]
+    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])
+
+
+def com_velocities(scene: Scene, phi, phidot) -> np.ndarray:
+    """xdot_1..xdot_n, shape (n, 2): xdot_i = Xdot_i + thetadot_i S (x_i - X_i).
+
+    Differentiating x_i = X_i + a_i e_i + b_i n_i with d e_i/dt = thetadot_i n_i and
+    d n_i/dt = -thetadot_i e_i gives thetadot_i (a_i n_i - b_i e_i) = thetadot_i S (x_i - X_i).
+    Equivalently xdot_i = sum_{j <= i} phidot_j S (x_i - X_j): joint j turns everything
+    distal to it about X_j.
+    """
+    chain = chain_geometry(scene, phi)
+    thetadot = absolute_angles(_vector(scene, phidot, "phidot"))
+    joint_dots = joint_velocities(scene, phi, phidot)
+    arms = chain.coms - chain.joints[:-1]
+    return joint_dots[:-1] + thetadot[:, None] * (arms @ S.T)
+
+
+def kinetic_energy(scene: Scene, phi, phidot) -> float:
+    """T = sum_i 1/2 m_i |xdot_i|^2 + 1/2 J_i thetadot_i^2 (model.md section 3)."""
+    masses = np.array([link.mass for link in scene.links])
+    inertias = np.array([link.inertia for link in scene.links])
+    xdot = com_velocities(scene, phi, phidot)
+    thetadot = absolute_angles(_vector(scene, phidot, "phidot"))
+    return float(0.5 * np.sum(masses * np.sum(xdot * xdot, axis=1))
+                 + 0.5 * np.sum(inertias * thetadot * thetadot))
+
+
+def gravitational_energy(scene: Scene, phi) -> float:
+    """sum_i m_i g y_i, zero at y = 0, g along -y (model.md section 3)."""
+    masses = np.array([link.mass for link in scene.links])
+    return float(scene.gravity * np.sum(masses * chain_geometry(scene, phi).coms[:, 1]))
+
+
+def elastic_energy(scene: Scene, phi) -> float:
+    """Sum of the spring energies of model.md section 2."""
+    return float(sum(spring_energy(scene, spring, phi) for spring in scene.springs))
+
+
+def potential_energy(scene: Scene, phi) -> float:
+    """V = sum_i m_i g y_i + the spring energies (model.md section 3)."""
+    return gravitational_energy(scene, phi) + elastic_energy(scene, phi)
+
+
+def energy(scene: Scene, phi, phidot) -> Energy:
+    """The parts of H = T + V at (phi, phidot) (model.md section 3)."""
+    return Energy(kinetic=kinetic_energy(scene, phi, phidot),
+                  gravitational=gravitational_energy(scene, phi),
+                  elastic=elastic_energy(scene, phi))
+
+
+def total_energy(scene: Scene, phi, phidot) -> float:
+    """H = T + V at (phi, phidot) (model.md section 3): the energy reported everywhere."""
+    return energy(scene, phi, phidot).total
+
+
+def mass_matrix(scene: Scene, phi) -> np.ndarray:
+    """M(phi) in joint space, T = 1/2 phidot^T M phidot, by polarisation of the quadratic form."""
+    n = scene.n
+    unit = np.eye(n)
+    diagonal = np.array([2 * kinetic_energy(scene, phi, unit[i]) for i in range(n)])
+    matrix = np.diag(diagonal)
+    for i in range(n):
+        for j in range(i + 1, n):
+            both = 2 * kinetic_energy(scene, phi, unit[i] + unit[j])
+            matrix[i, j] = matrix[j, i] = (both - diagonal[i] - diagonal[j]) / 2
+    return matrix

@@ -1,0 +1,468 @@
+"""Reading and validating scene files (docs/scene-format.md).
+
+Every rule of the format is checked and the first violation, in the file's order of keys, raises
+a one-line SceneError that names the file, the key with its path and the value, e.g.
+``links[2].mass: must be > 0, got -1.0``.
+"""
+from __future__ import annotations
+
+import difflib
+import json
+import math
+import os
+import re
+import tomllib
+from pathlib import Path
+from typing import Any, NoReturn
+
+from ..errors import SceneError
+from . import kinematics
+from .values import METHODS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
+
+NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
+"""A scene name: a letter, then letters, digits, '_' or '-' (usable in C after `c_identifier`)."""
+
+_TOP_KEYS = ("name", "gravity", "base", "links", "springs", "actuation", "initial",
+             "simulation")
+_ACTUATION_KEYS = ("joints",)
+_BASE_KEYS = ("fastening",)
+_LINK_KEYS = ("mass", "inertia", "length", "com", "com_normal", "fastening", "damping")
+_LINK_REQUIRED = ("mass", "inertia", "length", "com")
+_SPRING_KEYS = ("joints", "stiffness", "rest_length", "offsets")
+_SPRING_REQUIRED = ("joints", "stiffness", "rest_length")
+_INITIAL_KEYS = ("angles", "velocities")
+_SIMULATION_KEYS = ("method", "quadrature", "dt", "t_end")
+
+_MISSING = object()
+_SHOW_LIMIT = 120
+
+
+def load_scene(path: str | os.PathLike[str]) -> Scene:
+    """Read and validate the scene file at `path`; its default name is the file's stem."""
+    source = os.fspath(path)
+    try:
+        data = Path(source).read_bytes()
+    except OSError as error:
+        reason = error.strerror or str(error)
+        raise SceneError(f"{source}: cannot read scene file: {reason}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        line = data[: error.start].count(b"\n") + 1
+        raise SceneError(
+            f"{source}:{line}: TOML syntax error: the file is not UTF-8 text "
+            f"(invalid byte 0x{data[error.start]:02x})"
+        ) from None
+    return parse_scene(text, source, Path(source).stem)
+
+
+def parse_scene(text: str, source: str, default_name: str) -> Scene:
+    """Parse and validate scene TOML `text`; errors name `source`, the key path and the line.
+
+    Every rule of scene-format.md is checked and the first violation, in the file's order of
+    keys, raises a one-line SceneError ``<source>: <key path>: <what is wrong>, got <value>``
+    (``<source>:<line>: TOML syntax error: ...`` when the text is not TOML). List indices in
+    key paths are 0-based, as in the file's arrays: ``links[0]`` is link 1 of model.md.
+    """
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        message = str(error)
+        match = re.search(r"\(at line (\d+), column \d+\)", message)
+        if match:
+            line = int(match.group(1))
+        else:  # "(at end of document)"
+            line = max(1, len(text.splitlines()))
+        raise SceneError(f"{source}:{line}: TOML syntax error: {message}") from None
+    except ValueError as error:   # an integer literal beyond Python's digit limit
+        match = re.search(r"\d{4000,}", text)
+        line = text.count("\n", 0, match.start()) + 1 if match else 1
+        raise SceneError(f"{source}:{line}: TOML syntax error: {_printable(str(error))}") from None
+    return _SceneReader(source, default_name).read(document)
+
+
+def _show(value: Any) -> str:
+    """A value as it would be written in TOML, on one line and shortened if long."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, (int, float)):
+        text = repr(value)
+    elif isinstance(value, str):
+        text = json.dumps(value, ensure_ascii=False)
+    elif isinstance(value, list):
+        text = "[" + ", ".join(_show(item) for item in value) + "]"
+    elif isinstance(value, dict):
+        text = "{" + ", ".join(f"{key} = {_show(item)}" for key, item in value.items()) + "}"
+    elif hasattr(value, "isoformat"):
+        text = value.isoformat()
+    else:
+        text = repr(value)
+    text = _printable(text)
+    if len(text) > _SHOW_LIMIT:
+        text = text[: _SHOW_LIMIT - 3] + "..."
+    return text
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _printable(text: str) -> str:
+    """Control characters (newlines, carriage returns, ...) written as escapes: one line."""
+    return _CONTROL.sub(lambda match: match.group().encode("unicode_escape").decode(), text)
+
+
+def _key(key: str) -> str:
+    """A key as it would be written in a key path: bare if it can be, else quoted."""
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key, ensure_ascii=False)
+
+
+def _kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a float"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    return "a date/time"
+
+
+def _entries(count: int) -> str:
+    return f"{count} entry" if count == 1 else f"{count} entries"
+
+
+def _is_integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+class _SceneReader:
+    """Validates one parsed TOML document; `fail` raises the one-line SceneError."""
+
+    def __init__(self, source: str, default_name: str):
+        self.source = source
+        self.default_name = default_name
+        self.n: int | None = None
+
+    # -- errors ---------------------------------------------------------------------------
+    def fail(self, path: str, what: str, value: Any = _MISSING) -> NoReturn:
+        message = f"{self.source}: {path}: {what}"
+        if value is not _MISSING:
+            message += f", got {_show(value)}"
+        raise SceneError(message)
+
+    def unknown_key(self, path: str, key: str, value: Any, allowed: tuple[str, ...]) -> NoReturn:
+        close = difflib.get_close_matches(key, allowed, n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        self.fail(
+            _key(key) if not path else f"{path}.{_key(key)}",
+            f"unknown key ({hint}allowed here: {', '.join(allowed)})",
+            value,
+        )
+
+    # -- value checks ---------------------------------------------------------------------
+    def number(self, path: str, value: Any, meaning: str) -> float:
+        """A finite int or float (never a boolean), as float."""
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            self.fail(path, f"must be a number ({meaning}), not {_kind(value)}", value)
+        try:
+            result = float(value)
+        except OverflowError:   # an integer beyond the range of a double
+            self.fail(path, f"must be finite ({meaning}), out of the range of a double", value)
+        if not math.isfinite(result):
+            self.fail(path, f"must be finite ({meaning})", value)
+        return result
+
+    def positive(self, path: str, value: Any, meaning: str) -> float:
+        result = self.number(path, value, meaning)
+        if not result > 0.0:
+            self.fail(path, f"must be > 0 ({meaning})", result)
+        return result
+
+    def nonnegative(self, path: str, value: Any, meaning: str) -> float:
+        result = self.number(path, value, meaning)
+        if not result >= 0.0:
+            self.fail(path, f"must be >= 0 ({meaning})", result)
+        return result
+
+    def table(self, path: str, value: Any, header: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            self.fail(path, f"must be a table ({header}), not {_kind(value)}", value)
+        return value
+
+    def array_of_tables(self, path: str, value: Any) -> list[Any]:
+        """The array itself; each entry is checked with `table` when its turn comes."""
+        if not isinstance(value, list):
+            self.fail(path, f"must be an array of tables ([[{path}]]), not {_kind(value)}", value)
+        return value
+
+    def number_list(self, path: str, value: Any, meaning: str, length: int | None,
+                    length_meaning: str) -> tuple[float, ...]:
+        if not isinstance(value, list):
+            self.fail(path, f"must be an array of numbers ({meaning}), not {_kind(value)}", value)
+        if length is not None and len(value) != length:
+            self.fail(path, f"must have {_entries(length)} ({length_meaning}), "
+                            f"not {len(value)}", value)
+        return tuple(self.number(f"{path}[{index}]", item, meaning)
+                     for index, item in enumerate(value))
+
+    def name(self, value: Any) -> str:
+        if not isinstance(value, str):
+            self.fail("name", f"must be a string, not {_kind(value)}", value)
+        if not NAME_PATTERN.fullmatch(value):
+            self.fail("name", "must start with a letter and contain only letters, digits, "
+                              "'_' and '-' (it prefixes generated C names)", value)
+        return value
+
+    def default_scene_name(self) -> str:
+        name = self.default_name
+        if NAME_PATTERN.fullmatch(name):
+            return name
+        suggestion = re.sub(r"[^A-Za-z0-9_-]", "_", name)
+        if not suggestion[:1].isalpha():
+            suggestion = "scene_" + suggestion
+        self.fail("name", "not set, and the default (the file's stem) is not a valid scene name "
+                          "(a letter, then letters, digits, '_' or '-'); set it in the file, "
+                          f"e.g. name = {json.dumps(suggestion)}", name)
+
+    # -- sections -------------------------------------------------------------------------
+    def read(self, document: dict[str, Any]) -> Scene:
+        links_value = document.get("links")
+        if isinstance(links_value, list):
+            self.n = len(links_value)
+
+        name = _MISSING
+        gravity = 9.81
+        base_fastening = 0.0
+        links: tuple[Link, ...] | None = None
+        springs: tuple[Spring, ...] = ()
+        angles: tuple[float, ...] | None = None
+        velocities: tuple[float, ...] | None = None
+        simulation = Simulation()
+        actuated: tuple[int, ...] = ()
+
+        for key, value in document.items():
+            if key == "name":
+                name = self.name(value)
+            elif key == "gravity":
+                gravity = self.nonnegative("gravity", value, "g in m/s^2 along -y; 0 is off")
+            elif key == "base":
+                base_fastening = self.base(value)
+            elif key == "links":
+                links = self.links(value)
+            elif key == "springs":
+                springs = self.springs(value)
+            elif key == "actuation":
+                actuated = self.actuation(value)
+            elif key == "initial":
+                angles, velocities = self.initial(value)
+            elif key == "simulation":
+                simulation = self.simulation(value)
+            else:
+                self.unknown_key("", key, value, _TOP_KEYS)
+
+        if name is _MISSING:
+            name = self.default_scene_name()
+        if links is None:
+            self.fail("links", "missing: at least one [[links]] table is required")
+        n = len(links)
+        scene = Scene(
+            name=name,
+            gravity=gravity,
+            base_fastening=base_fastening,
+            links=links,
+            springs=springs,
+            initial_angles=angles if angles is not None else (0.0,) * n,
+            initial_velocities=velocities if velocities is not None else (0.0,) * n,
+            simulation=simulation,
+            actuated_joints=actuated,
+        )
+        self.refuse_zero_length_segments(scene)
+        return scene
+
+    def base(self, value: Any) -> float:
+        table = self.table("base", value, "[base]")
+        fastening = 0.0
+        for key, item in table.items():
+            if key == "fastening":
+                fastening = self.number("base.fastening", item, "r_1, normal offset in m")
+            else:
+                self.unknown_key("base", key, item, _BASE_KEYS)
+        return fastening
+
+    def links(self, value: Any) -> tuple[Link, ...]:
+        tables = self.array_of_tables("links", value)
+        if not tables:
+            self.fail("links", "at least one link is required", value)
+        return tuple(self.link(index, self.table(f"links[{index}]", table, "[[links]]"))
+                     for index, table in enumerate(tables))
+
+    def link(self, index: int, table: dict[str, Any]) -> Link:
+        path = f"links[{index}]"
+        i = index + 1
+        fields: dict[str, float] = {"com_normal": 0.0, "fastening": 0.0, "damping": 0.0}
+        for key, item in table.items():
+            where = f"{path}.{key}"
+            if key == "mass":
+                fields[key] = self.positive(where, item, f"m_{i} in kg, link {i}")
+            elif key == "inertia":
+                fields[key] = self.nonnegative(where, item, f"J_{i} in kg m^2, link {i}")
+            elif key == "length":
+                fields[key] = self.positive(where, item, f"L_{i} in m, link {i}")
+            elif key == "com":
+                fields[key] = self.number(where, item, f"a_{i} in m, link {i}")
+            elif key == "com_normal":
+                fields[key] = self.number(where, item, f"b_{i} in m, link {i}")
+            elif key == "fastening":
+                fields[key] = self.number(where, item, f"r_{i + 1} in m, link {i}")
+            elif key == "damping":
+                fields[key] = self.nonnegative(where, item, f"d_{i} in N m s/rad, joint {i}")
+            else:
+                self.unknown_key(path, key, item, _LINK_KEYS)
+        for key in _LINK_REQUIRED:
+            if key not in fields:
+                self.fail(f"{path}.{key}", f"missing: required for every link (link {i})")
+        return Link(**fields)
+
+    def springs(self, value: Any) -> tuple[Spring, ...]:
+        tables = self.array_of_tables("springs", value)
+        return tuple(self.spring(index, self.table(f"springs[{index}]", table, "[[springs]]"))
+                     for index, table in enumerate(tables))
+
+    def spring(self, index: int, table: dict[str, Any]) -> Spring:
+        path = f"springs[{index}]"
+        joints: tuple[int, int] | None = None
+        stiffness = rest_length = None
+        offsets: tuple[float, ...] | None = None
+        offsets_raw: Any = None
+        for key, item in table.items():
+            where = f"{path}.{key}"
+            if key == "joints":
+                joints = self.spring_joints(where, item)
+            elif key == "stiffness":
+                stiffness = self.positive(where, item, "k in N/m")
+            elif key == "rest_length":
+                rest_length = self.nonnegative(where, item, "S_0 in m, over all segments")
+            elif key == "offsets":
+                offsets = self.number_list(where, item, "r of a fastening in m", None, "")
+                offsets_raw = item
+            else:
+                self.unknown_key(path, key, item, _SPRING_KEYS)
+        found = {"joints": joints, "stiffness": stiffness, "rest_length": rest_length}
+        for key in _SPRING_REQUIRED:
+            if found[key] is None:
+                self.fail(f"{path}.{key}", "missing: required for every spring")
+        first, last = joints
+        if offsets is not None and len(offsets) != last - first + 2:
+            self.fail(f"{path}.offsets",
+                      f"must have {_entries(last - first + 2)}, one per fastening "
+                      f"P_{first}..P_{last + 1} passed by joints [{first}, {last}], "
+                      f"not {len(offsets)}", offsets_raw)
+        return Spring(first=first, last=last, stiffness=stiffness, rest_length=rest_length,
+                      offsets=offsets)
+
+    def spring_joints(self, path: str, value: Any) -> tuple[int, int]:
+        if (not isinstance(value, list) or len(value) != 2
+                or not all(_is_integer(item) for item in value)):
+            self.fail(path, "must be an array of two integers [first, last] (1-based joints)",
+                      value)
+        first, last = value
+        if first < 1:
+            self.fail(path, f"joint {first} does not exist: joints are numbered from 1", value)
+        if first > last:
+            self.fail(path, f"first joint {first} is after last joint {last}; "
+                            "write [first, last] with first <= last", value)
+        if self.n is not None and last > self.n:
+            self.fail(path, f"joint {last} does not exist: the chain has {self.n} "
+                            f"joint{'s' if self.n != 1 else ''} (1..{self.n})", value)
+        return first, last
+
+    def actuation(self, value: Any) -> tuple[int, ...]:
+        """[actuation] joints = [...]: 1-based joints with an input torque, ascending, unique."""
+        table = self.table("actuation", value, "[actuation]")
+        joints: tuple[int, ...] | None = None
+        for key, item in table.items():
+            where = f"actuation.{key}"
+            if key == "joints":
+                joints = self.actuated_joints(where, item)
+            else:
+                self.unknown_key("actuation", key, item, _ACTUATION_KEYS)
+        if joints is None:
+            self.fail("actuation.joints", "missing: list the actuated joints (1-based), "
+                                          "or remove the [actuation] table")
+        return joints
+
+    def actuated_joints(self, path: str, value: Any) -> tuple[int, ...]:
+        if not isinstance(value, list) or not all(_is_integer(item) for item in value):
+            self.fail(path, "must be an array of integers (1-based actuated joints)", value)
+        if not value:
+            self.fail(path, "must list at least one joint; remove the [actuation] table for "
+                            "an unactuated chain", value)
+        for index, joint in enumerate(value):
+            if joint < 1 or (self.n is not None and joint > self.n):
+                chain = (f": the chain has {self.n} joint{'s' if self.n != 1 else ''} "
+                         f"(1..{self.n})" if self.n is not None else ": joints are numbered from 1")
+                self.fail(f"{path}[{index}]", f"joint {joint} does not exist{chain}", joint)
+            if index and joint <= value[index - 1]:
+                self.fail(f"{path}[{index}]", "joints must be listed in ascending order, each "
+                                              f"once (after joint {value[index - 1]})", joint)
+        return tuple(value)
+
+    def initial(self, value: Any) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
+        table = self.table("initial", value, "[initial]")
+        angles = velocities = None
+        for key, item in table.items():
+            where = f"initial.{key}"
+            if key == "angles":
+                angles = self.number_list(where, item, "phi_i in rad", self.n, "one per link")
+            elif key == "velocities":
+                velocities = self.number_list(where, item, "phidot_i in rad/s", self.n,
+                                              "one per link")
+            else:
+                self.unknown_key("initial", key, item, _INITIAL_KEYS)
+        return angles, velocities
+
+    def simulation(self, value: Any) -> Simulation:
+        table = self.table("simulation", value, "[simulation]")
+        fields: dict[str, Any] = {}
+        for key, item in table.items():
+            where = f"simulation.{key}"
+            if key == "method":
+                if not isinstance(item, str) or item not in METHODS:
+                    self.fail(where, "must be one of " + ", ".join(f'"{m}"' for m in METHODS),
+                              item)
+                fields[key] = item
+            elif key == "quadrature":
+                low, high = QUADRATURE_RANGE
+                if not _is_integer(item) or not low <= item <= high:
+                    self.fail(where, f"must be an integer from {low} to {high} "
+                                     "(Gauss-Legendre points)", item)
+                fields[key] = item
+            elif key == "dt":
+                fields[key] = self.positive(where, item, "step in s")
+            elif key == "t_end":
+                fields[key] = self.positive(where, item, "duration in s")
+            else:
+                self.unknown_key("simulation", key, item, _SIMULATION_KEYS)
+        return Simulation(**fields)
+
+    def refuse_zero_length_segments(self, scene: Scene) -> None:
+        """Refuse a spring segment of (numerically) zero length at the initial angles.
+
+        model.md section 2: the gradient of s_j = |P_{j+1} - P_j| is undefined at s_j = 0.
+        """
+        phi = scene.initial_angles
+        for index, spring in enumerate(scene.springs):
+            geometry = kinematics.spring_geometry(scene, spring, phi)
+            tolerance = kinematics.zero_segment_tolerance(scene, spring)
+            for j, length in zip(spring.joints, geometry.segment_lengths):
+                if length < tolerance:
+                    self.fail(f"springs[{index}]",
+                              f"segment s_{j} (fastening P_{j} to P_{j + 1}, joint {j}) has zero "
+                              "length at the initial configuration (initial.angles), where its "
+                              "direction is undefined; move a fastening (offsets) or change "
+                              f"the initial angles (limit {tolerance:.3g} m)", float(length))

@@ -1,0 +1,104 @@
+"""The values of a scene: frozen dataclasses of validated numbers (docs/scene-format.md).
+
+A Scene is what the reader (chaingen.scene.reader) makes of a scene file; everything downstream
+(symbolic model, schemes, C package) is a pure function of it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+#: The time-stepping schemes a scene (simulation.method) or the command line may name.
+METHODS = ("es", "vi", "midpoint")
+#: Gauss-Legendre points of the spring terms (simulation.quadrature, --quadrature).
+QUADRATURE_RANGE = (1, 20)
+
+
+def quadrature_used(scene: Scene, method: str, quadrature: int) -> int | None:
+    """The quadrature a scheme of `scene` runs with, None where K plays no role.
+
+    Only "es" averages the spring gradient over the step by Gauss-Legendre quadrature
+    (docs/model.md, section 4); without springs there is nothing to average.
+    """
+    return quadrature if method == "es" and scene.springs else None
+
+
+def c_identifier(name: str) -> str:
+    """The C-safe form of a scene name: lower case, '-' replaced by '_'."""
+    return name.lower().replace("-", "_")
+
+
+@dataclass(frozen=True)
+class Link:
+    """Link i of docs/model.md, section 1 (SI units)."""
+
+    mass: float          # m_i > 0
+    inertia: float       # J_i >= 0 about the COM
+    length: float        # L_i > 0, joint i to joint i+1
+    com: float           # a_i, along the link from the proximal joint
+    com_normal: float    # b_i, normal to the link
+    fastening: float     # r_{i+1}, normal offset of the fastening at the distal joint
+    damping: float       # d_i >= 0, viscous damping of joint i
+
+
+@dataclass(frozen=True)
+class Spring:
+    """A linear spring over joints first..last (1-based, docs/model.md, section 2)."""
+
+    first: int
+    last: int
+    stiffness: float
+    rest_length: float
+    offsets: tuple[float, ...] | None   # r of fastenings first..last+1, or None: the chain's
+
+    @property
+    def is_multi_articular(self) -> bool:
+        return self.last > self.first
+
+    @property
+    def joints(self) -> tuple[int, ...]:
+        return tuple(range(self.first, self.last + 1))
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Defaults for `simulate`; command-line options override them."""
+
+    method: str = METHODS[0]
+    quadrature: int = 3
+    dt: float = 0.01
+    t_end: float = 10.0
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One chain, its springs, its initial state and its simulation defaults: the validated
+    numbers of a scene file (docs/scene-format.md). Everything downstream is a function of it."""
+
+    name: str
+    gravity: float
+    base_fastening: float                  # r_1
+    links: tuple[Link, ...]
+    springs: tuple[Spring, ...]
+    initial_angles: tuple[float, ...]      # phi_i (rad)
+    initial_velocities: tuple[float, ...]  # phidot_i (rad/s)
+    simulation: Simulation
+    actuated_joints: tuple[int, ...] = ()  # 1-based joints driven by an input torque, ascending
+
+    @property
+    def n(self) -> int:
+        return len(self.links)
+
+    def chain_fastenings(self) -> tuple[float, ...]:
+        """r_1 .. r_{n+1}: the base's fastening, then each link's distal one."""
+        return (self.base_fastening,) + tuple(link.fastening for link in self.links)
+
+    def spring_fastenings(self, spring: Spring) -> tuple[float, ...]:
+        """r of the fastenings P_first .. P_{last+1} that `spring` runs through."""
+        if spring.offsets is not None:
+            return spring.offsets
+        return self.chain_fastenings()[spring.first - 1: spring.last + 1]
+
+    @property
+    def c_name(self) -> str:
+        """The name as used in C identifiers and file names (see `c_identifier`)."""
+        return c_identifier(self.name)

@@ -1,0 +1,109 @@
+"""`chaingen bench`: our schemes against MuJoCo and SciPy, speed and accuracy, in one run.
+
+    chaingen bench [--quick] [--out FILE.md] [--figures DIR] [--dts 0.04,0.02,...]
+                   [--scaling-n 2,3,5,10,20] [--skip-scaling] [--skip-reference]
+                   [--timeout SECONDS]
+
+Three parts, all measured side by side on one machine in one process (the scaling series in
+child processes, so that a size that takes too long can be stopped):
+
+1. Reference scenes (scenes/three_link_*.toml, the scene's own run: 50 s from its initial
+   state). Every scheme at a dt series, MuJoCo (Euler, implicitfast, RK4) at its own dt series
+   and SciPy's solve_ivp (DOP853, Radau) at a tolerance series. For each run: CPU time per step
+   and of the whole run, t_realtime, max |H - H_0|, max constraint error, the trajectory error
+   at t_end against a tight DOP853 reference (codegen.scipy_peer.reference_solution), and for
+   ours the Newton iterations per step and the step's cost in residual-and-Jacobian
+   evaluations.
+2. A scaling series: `scaling_scene(n)` for n = 2 ... 20; generate and build seconds, peak
+   memory, model C size, per-step time, and MuJoCo RK4's per-step time at the same n.
+3. Headline ratios with the issue's targets, computed from parts 1 and 2.
+
+The parts live in their own modules: config (what runs), runs (part 1), scaling (part 2),
+headlines (part 3), knobs (the speed knobs), harness (the C timing program), report and figures.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from ...progress import Progress
+from ...runtime.files import write_text
+from ...scene import METHODS, load_reference_scene
+from . import knobs
+from .config import HEADLINE_DT, HEADLINE_SCENE, BenchConfig, bench_config
+from .figures import plot_scaling, plot_work_precision
+from .headlines import headlines
+from .report import headline_table, machine_description, markdown, reference_table, scaling_table
+from .runs import reference_study
+from .scaling import scaling_study
+from .scenes import scaling_scene
+
+__all__ = ["BenchConfig", "BenchReport", "bench_config", "run_bench", "scaling_scene"]
+
+
+def knob_study(config: BenchConfig, progress, emit) -> list:
+    """The speed knobs (the knobs module): every scheme on the headline scene at the
+    headline dt, and the compiler knobs of "es" on the largest chain of the scaling series."""
+    scene = load_reference_scene(HEADLINE_SCENE)
+    t_end = config.t_end or scene.simulation.t_end
+    rows = []
+    for method in METHODS:
+        rows += knobs.option_rows(scene, HEADLINE_SCENE, method, 3, HEADLINE_DT, t_end,
+                                        n_steps=2000, repeats=config.repeats,
+                                        progress=progress)
+    if config.run_scaling:
+        n = max(config.scaling_ns)
+        rows += knobs.flag_rows_large(scaling_scene(n), f"scaling n = {n}",
+                                            HEADLINE_DT, n_steps=config.scaling_steps // 2,
+                                            repeats=config.repeats, progress=progress)
+    emit(f"\nspeed knobs\n\n{knobs.knob_table(rows)}")
+    return rows
+
+
+
+@dataclass(frozen=True)
+class BenchReport:
+    headlines: list
+    reference: dict
+    scaling: list | None
+    document: Path
+    figures: dict
+    wall_seconds: float
+
+
+def run_bench(config: BenchConfig, *, progress=None, emit=print) -> BenchReport:
+    """Run every part of `config`, then write the figures and the document (in that order, so
+    that a failure leaves the previous document in place)."""
+    started = time.perf_counter()
+    with Progress("bench", total=0) as bar:
+        if progress is None:   # a status line on a terminal; silent in logs, in CI, --quiet
+            def progress(message: str) -> None:
+                bar.stage(message)
+        return _run_bench(config, progress, emit, started)
+
+
+def _run_bench(config: BenchConfig, progress, emit, started: float) -> BenchReport:
+    machine = machine_description()
+    def emit_scene(name: str, t_end: float, rows) -> None:
+        emit(f"\n{name} (t_end = {t_end:g} s)\n\n{reference_table(rows)}")
+
+    reference = reference_study(config, progress, emit_scene) if config.run_reference else {}
+    scaling = None
+    if config.run_scaling:
+        scaling = scaling_study(config, progress)
+        emit(f"\nscaling series\n\n{scaling_table(scaling)}")
+    knobs = knob_study(config, progress, emit)
+    found = headlines(reference, scaling, config)
+    emit(f"\nheadline\n\n{headline_table(found)}")
+    figures = {}
+    for name, rows in reference.items():
+        figures[name] = plot_work_precision(name, rows, config.figures / f"bench_{name}.png")
+    if scaling is not None:
+        figures["scaling"] = plot_scaling(scaling, config.figures / "bench_scaling.png")
+    wall = time.perf_counter() - started
+    document = write_text(config.out, markdown(config, found, reference, scaling,
+                                                     figures, machine, wall, knobs))
+    emit(f"\nwrote {document} and {len(figures)} figures in {config.figures} "
+         f"({wall / 60:.1f} min)")
+    return BenchReport(found, reference, scaling, document, figures, wall)

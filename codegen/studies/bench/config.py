@@ -1,0 +1,214 @@
+"""What one run of `chaingen bench` does: the series, the targets, the options.
+
+`bench_config` turns the command line's values into a checked BenchConfig; BenchError names a
+bad one. VARIANTS is the one list of Newton options our schemes are run with: every row and
+headline names its variant, and a new knob is one more entry there.
+"""
+from __future__ import annotations
+
+import importlib.util
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ...errors import BenchError
+from ...runtime import JACOBIAN_ACROSS_STEPS, NewtonOptions, Solver
+from ...scene import METHODS, STANDARD_SCENES, load_reference_scene
+from .knobs import newton_options
+
+#: The report and its figures, relative to the working directory, unless --out says otherwise.
+DEFAULT_OUT = "benchmarks.md"
+#: The scene of the headline ratios.
+HEADLINE_SCENE = "three_link_mono"
+HARNESS_FLAGS = ("-O2",)
+
+
+# --------------------------------------------------------------------------------------------
+# What runs
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Variant:
+    """Newton options our schemes are timed with: a label for the tables and the fields the
+    harness sets (the contract's Newton option fields; unset fields keep the package's
+    defaults)."""
+
+    label: str
+    options: dict = field(default_factory=dict)
+
+    def newton_options(self, solver: Solver) -> NewtonOptions:
+        """The same options for Solver.simulate (the error run): the package's defaults with
+        this variant's fields (chaingen.studies.bench.knobs.newton_options)."""
+        return newton_options(solver, self.options)
+
+
+#: The Newton variants every scheme is run with: the package's defaults (warm start; Newton-chord,
+#: the Jacobian once a step, for "es" and "midpoint", simplified Newton for "vi") and simplified
+#: Newton (the factorised Jacobian reused across iterations and steps). The knobs module
+#: measures the other knobs.
+#: A new knob is one more entry here.
+VARIANTS = (Variant("default options", {}),
+            Variant("simplified Newton", {"reuse_jacobian": JACOBIAN_ACROSS_STEPS}))
+
+DEFAULT_DTS = (0.04, 0.02, 0.01, 0.005, 0.0025)
+#: es also runs at these larger steps on the headline scene, so that its energy error can reach
+#: the error of headline c (1e-10 J) from above: measured, not extrapolated.
+BRACKET_DTS = (0.2, 0.1, 0.05)
+#: K = 5: the quadrature error, not dt, bounds es's energy error (O(dt^2K)), so a higher K reaches
+#: a given energy error at a much larger dt (headline c).
+QUADRATURES = (1, 2, 3, 5)
+MUJOCO_INTEGRATORS = ("Euler", "implicitfast", "RK4")
+MUJOCO_DTS = (0.01, 0.005, 0.0025, 0.001, 5e-4, 2.5e-4, 1e-4)
+SCIPY_TOLERANCES = (("DOP853", tuple(10.0 ** -k for k in range(4, 13))),
+                    ("Radau", tuple(10.0 ** -k for k in range(4, 11))))
+SCALING_NS = (2, 3, 5, 10, 20)
+#: (method, quadrature) of the scaling series.
+SCALING_METHODS = (("es", 3), ("vi", 3), ("midpoint", 3))
+#: dt of the scaling series' per-step time, and the smaller ones tried if a scheme fails at it.
+SCALING_DTS = (0.01, 0.005, 0.0025)
+MUJOCO_TIMED_STEPS = 20_000
+#: A SciPy run shorter than this (CPU s) is repeated and its median taken.
+SCIPY_REPEAT_BELOW = 1.0
+
+#: Targets of issue 6.
+TARGET_RATIO_ES = 0.3          # a: es K=3 step / MuJoCo RK4 step, mono, dt = 0.01
+TARGET_ENERGY_ES = 1e-11       # a: es K=3 max energy error (J)
+TARGET_RATIO_VI = 0.15         # b: vi step / MuJoCo RK4 step
+TARGET_EQUAL_ERROR = 1e-10     # c: the energy error (J) at which CPU times are compared
+TARGET_SCIPY_OVER_ES = 100.0   # c: DOP853 CPU / es CPU at that error
+TARGET_BUILD_SECONDS = 20.0    # d: generate + build at n = 20
+TARGET_SCALING_RATIO = 5.0     # d: es step / MuJoCo RK4 step at n = 20
+TARGET_STEP_OVER_EVALUATION = 2.5   # e: es K=3 step / one residual-and-Jacobian evaluation
+HEADLINE_DT = 0.01
+#: The early time of the second trajectory error: over the standard run's 50 s the reference
+#: scenes amplify differences (1e-12 rad at t = 0 becomes 1e-5 to 1e-4 at 50 s), so only an
+#: error taken this early measures a method's accuracy (the reference is good to 1e-14 there).
+EARLY_T = 3.0
+HEADLINE_N = 20
+
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """Everything one run of the benchmark does; `bench_config` makes and checks it."""
+
+    quick: bool
+    scenes: tuple[str, ...]
+    t_end: float | None                  # None: each scene's own [simulation].t_end
+    dts: tuple[float, ...]
+    quadratures: tuple[int, ...]
+    methods: tuple[str, ...]
+    mujoco_integrators: tuple[str, ...]
+    mujoco_dts: tuple[float, ...]
+    scipy_tolerances: tuple[tuple[str, tuple[float, ...]], ...]
+    scaling_ns: tuple[int, ...]
+    scaling_methods: tuple[tuple[str, int], ...]
+    timeout: float
+    repeats: int                         # harness and MuJoCo timing repeats
+    scipy_repeats: int
+    scaling_steps: int                   # steps timed per repeat in the scaling series
+    run_reference: bool
+    run_scaling: bool
+    out: Path
+    figures: Path
+    command: str
+
+
+def _parse_list(text: str, option: str, kind):
+    values = []
+    for item in text.split(","):
+        item = item.strip()
+        what, example = ("an integer", "2,3,5") if kind is int else ("a number", "0.02,0.01")
+        try:
+            value = kind(item)
+        except ValueError:
+            raise BenchError(f"{option}: {item!r} is not {what} (give a comma-separated list, "
+                             f"e.g. {option} {example})") from None
+        values.append(value)
+    return tuple(values)
+
+
+def _divides(dt: float, t_end: float) -> bool:
+    steps = round(t_end / dt)
+    return steps >= 1 and abs(steps * dt - t_end) <= 1e-9 * t_end
+
+
+def _check_divides(dt: float, t_end: float, option: str) -> None:
+    if not _divides(dt, t_end):
+        raise BenchError(f"{option}: dt = {dt!r} s does not divide the run's t_end = {t_end:g} s "
+                         "(the trajectory error is taken at t_end)")
+
+
+def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str | None = None,
+                 timeout: float = 300.0, skip_scaling: bool = False,
+                 skip_reference: bool = False, out: Path | None = None,
+                 figures: Path | None = None) -> BenchConfig:
+    """The run's settings from the command line's values; BenchError names a bad one."""
+    if skip_scaling and skip_reference:
+        raise BenchError("--skip-scaling and --skip-reference: nothing left to run; drop one")
+    if not (math.isfinite(timeout) and timeout > 0):
+        raise BenchError(f"--timeout: must be > 0 seconds and finite, got {timeout}")
+    for module in ("mujoco", "scipy", "matplotlib"):
+        if importlib.util.find_spec(module) is None:
+            raise BenchError(f"chaingen bench needs {module}, which is not installed "
+                             "(pip install -e '.[test]')")
+    scenes = (HEADLINE_SCENE,) if quick else STANDARD_SCENES
+    t_end = 2.0 if quick else None
+    if dts is None:
+        dt_values = (0.02, 0.01) if quick else DEFAULT_DTS
+    else:
+        dt_values = _parse_list(dts, "--dts", float)
+        for dt in dt_values:
+            if not (math.isfinite(dt) and dt > 0):
+                raise BenchError(f"--dts: every dt must be > 0 and finite, got {dt!r}")
+    if not skip_reference:
+        for name in scenes:
+            run_end = t_end or load_reference_scene(name).simulation.t_end
+            for dt in dt_values:
+                _check_divides(dt, run_end, "--dts")
+    if scaling_n is None:
+        ns = (2, 3) if quick else SCALING_NS
+    else:
+        ns = _parse_list(scaling_n, "--scaling-n", int)
+        for n in ns:
+            if not 2 <= n <= 100:
+                raise BenchError(f"--scaling-n: every n must be between 2 and 100 (a "
+                                 f"multi-articular spring needs two joints), got {n}")
+    out_default = out is None
+    out = Path(out) if out is not None else Path(DEFAULT_OUT)
+    if out.is_dir():
+        raise BenchError(f"--out: {out} is a directory; give a file name")
+    if not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise BenchError(f"--out: directory {out.parent} does not exist")
+    figures_default = figures is None
+    figures = Path(figures) if figures is not None else out.parent / "figures"
+    if figures.exists() and not figures.is_dir():
+        raise BenchError(f"--figures: {figures} exists and is not a directory")
+    if not figures.exists() and not figures.parent.is_dir():
+        raise BenchError(f"--figures: directory {figures.parent} does not exist")
+
+    command = ["chaingen", "bench"]
+    command += ["--quick"] if quick else []
+    command += ["--dts", dts] if dts is not None else []
+    command += ["--scaling-n", scaling_n] if scaling_n is not None else []
+    command += ["--skip-scaling"] if skip_scaling else []
+    command += ["--skip-reference"] if skip_reference else []
+    command += ["--timeout", f"{timeout:g}"] if timeout != 300.0 else []
+    command += [] if out_default else ["--out", str(out)]
+    command += [] if figures_default else ["--figures", str(figures)]
+    return BenchConfig(
+        quick=quick, scenes=scenes, t_end=t_end, dts=dt_values,
+        quadratures=(3,) if quick else QUADRATURES, methods=METHODS,
+        mujoco_integrators=("Euler", "RK4") if quick else MUJOCO_INTEGRATORS,
+        mujoco_dts=(0.01, 0.001) if quick else MUJOCO_DTS,
+        scipy_tolerances=((("DOP853", (1e-6, 1e-10)), ("Radau", (1e-6,))) if quick
+                          else SCIPY_TOLERANCES),
+        scaling_ns=ns, scaling_methods=SCALING_METHODS, timeout=float(timeout),
+        repeats=3 if quick else 7, scipy_repeats=1 if quick else 3,
+        scaling_steps=200 if quick else 1000,
+        run_reference=not skip_reference, run_scaling=not skip_scaling,
+        out=out, figures=figures, command=" ".join(command))
+
+
+def steps(t_end: float, dt: float) -> int:
+    return round(t_end / dt)

@@ -1,0 +1,120 @@
+"""Time a generated package's C loop: steps, and the evaluations a step cannot avoid.
+
+A small C program (templates/bench_harness.c.j2) is compiled with the package's sources and
+times, with the process CPU clock and no Python in between, N calls of <prefix>_step, one
+residual-and-Jacobian evaluation, one residual evaluation and one LU factorisation and solve of
+dF/dz. Each is the median of repeats. The ratio step / (residual and Jacobian) is how close a
+step is to its floor: a Newton step cannot do with less than one such evaluation.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ...generate.interface import CInterface
+from ...generate.package import GeneratedPackage, template_environment
+from ...runtime import contract
+from ...runtime.build import STRICT_FLAGS, compiler
+from ...runtime.contract import Features
+
+
+class HarnessError(RuntimeError):
+    """The harness did not build, or a step failed while timing."""
+
+
+@dataclass(frozen=True)
+class LoopTimings:
+    """CPU time of one step and of its building blocks, in nanoseconds (medians of repeats)."""
+
+    step_ns: float
+    residual_jacobian_ns: float
+    residual_ns: float
+    lu_ns: float
+    mean_iterations: float
+
+    @property
+    def step_over_evaluation(self) -> float:
+        """Step time in units of one residual-and-Jacobian evaluation."""
+        return self.step_ns / self.residual_jacobian_ns
+
+
+class Harness:
+    """A compiled timing program for one package; call `time` as often as needed."""
+
+    def __init__(self, package: GeneratedPackage, *, flags: tuple[str, ...] = ("-O2",),
+                 workdir: Path | None = None):
+        self.package = package
+        self._owned = workdir is None
+        self.workdir = Path(workdir or tempfile.mkdtemp(prefix=f"bench-{package.prefix}-"))
+        for name, text in package.files.items():
+            (self.workdir / name).write_text(text)
+        manifest = package.manifest
+        features = Features(inputs=bool(manifest["nu"]), flows=manifest["energy_flows"],
+                            sensitivities=manifest["sensitivities"],
+                            segments=manifest["segment_tolerance"] is not None)
+        environment = template_environment(CInterface(package.prefix, features))
+        source = environment.get_template("bench_harness.c.j2").render(
+            prefix=package.prefix, PREFIX=package.prefix.upper(), nu=manifest["nu"],
+            flows=manifest["energy_flows"],
+            option_fields=[(field.name, field.c_type) for field in contract.NEWTON_OPTIONS])
+        (self.workdir / "bench_harness.c").write_text(source)
+        self.program = self.workdir / "bench_harness"
+        # Each source in its own compiler process, at once, the package's own flags for its
+        # large model (manifest source_flags) as chaingen's build does.
+        source_flags = manifest.get("source_flags", {})
+        sources = ["bench_harness.c", *manifest["sources"]]
+        commands = [[compiler(), *STRICT_FLAGS, *source_flags.get(name, flags), "-c", name, "-o",
+                     f"{name}.o"] for name in sources]
+        commands.append([compiler(), "-o", str(self.program), *(f"{name}.o" for name in sources),
+                         "-lm"])
+        start = time.perf_counter()
+        processes = [subprocess.Popen(command, cwd=self.workdir, stdout=subprocess.PIPE,
+                                      stderr=subprocess.PIPE, text=True)
+                     for command in commands[:-1]]
+        results = [(command, process, process.communicate()[1])
+                   for command, process in zip(commands, processes)]
+        if all(process.returncode == 0 for _, process, _ in results):
+            link = subprocess.run(commands[-1], cwd=self.workdir, capture_output=True, text=True)
+            results.append((commands[-1], link, link.stderr))
+        #: wall time of compiling and linking package and harness (the model dominates)
+        self.build_seconds = time.perf_counter() - start
+        for command, process, stderr in results:
+            if process.returncode != 0:
+                raise HarnessError(f"building the harness failed: {' '.join(command)}\n{stderr}")
+
+    def time(self, x0, dt: float, *, n_steps: int = 2000, repeats: int = 7,
+             options: dict[str, float] | None = None) -> LoopTimings:
+        """Timings of `n_steps` steps from state x0 (repeated), and of the evaluations."""
+        x0 = np.asarray(x0, dtype=float)
+        arguments = [str(self.program), str(n_steps), str(repeats), repr(float(dt))]
+        arguments += [f"{key}={value!r}" for key, value in (options or {}).items()]
+        result = subprocess.run(arguments, input=" ".join(map(repr, x0.tolist())),
+                                capture_output=True, text=True)
+        try:
+            report = json.loads(result.stdout)
+        except json.JSONDecodeError:
+            raise HarnessError(f"{self.package.prefix}: harness failed: {result.stderr}") from None
+        if report["status"] != 0:
+            raise HarnessError(f"{self.package.prefix}: status {report['status']} while timing "
+                               f"(step {report.get('failed_step', '?')})")
+        return LoopTimings(step_ns=report["step_ns"],
+                           residual_jacobian_ns=report["residual_jacobian_ns"],
+                           residual_ns=report["residual_ns"], lu_ns=report["lu_ns"],
+                           mean_iterations=report["iterations"] / n_steps)
+
+    def close(self) -> None:
+        if self._owned:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+
+    def __enter__(self) -> Harness:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

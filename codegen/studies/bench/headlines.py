@@ -1,0 +1,212 @@
+"""Part 3 of the benchmark: the headline ratios with their targets, from parts 1 and 2."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ...scene import load_reference_scene
+from .config import (
+    HEADLINE_DT,
+    HEADLINE_N,
+    HEADLINE_SCENE,
+    TARGET_BUILD_SECONDS,
+    TARGET_ENERGY_ES,
+    TARGET_EQUAL_ERROR,
+    TARGET_RATIO_ES,
+    TARGET_RATIO_VI,
+    TARGET_SCALING_RATIO,
+    TARGET_SCIPY_OVER_ES,
+    TARGET_STEP_OVER_EVALUATION,
+    VARIANTS,
+    BenchConfig,
+    Variant,
+)
+from .runs import RunRow, method_label
+from .scaling import ScalingRow
+
+
+def interpolate_cost(points, target: float) -> float | None:
+    """CPU cost at error `target` by log-log interpolation along work-precision points.
+
+    points: (cost, error) pairs, both > 0 (others are ignored). Taken in order of cost, the
+    first (cheapest) pair of neighbours whose errors bracket `target` is interpolated:
+    log cost is linear in log error between them. None when no pair brackets `target`, that
+    is when it is outside the measured errors: never extrapolated.
+    """
+    usable = sorted((c, e) for c, e in points if c > 0 and e > 0)
+    log_target = math.log(target)
+    for (c0, e0), (c1, e1) in zip(usable, usable[1:]):
+        if e0 == target:
+            return c0
+        if (e0 - target) * (e1 - target) <= 0:
+            if e1 == e0:
+                return c0
+            fraction = (log_target - math.log(e0)) / (math.log(e1) - math.log(e0))
+            return math.exp(math.log(c0) + fraction * (math.log(c1) - math.log(c0)))
+    if len(usable) == 1 and usable[0][1] == target:
+        return usable[0][0]
+    return None
+
+
+@dataclass(frozen=True)
+class Headline:
+    key: str
+    claim: str
+    variant: str
+    measured: str          # the value with what it was computed from
+    target: str
+    passed: bool | None    # None: not measured
+
+    @property
+    def mark(self) -> str:
+        return {True: "pass", False: "FAIL", None: "not measured"}[self.passed]
+
+
+def _find(rows, **match) -> RunRow | None:
+    for row in rows:
+        if all(getattr(row, key) == value for key, value in match.items()):
+            return row
+    return None
+
+
+def _us(seconds: float) -> str:
+    return f"{seconds * 1e6:.2f} us"
+
+
+def _step_ratio_headline(key: str, claim: str, rows, method: str, variant: Variant,
+                         target: float) -> Headline:
+    ours = _find(rows, method=method, variant=variant.label, dt=HEADLINE_DT)
+    peer = _find(rows, method="MuJoCo RK4", dt=HEADLINE_DT)
+    target_text = f"<= {target:g}"
+    if ours is None or peer is None:
+        missing = "our run" if ours is None else "MuJoCo RK4"
+        return Headline(key, claim, variant.label, f"{missing} at dt = {HEADLINE_DT:g} s not in "
+                        "this run", target_text, None)
+    if ours.failure or peer.failure:
+        return Headline(key, claim, variant.label,
+                        f"failed: {ours.failure or peer.failure}", target_text, False)
+    ratio = ours.step_seconds / peer.step_seconds
+    return Headline(key, claim, variant.label,
+                    f"{ratio:.3f} ({_us(ours.step_seconds)} / {_us(peer.step_seconds)})",
+                    target_text, ratio <= target)
+
+
+def equal_error_headline(rows, variant: Variant, es_method: str) -> Headline:
+    """c: CPU time of SciPy DOP853 / CPU time of es at energy error TARGET_EQUAL_ERROR."""
+    claim = (f"SciPy DOP853 CPU / {es_method} CPU at equal energy error "
+             f"{TARGET_EQUAL_ERROR:.0e} J, standard run")
+    target_text = f">= {TARGET_SCIPY_OVER_ES:g}"
+
+    def points(method: str, variant_label: str):
+        return [(row.run_seconds, row.energy_error) for row in rows
+                if row.method == method and row.variant == variant_label and not row.failure]
+
+    es_points = points(es_method, variant.label)
+    scipy_points = points("SciPy DOP853", "-")
+    if not es_points or not scipy_points:
+        return Headline("c", claim, variant.label, "runs missing from this run", target_text,
+                        None)
+    scipy_cost = interpolate_cost(scipy_points, TARGET_EQUAL_ERROR)
+    errors = [e for _, e in scipy_points]
+    if scipy_cost is None:
+        return Headline("c", claim, variant.label,
+                        f"DOP853's energy errors ({min(errors):.1e} .. {max(errors):.1e} J) do "
+                        f"not reach {TARGET_EQUAL_ERROR:.0e}: not measured", target_text, None)
+    es_cost = interpolate_cost(es_points, TARGET_EQUAL_ERROR)
+    if es_cost is not None:
+        ratio = scipy_cost / es_cost
+        return Headline("c", claim, variant.label,
+                        f"{ratio:.1f} ({scipy_cost * 1e3:.2f} ms / {es_cost * 1e3:.2f} ms, both "
+                        "interpolated)", target_text, ratio >= TARGET_SCIPY_OVER_ES)
+    es_errors = [e for _, e in es_points]
+    if max(es_errors) < TARGET_EQUAL_ERROR:
+        # Every es run is more accurate than the target: the cheapest one reaches it, so its
+        # cost bounds es's cost at the target from above and the ratio from below.
+        cheapest_cost, cheapest_error = min(es_points)
+        ratio = scipy_cost / cheapest_cost
+        return Headline("c", claim, variant.label,
+                        f">= {ratio:.1f} (lower bound: {scipy_cost * 1e3:.2f} ms interpolated / "
+                        f"{cheapest_cost * 1e3:.2f} ms, {es_method}'s cheapest run, which is "
+                        f"already at {cheapest_error:.1e} J; every {es_method} run is below "
+                        f"{TARGET_EQUAL_ERROR:.0e})", target_text,
+                        True if ratio >= TARGET_SCIPY_OVER_ES else None)
+    return Headline("c", claim, variant.label,
+                    f"{es_method}'s energy errors ({min(es_errors):.1e} .. {max(es_errors):.1e} "
+                    f"J) do not reach {TARGET_EQUAL_ERROR:.0e}: not measured", target_text, None)
+
+
+def headlines(reference: dict[str, list[RunRow]], scaling: list[ScalingRow] | None,
+              config: BenchConfig) -> list[Headline]:
+    """Rows a-e of the issue, one per Newton variant, from this run's measurements."""
+    rows = reference.get(HEADLINE_SCENE, [])
+    scene = load_reference_scene(HEADLINE_SCENE)
+    es = method_label(scene, "es", 3)
+    where = f"{HEADLINE_SCENE}, dt = {HEADLINE_DT:g} s"
+    found = []
+    for variant in VARIANTS:
+        found.append(_step_ratio_headline(
+            "a", f"{es} step / MuJoCo RK4 step, {where}", rows, es, variant, TARGET_RATIO_ES))
+        es_row = _find(rows, method=es, variant=variant.label, dt=HEADLINE_DT)
+        if es_row is None or es_row.failure:
+            measured = es_row.failure if es_row else "not in this run"
+            found.append(Headline("a", f"{es} max energy error, {where}", variant.label,
+                                  measured, f"<= {TARGET_ENERGY_ES:.0e} J", None))
+        else:
+            found.append(Headline("a", f"{es} max energy error, {where}", variant.label,
+                                  f"{es_row.energy_error:.2e} J", f"<= {TARGET_ENERGY_ES:.0e} J",
+                                  es_row.energy_error <= TARGET_ENERGY_ES))
+        found.append(_step_ratio_headline(
+            "b", f"vi step / MuJoCo RK4 step, {where}", rows, "vi", variant, TARGET_RATIO_VI))
+        es_labels = [label for label in dict.fromkeys(row.method for row in rows)
+                     if label.split()[0] == "es"] or [es]
+        found += [equal_error_headline(rows, variant, label) for label in es_labels]
+        found += scaling_headlines(scaling, variant)
+        if es_row is None or es_row.failure:
+            found.append(Headline("e", f"{es} step / one residual-and-Jacobian evaluation, "
+                                  f"{where}", variant.label, "not in this run",
+                                  f"<= {TARGET_STEP_OVER_EVALUATION:g}", None))
+        else:
+            ratio = es_row.step_over_evaluation
+            found.append(Headline(
+                "e", f"{es} step / one residual-and-Jacobian evaluation, {where}",
+                variant.label, f"{ratio:.2f} ({_us(es_row.step_seconds)} / "
+                f"{_us(es_row.step_seconds / ratio)})",
+                f"<= {TARGET_STEP_OVER_EVALUATION:g}", ratio <= TARGET_STEP_OVER_EVALUATION))
+    return sorted(found, key=lambda headline: headline.key)   # stable: variants stay in order
+
+
+def scaling_headlines(scaling: list[ScalingRow] | None, variant: Variant) -> list[Headline]:
+    es = "es K=3"
+    claims = (f"{es} generate + build seconds, scaling series n = {HEADLINE_N}",
+              f"{es} step / MuJoCo RK4 step, scaling series n = {HEADLINE_N}")
+    targets = (f"<= {TARGET_BUILD_SECONDS:g} s", f"<= {TARGET_SCALING_RATIO:g}")
+    row = None
+    if scaling is not None:
+        row = next((r for r in scaling if r.method == es and r.n == HEADLINE_N
+                    and r.variant == variant.label), None)
+    if row is None:
+        reason = ("scaling series skipped" if scaling is None
+                  else f"n = {HEADLINE_N} not in the scaling series")
+        return [Headline("d", claim, variant.label, reason, target, None)
+                for claim, target in zip(claims, targets)]
+    found = []
+    seconds = row.generate_and_build_seconds
+    if seconds is None:
+        found.append(Headline("d", claims[0], variant.label, f"failed: {row.failure}",
+                              targets[0], False))
+    else:
+        found.append(Headline("d", claims[0], variant.label,
+                              f"{seconds:.1f} s ({row.generate_seconds:.1f} s generate + "
+                              f"{row.build_seconds:.1f} s build)", targets[0],
+                              seconds <= TARGET_BUILD_SECONDS))
+    ratio = row.ratio
+    if ratio is None:
+        found.append(Headline("d", claims[1], variant.label, f"failed: {row.failure}",
+                              targets[1], False))
+    else:
+        found.append(Headline("d", claims[1], variant.label,
+                              f"{ratio:.2f} ({_us(row.step_seconds)} / "
+                              f"{_us(row.mujoco_step_seconds)}, dt = {row.dt:g} s)",
+                              targets[1], ratio <= TARGET_SCALING_RATIO))
+    return found
+

@@ -1,0 +1,249 @@
+"""The benchmark's document: its tables, the machine, how it was measured."""
+from __future__ import annotations
+
+import importlib.metadata
+import os
+import platform
+import subprocess
+import time
+from pathlib import Path
+
+from ...generate.interface import c_literal
+from ...runtime import contract
+from ...runtime.build import STRICT_FLAGS, compiler
+from .config import (
+    EARLY_T,
+    HARNESS_FLAGS,
+    HEADLINE_DT,
+    HEADLINE_SCENE,
+    MUJOCO_TIMED_STEPS,
+    VARIANTS,
+    BenchConfig,
+)
+from .headlines import Headline
+from .knobs import knob_table
+from .runs import RunRow
+from .scaling import ScalingRow
+
+
+def _time(seconds: float | None) -> str:
+    if seconds is None:
+        return "-"
+    if seconds < 1e-6:
+        return f"{seconds * 1e9:.0f} ns"
+    if seconds < 1e-3:
+        return f"{seconds * 1e6:.2f} us"
+    if seconds < 1.0:
+        return f"{seconds * 1e3:.2f} ms"
+    return f"{seconds:.2f} s"
+
+
+def _sci(value: float | None) -> str:
+    return "-" if value is None else f"{value:.1e}"
+
+
+def _fixed(value: float | None, digits: int = 2) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def _megabytes(value: float | None) -> str:
+    return "-" if value is None else f"{value:.0f} MB"
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def reference_table(rows: list[RunRow]) -> str:
+    lines = ["| method | variant | setting | per step | run CPU | t_realtime | max energy error "
+             "[J] | max constraint error | trajectory error at t_end [rad] | trajectory error at "
+             f"t = {min(EARLY_T, rows[0].t_end):g} s [rad] | Newton it. | step / (res+Jac) | "
+             "note |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        lines.append(
+            f"| {row.method} | {row.variant} | {row.setting} | {_time(row.step_seconds)} | "
+            f"{_time(row.run_seconds)} | {_sci(row.t_realtime)} | {_sci(row.energy_error)} | "
+            f"{_sci(row.constraint_error)} | {_sci(row.trajectory_error)} | "
+            f"{_sci(row.early_trajectory_error)} | {_fixed(row.newton_iterations)} | "
+            f"{_fixed(row.step_over_evaluation)} | "
+            f"{_cell('failed: ' + row.failure) if row.failure else ''} |")
+    return "\n".join(lines)
+
+
+def scaling_table(rows: list[ScalingRow]) -> str:
+    lines = ["| method | n | variant | generate | build | generate + build | peak RSS generate | "
+             "peak RSS compile | model C | dt | per step | Newton it. | MuJoCo RK4 per step | "
+             "ratio | note |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        size = "-" if row.model_c_bytes is None else f"{row.model_c_bytes / 1024:.0f} KiB"
+        lines.append(
+            f"| {row.method} | {row.n} | {row.variant} | {_time(row.generate_seconds)} | "
+            f"{_time(row.build_seconds)} | {_time(row.generate_and_build_seconds)} | "
+            f"{_megabytes(row.generate_peak_mb)} | {_megabytes(row.compile_peak_mb)} | "
+            f"{size} | {'-' if row.dt is None else f'{row.dt:g} s'} | "
+            f"{_time(row.step_seconds)} | {_fixed(row.newton_iterations)} | "
+            f"{_time(row.mujoco_step_seconds)} | {_fixed(row.ratio)} | "
+            f"{_cell(row.failure) if row.failure else ''} |")
+    return "\n".join(lines)
+
+
+def headline_table(found: list[Headline]) -> str:
+    lines = ["| | claim | variant | measured | target | |", "|---|---|---|---|---|---|"]
+    for h in found:
+        lines.append(f"| {h.key} | {h.claim} | {h.variant} | {_cell(h.measured)} | {h.target} "
+                     f"| {h.mark} |")
+    return "\n".join(lines)
+
+
+def _first_line(command: list[str]) -> str:
+    try:
+        result = subprocess.run(command, capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired):
+        return "unknown"
+    return (result.stdout.strip().splitlines() or ["unknown"])[0]
+
+
+def machine_description() -> list[tuple[str, str]]:
+    """What the numbers were measured on: CPU, cores, memory, OS, compiler and versions."""
+    cpu = "unknown"
+    memory = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal"):
+                memory = f"{int(line.split()[1]) / 1024 ** 2:.1f} GiB"
+                break
+    except OSError:
+        pass
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:
+        usable = os.cpu_count()
+
+    def version(package: str) -> str:
+        try:
+            return importlib.metadata.version(package)
+        except importlib.metadata.PackageNotFoundError:
+            return "not installed"
+
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    return [
+        ("CPU", cpu),
+        ("cores", f"{os.cpu_count()} ({usable} usable by this process); load average at the "
+                  f"start {load} (the machine is shared)"),
+        ("memory", memory),
+        ("OS", platform.platform()),
+        ("C compiler", f"{compiler()}: {_first_line([compiler(), '--version'])}"),
+        ("our flags", " ".join(STRICT_FLAGS + HARNESS_FLAGS) + ", and the package's own "
+                      "per-source flags in their place (the solver source -O3, a generated "
+                      "model over 1 MB -O1), each source in its own compiler process, as "
+                      "chaingen's build does; the Solver used for the errors is that build"),
+        ("MuJoCo", f"{version('mujoco')} (PyPI wheel, its own build flags)"),
+        ("SciPy", f"{version('scipy')} (right-hand side and Jacobian: CasADi C compiled by "
+                  "chaingen.reference.scipy_peer with the runtime's default flags; integrator in "
+                  "Python)"),
+        ("Python", platform.python_version()),
+        ("numpy, sympy, casadi, matplotlib",
+         f"{version('numpy')}, {version('sympy')}, {version('casadi')}, "
+         f"{version('matplotlib')}"),
+    ]
+
+
+
+def _link(figure: Path, document: Path) -> str:
+    return Path(os.path.relpath(figure, document.parent)).as_posix()
+
+
+HOW_MEASURED = """\
+- CPU time is process time of the compiled loop only, the median of repeats: ours from a C
+  program calling the generated step over the whole run (`chaingen.studies.bench.harness`),
+  MuJoCo from one `mj_step(model, data, nstep=N)` call (at most {mujoco_steps} steps a repeat:
+  its cost per step does not depend on the state), SciPy from `solve_ivp` alone (right-hand side and
+  Jacobian compiled; its steps and their error control run in Python). Run CPU = per step x
+  steps for ours and MuJoCo; t_realtime = run CPU / simulated time.
+- Max energy error: max |H - H_0| over every step of the run (SciPy: over its accepted steps).
+  Trajectory error: max_i |phi_i(t) - phi_ref,i(t)|, each difference wrapped to [-pi, pi),
+  against SciPy DOP853 at rtol = atol = 2.2e-14 (`chaingen.reference.scipy_peer`), at t_end and at
+  t = {early_t:g} s (the plots use the latter; SciPy's run to it is a second, untimed one).
+  Max constraint error: es max_i |c_i|, vi max_i ||q_i| - 1|; "-" for minimal coordinates.
+- Over 50 s the reference scenes amplify small differences strongly, so a trajectory error of
+  order 1 rad means a run has lost the phase, not that its model is wrong: second-order
+  schemes (ours, MuJoCo's Euler) get there at every dt of the series while their energy error
+  stays small. The energy error and the trajectory error measure different things. At
+  t = {early_t:g} s the reference is good to about 1e-14 rad and the errors order the methods.
+- Newton it.: mean iterations per step; step / (res+Jac): the step's time in units of one
+  residual-and-Jacobian evaluation, the least a Newton step can cost.
+- Variant: the Newton options ours ran with ({variants}). K (es only) is the Gauss-Legendre
+  quadrature of the spring terms; a scene without springs has no K.
+- The machine is shared, so single timings carry noise of some ten percent: compare ratios
+  measured side by side, as the headline does.
+"""
+
+
+
+def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
+             figures: dict[str, Path], machine, wall_seconds: float, knobs=()) -> str:
+    lines = ["# Benchmarks: speed against accuracy", "",
+             f"Written by `{config.command}` in {wall_seconds / 60:.1f} min of wall time on "
+             f"{time.strftime('%Y-%m-%d')}. Every number and figure comes from that run; nothing "
+             "is edited by hand." + (" **Quick mode**: a smoke test with short runs and few "
+                                     "series, not the benchmark." if config.quick else ""),
+             "", "## Headline", "",
+             "The issue's targets, measured side by side in this run (a-c, e on "
+             f"{HEADLINE_SCENE}, standard run; d on the scaling series).", "",
+             headline_table(found), "", "## Machine", ""]
+    lines += [f"- {key}: {value}" for key, value in machine]
+    lines += ["", "## How it is measured", "",
+              HOW_MEASURED.format(mujoco_steps=MUJOCO_TIMED_STEPS, early_t=EARLY_T,
+                                  variants="; ".join(f"{v.label}: "
+                                                     f"{v.options or 'the package defaults'}"
+                                                     for v in VARIANTS)).rstrip()]
+    if reference:
+        lines += ["", "## Reference scenes", ""]
+        for name, rows in reference.items():
+            lines += [f"### {name}", "",
+                      f"From the scene's initial state to t_end = {rows[0].t_end:g} s.", "",
+                      f"![{name} work-precision]({_link(figures[name], config.out)})", "",
+                      reference_table(rows), ""]
+    if scaling is not None:
+        lines += ["## Scaling", "",
+                  "`chaingen.studies.bench.scenes.scaling_scene(n)`: n identical links "
+                  "(1 kg, 0.4 m), g = 9.81, "
+                  "a mono-articular spring across every joint and one multi-articular spring "
+                  "over joints 1..min(n, 3). Generate (SymPy, CasADi, rendering) and build "
+                  "(gcc with the package's per-source flags, sources compiled side by side) "
+                  "run in a child process with a limit of "
+                  f"{config.timeout:g} s; a scheme over the limit, or that the lower bound "
+                  "t(n') >= t(n) (n'/n)^2 puts over it, is not run at larger n. "
+                  "Peak RSS: of the generating Python process (VmHWM), and of the compiler "
+                  "with the passes it runs (GNU time). "
+                  f"Per step: {config.scaling_steps} steps from the initial state.", "",
+                  f"![scaling]({_link(figures['scaling'], config.out)})", "",
+                  scaling_table(scaling), ""]
+    if knobs:
+        tolerances = ", ".join(f"{field.name} = {c_literal(field.default)}"
+                               for field in contract.NEWTON_OPTIONS
+                               if field.name.endswith(("_rtol", "_atol", "_tol")))
+        lines += ["## Speed knobs", "", KNOBS_TEXT.format(scene=HEADLINE_SCENE, dt=HEADLINE_DT,
+                                                          tolerances=tolerances),
+                  "", knob_table(knobs), ""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+KNOBS_TEXT = """\
+One knob changed at a time against the package defaults, on {scene} at dt = {dt} s (step time
+of the C loop, median of repeats; energy error over the standard run with the same options), and
+the compiler knobs again on the largest chain of the scaling series, where the dense LU and the
+size of the generated model dominate. The package defaults are warm start, Newton-chord (the
+Jacobian evaluated and factorised once a step, reused within it) for "es" and "midpoint" and
+simplified Newton (reused across steps) for "vi", tolerances {tolerances}, the solver
+source at -O3 and a generated model larger than 1 MB at -O1. "step / (F, dF/dz)" is the step's
+time in units of one residual-and-Jacobian evaluation.
+Not measured: constants baked into the code against run-time parameters; every scene number is
+baked into the generated code (no parameter vector exists yet to compare against)."""
+

@@ -1,0 +1,54 @@
+"""The scaling series' chain: n identical links with a spring on every joint."""
+from __future__ import annotations
+
+import math
+
+from ...scene import Scene, parse_scene
+
+SCALING_LINK = {"mass": 1.0, "length": 0.4, "com": 0.2, "fastening": 0.05}
+SCALING_MONO_STIFFNESS = 200.0     # N/m: k L r = 4 N m/rad per joint, like m g L
+SCALING_MULTI_STIFFNESS = 100.0
+#: Rest lengths are this fraction of the straight posture's, so the springs pull from the start.
+SCALING_REST_FRACTION = 0.95
+#: The chain starts hanging (phi_1 = -pi/2 is straight down), deflected by this at joint 1
+#: and bent by SCALING_INITIAL_ANGLE at every other joint. Released from the horizontal instead,
+#: a long chain whips: MuJoCo's RK4 at dt = 0.01 s goes unstable from n = 10 on.
+SCALING_HANGING_DEFLECTION = 0.2
+SCALING_INITIAL_ANGLE = 0.1
+
+
+def scaling_scene_text(n: int) -> str:
+    """TOML of the scaling series' chain of n identical links (see scaling_scene)."""
+    link = SCALING_LINK
+    inertia = link["mass"] * link["length"] ** 2 / 12
+    lines = [f"# chaingen bench scaling series: {n} identical links, a mono-articular spring",
+             "# across every joint and one multi-articular spring over the first joints.",
+             f'name = "scaling-{n}"', "gravity = 9.81", "", "[base]",
+             f"fastening = {link['fastening']!r}", ""]
+    for _ in range(n):
+        lines += ["[[links]]", f"mass = {link['mass']!r}", f"inertia = {inertia!r}",
+                  f"length = {link['length']!r}", f"com = {link['com']!r}",
+                  f"fastening = {link['fastening']!r}", ""]
+    # Straight posture, all offsets equal: each segment P_j -> P_{j+1} is one link long.
+    for j in range(1, n + 1):
+        lines += ["[[springs]]", f"joints = [{j}, {j}]",
+                  f"stiffness = {SCALING_MONO_STIFFNESS!r}",
+                  f"rest_length = {SCALING_REST_FRACTION * link['length']!r}", ""]
+    last = min(n, 3)
+    lines += ["[[springs]]", f"joints = [1, {last}]", f"stiffness = {SCALING_MULTI_STIFFNESS!r}",
+              f"rest_length = {SCALING_REST_FRACTION * last * link['length']!r}", ""]
+    angles = ", ".join([repr(-math.pi / 2 + SCALING_HANGING_DEFLECTION)]
+                       + [repr(SCALING_INITIAL_ANGLE)] * (n - 1))
+    lines += ["[initial]", f"angles = [{angles}]", f"velocities = [{', '.join(['0.0'] * n)}]",
+              "", "[simulation]", 'method = "es"', "quadrature = 3", "dt = 0.01",
+              "t_end = 10.0", ""]
+    return "\n".join(lines)
+
+
+def scaling_scene(n: int) -> Scene:
+    """n identical links (1 kg, 0.4 m, COM at 0.2 m, J = m L^2 / 12, fastenings 0.05 m off the
+    axis), g = 9.81, a mono-articular spring across every joint and one multi-articular spring
+    over joints 1..min(n, 3), rest lengths 95 % of the straight posture's. At rest, hanging
+    0.2 rad off the vertical with every other joint bent by 0.1 rad. Parsed from TOML like a
+    user's file, so it is validated like one."""
+    return parse_scene(scaling_scene_text(n), f"<scaling scene n={n}>", f"scaling-{n}")

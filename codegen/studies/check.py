@@ -1,0 +1,211 @@
+"""`chaingen check`: the generated C against numbers computed independently of it.
+
+For users' CI: every generated derivative against central finite differences of the generated
+function it differentiates, and every generated function against its SymPy expression
+evaluated numerically (lambdify), at random admissible states. One row per quantity with the
+worst relative error over all samples; the check fails when any row exceeds its tolerance.
+
+- residual Jacobian dF/dz vs central differences of F (C);
+- step sensitivities d s1/d s0, d s1/d u vs central differences of the joint-space step map;
+- residual F, next state, initial state, energy, joint angles and rates, constraint residuals
+  vs SymPy (the expressions the code was generated from).
+
+The states are random joint-space states near the scene's initial one, mapped by the generated
+initial_state; the SymPy comparisons also use states pushed off the constraint manifold, where
+the constraint residuals are not round-off.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy as sp
+
+from ..runtime import NewtonOptions, Solver
+from ..symbolic.schemes import DiscreteScheme
+
+#: Newton settings for the differenced step map: tight, so solver noise stays below the
+#: differences' own error.
+TIGHT = NewtonOptions(max_iterations=50, update_rtol=1e-14, update_atol=1e-14,
+                      residual_tol=1e-12)
+#: Worst relative error allowed: finite differences (O(h^2) plus round-off / h), and numeric
+#: SymPy evaluations (round-off of two different expression graphs).
+DERIVATIVE_TOLERANCE = 1e-6
+VALUE_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class CheckRow:
+    quantity: str
+    reference: str      # what the generated function is compared with
+    worst: float        # worst relative error over the samples
+    tolerance: float
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.worst <= self.tolerance)   # NaN fails
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    scene: str
+    method: str
+    quadrature: int | None
+    samples: int
+    rows: tuple[CheckRow, ...] = field(default=())
+
+    @property
+    def passed(self) -> bool:
+        return all(row.passed for row in self.rows)
+
+    def table(self) -> str:
+        label = f"method {self.method}" + (f", quadrature {self.quadrature}"
+                                           if self.quadrature is not None else "")
+        lines = [f"{self.scene}: {label}, {self.samples} random states",
+                 f"  {'quantity':<22} {'against':<22} {'worst rel. error':>16} "
+                 f"{'tolerance':>10}  result"]
+        for row in self.rows:
+            lines.append(f"  {row.quantity:<22} {row.reference:<22} {row.worst:>16.2e} "
+                         f"{row.tolerance:>10.0e}  {'ok' if row.passed else 'MISMATCH'}")
+        lines.append("  passed" if self.passed else "  FAILED: a generated function disagrees")
+        return "\n".join(lines)
+
+
+def relative_error(computed, reference) -> float:
+    """max |computed - reference| / max(max |reference|, 1e-300); NaN anywhere gives NaN."""
+    computed, reference = np.asarray(computed, float), np.asarray(reference, float)
+    if computed.shape != reference.shape:
+        return float("nan")
+    if not (np.all(np.isfinite(computed)) and np.all(np.isfinite(reference))):
+        return float("nan")
+    if computed.size == 0:
+        return 0.0
+    return float(np.abs(computed - reference).max() / max(np.abs(reference).max(), 1e-300))
+
+
+def central_differences(f, point, steps) -> np.ndarray:
+    columns = []
+    for j, h in enumerate(steps):
+        e = np.zeros(len(point))
+        e[j] = h
+        columns.append((np.asarray(f(point + e)) - np.asarray(f(point - e))) / (2 * h))
+    return np.column_stack(columns) if columns else np.zeros((0, 0))
+
+
+class _SympyFunctions:
+    """The scheme's expressions, lambdified over the same inputs as the C functions."""
+
+    def __init__(self, scheme: DiscreteScheme):
+        state = list(scheme.state)
+        solve = scheme.output_solve
+        solved = list(solve.symbols) if solve else []
+
+        def lam(inputs, expressions):
+            return sp.lambdify(inputs, list(expressions), modules="numpy", cse=True)
+
+        self.residual = scheme.step_function(scheme.residual)
+        self.next_state = scheme.step_function(scheme.next_state)
+        self.initial_state = lam(list(scheme.initial_angles) + list(scheme.initial_velocities),
+                                 scheme.initial_state)
+        self.outputs = lam(state + solved, list(scheme.joint_angles)
+                           + list(scheme.joint_velocities) + [scheme.energy]
+                           + list(scheme.constraint_residuals))
+        self.solve = (lam(state, list(solve.matrix)), lam(state, solve.rhs)) if solve else None
+        self.n = scheme.scene.n
+        self.nconstraint = scheme.constraint_residuals.shape[0]
+
+    def evaluate_outputs(self, x) -> np.ndarray:
+        solved = []
+        if self.solve:
+            matrix = np.array(self.solve[0](*x), float)
+            size = int(round(np.sqrt(matrix.size)))
+            solved = list(np.linalg.solve(matrix.reshape(size, size),
+                                          np.array(self.solve[1](*x), float)))
+        return np.array(self.outputs(*x, *solved), float)
+
+
+def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
+                 seed: int = 0, dt: float | None = None) -> CheckReport:
+    """Compare `solver` (the C built from `scheme`) with differences and with SymPy."""
+    scene = scheme.scene
+    n, nu = scene.n, solver.nu
+    dt = dt if dt is not None else scene.simulation.dt
+    rng = np.random.default_rng(seed)
+    reference = _SympyFunctions(scheme)
+    worst: dict[str, float] = {}
+
+    def record(name: str, error: float) -> None:
+        previous = worst.get(name, 0.0)
+        worst[name] = error if (np.isnan(error) or np.isnan(previous)) else max(previous, error)
+
+    for _ in range(samples):
+        s0 = np.concatenate([np.asarray(scene.initial_angles) + rng.uniform(-0.5, 0.5, n),
+                             rng.uniform(-1.0, 1.0, n)])
+        u = rng.uniform(-1.0, 1.0, nu) if nu else None
+        u_list = list(u) if nu else []
+        x0 = solver.initial_state(s0[:n], s0[n:])
+        z = 0.01 * rng.standard_normal(solver.nz)
+
+        # The residual Jacobian against central differences of the C residual.
+        _, jacobian = solver.residual_jacobian(z, x0, dt, u=u)
+        steps = 1e-6 * np.maximum(1.0, np.abs(z))
+        numeric = central_differences(lambda v, x0=x0, u=u: solver.residual(v, x0, dt, u=u), z,
+                                      steps)
+        record("residual Jacobian", relative_error(jacobian, numeric))
+
+        # The step sensitivities against central differences of the joint-space step map.
+        if solver.has_sensitivities:
+            def step_map(s, v):
+                x = solver.initial_state(s[:n], s[n:])
+                phi, omega, _, _ = solver.outputs(solver.step(x, dt, u=v, options=TIGHT).x1)
+                return np.concatenate([phi, omega])
+
+            sens = solver.step_sensitivities(x0, dt, u=u)
+            record("d s1 / d s0", relative_error(sens.ds_ds, central_differences(
+                lambda s, u=u: step_map(s, u), s0, np.full(2 * n, 1e-4))))
+            if nu:
+                record("d s1 / d u", relative_error(sens.ds_du, central_differences(
+                    lambda v, s0=s0: step_map(s0, v), u, np.full(nu, 1e-3))))
+
+        # Generated functions against their SymPy expressions.
+        args = list(z) + list(x0) + u_list + [dt]
+        record("residual", relative_error(solver.residual(z, x0, dt, u=u),
+                                          reference.residual(*args)))
+        record("initial state", relative_error(x0, reference.initial_state(*s0)))
+        x1 = solver.step(x0, dt, u=u).x1
+        converged = _converged_unknowns(solver, x0, x1, dt, u)
+        if converged is not None:
+            record("next state", relative_error(
+                x1, reference.next_state(*converged, *x0, *u_list, dt)))
+        # Off the constraint manifold too, where the constraint residuals are O(1e-3).
+        off = x0 + 1e-3 * rng.standard_normal(len(x0)) * np.maximum(1.0, np.abs(x0))
+        for x in (x0, off):
+            phi, omega, energy, _ = solver.outputs(x)
+            expected = reference.evaluate_outputs(x)
+            record("joint angles", relative_error(phi, expected[:n]))
+            record("joint rates", relative_error(omega, expected[n:2 * n]))
+            record("energy", relative_error(energy, expected[2 * n]))
+        if reference.nconstraint:   # on the manifold both are round-off: compare off it
+            record("constraint error", relative_error(
+                solver.outputs(off)[3], np.abs(reference.evaluate_outputs(off)[2 * n + 1:]).max()))
+
+    against = {"residual Jacobian": "central differences", "d s1 / d s0": "central differences",
+               "d s1 / d u": "central differences"}
+    rows = tuple(CheckRow(name, against.get(name, "SymPy"), error,
+                          DERIVATIVE_TOLERANCE if name in against else VALUE_TOLERANCE)
+                 for name, error in worst.items())
+    quadrature = solver.manifest.get("quadrature")
+    return CheckReport(scene=scene.name, method=scheme.method, quadrature=quadrature,
+                       samples=samples, rows=rows)
+
+
+def _converged_unknowns(solver: Solver, x0, x1, dt, u):
+    """z of the step x0 -> x1, by Newton on the C residual from zero (None if it fails)."""
+    z = np.zeros(solver.nz)
+    for _ in range(50):
+        residual, jacobian = solver.residual_jacobian(z, x0, dt, u=u)
+        update = np.linalg.solve(jacobian, -residual)
+        z = z + update
+        if np.abs(update).max() <= 1e-14 * max(1.0, np.abs(z).max()):
+            return z
+    return None

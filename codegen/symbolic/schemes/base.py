@@ -1,0 +1,179 @@
+"""What every time-stepping scheme hands to code generation: a plain, immutable value.
+
+A scheme is a state x_k, unknowns z, a residual F(z; x_k, dt) = 0 solved by Newton's method, the
+map to the next state, a predictor for the first Newton guess, and the maps between its state
+and joint space. Templates, Newton loop, build and runtime are shared by all schemes: they see
+only this value. It is the only product of derivation: code generation translates it and never
+asks the physics again (holding torques, segment tolerances and the documentation of the
+scheme are on it too).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+from sympy import ImmutableMatrix
+
+from ...runtime.contract import JACOBIAN_EVERY_ITERATE
+from ...scene import Scene
+from ...scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE, run_segment_tolerance
+from ..joint_model import angle_directions, joint_space_potential
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The layout of one vector that crosses the C boundary: a name and a meaning per entry."""
+
+    entries: tuple[str, ...]
+    description: str
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+
+@dataclass(frozen=True)
+class LinearSolve:
+    """Symbols defined implicitly by matrix * symbols = rhs, all functions of the state.
+
+    "vi" stores momenta, so its joint rates are w = M(q)^-1 p: the outputs use the symbols w
+    and the C code solves for them, instead of SymPy inverting M symbolically.
+    """
+
+    symbols: ImmutableMatrix
+    matrix: ImmutableMatrix
+    rhs: ImmutableMatrix
+
+
+@dataclass(frozen=True)
+class FlowDescription:
+    """How a scheme measures the energy flows of a step, and the balance they satisfy
+    (docs/model.md, section 7); written into the generated header."""
+
+    input_work: str
+    dissipated: str
+    balance: str
+
+
+@dataclass(frozen=True)
+class DiscreteScheme:
+    method: str
+    quadrature: int | None             # Gauss-Legendre points, None where K plays no role
+    scene: Scene
+    summary: str                       # one sentence: what the scheme is
+    dt: sp.Symbol
+    state: ImmutableMatrix             # symbols of x_k
+    unknowns: ImmutableMatrix          # symbols of z
+    residual: ImmutableMatrix          # F(z; x_k, dt), one entry per unknown
+    next_state: ImmutableMatrix        # x_{k+1}(z; x_k, dt)
+    predictor: ImmutableMatrix         # first Newton guess z(x_k, dt)
+    joint_angles: ImmutableMatrix      # phi(x), relative angles wrapped to (-pi, pi]
+    joint_velocities: ImmutableMatrix  # omega(x), relative angular velocities
+    energy: sp.Expr                    # H(x) = T + V
+    constraint_residuals: ImmutableMatrix  # structural errors of x; C reports max |.|
+    initial_angles: ImmutableMatrix    # symbols phi of initial_state
+    initial_velocities: ImmutableMatrix  # symbols phidot of initial_state
+    initial_state: ImmutableMatrix     # x(phi, phidot)
+    state_layout: Layout
+    unknowns_layout: Layout
+    residual_description: str
+    output_solve: LinearSolve | None = None   # symbols the outputs use beside the state
+    # Inputs (model.md 7): torques u of the scene's actuated joints, constant over a step; the
+    # residual and next_state may depend on them. Empty for an unactuated scene.
+    inputs: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
+    # Energy flows of one step, functions of (z, x0, u, dt): the work of u and the energy
+    # dissipated by joint damping (>= 0). Zero for a scene with neither.
+    input_work: sp.Expr = sp.Integer(0)
+    dissipated: sp.Expr = sp.Integer(0)
+    # Every spring segment P_{j+1} - P_j of the state as (dx, dy) pairs, watched during a run
+    # (model.md 2): a segment must not shrink to zero length nor pass through it in a step.
+    segment_vectors: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
+    # Intermediate quantities of the step, (symbol, expression) in order of definition: each
+    # expression uses the step's inputs (z, x_k, u, dt) and earlier symbols, and residual,
+    # next_state and the flows may use the symbols. They keep a large chain's expressions as
+    # a sequence of small ones (model.md's spring segments at each quadrature node), which code
+    # generation translates once and shares, instead of SymPy expanding them into every use.
+    definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+    # How the flows above are measured (None for a scene without energy flows).
+    flow_description: FlowDescription | None = None
+    # dV/dphi in the symbols initial_angles: the joint torques that hold the chain still at a
+    # posture (gravity and springs), a controller's feed-forward. Actuated scenes only.
+    holding_torques: ImmutableMatrix | None = None
+    # The length under which each segment of segment_vectors stops a run (m), and that length
+    # relative to the geometry's size (docs/model.md, section 12).
+    segment_tolerances: tuple[float, ...] = ()
+    segment_relative_tolerance: float = RUN_SEGMENT_RELATIVE_TOLERANCE
+    # The Newton Jacobian reuse the package defaults to (a JACOBIAN_* mode of the contract).
+    jacobian_reuse: int = JACOBIAN_EVERY_ITERATE
+
+    @property
+    def step_inputs(self) -> list[sp.Symbol]:
+        """The inputs of the step's functions, in order: z, x_k, u, dt."""
+        return list(self.unknowns) + list(self.state) + list(self.inputs) + [self.dt]
+
+    def step_function(self, expressions):
+        """A numpy function of the step_inputs' values that evaluates `expressions`, which may
+        use the definitions. The definitions are evaluated in order, as the generated C does,
+        not substituted into one another (for a long chain that takes SymPy minutes)."""
+        def eliminate(reduced):
+            shared, reduced = sp.cse(reduced, symbols=sp.numbered_symbols("_shared"))
+            return list(self.definitions) + shared, reduced
+
+        return sp.lambdify(self.step_inputs, list(expressions), modules="numpy",
+                           cse=eliminate if self.definitions else True)
+
+    @property
+    def has_energy_flows(self) -> bool:
+        return has_energy_flows(self.scene)
+
+    def __post_init__(self) -> None:
+        if 2 * len(self.segment_tolerances) != self.segment_vectors.shape[0]:
+            raise ValueError(f"{self.method}: one tolerance per spring segment")
+        if self.residual.shape[0] != self.unknowns.shape[0]:
+            raise ValueError(f"{self.method}: {self.residual.shape[0]} residual entries for "
+                             f"{self.unknowns.shape[0]} unknowns")
+        if self.next_state.shape[0] != self.state.shape[0]:
+            raise ValueError(f"{self.method}: next_state does not match the state")
+
+
+def has_energy_flows(scene: Scene) -> bool:
+    """Whether energy can enter (actuation) or leave (damping) the chain."""
+    return bool(scene.actuated_joints) or any(link.damping for link in scene.links)
+
+
+def input_symbols(scene: Scene) -> ImmutableMatrix:
+    """u: one torque symbol per actuated joint, in the scene's order."""
+    return ImmutableMatrix(sp.symbols([f"tau{j}" for j in scene.actuated_joints], real=True))
+
+
+def joint_torques(scene: Scene, inputs) -> list[sp.Expr]:
+    """tau_i for every joint i: the input of an actuated joint, zero elsewhere."""
+    torques = [sp.Integer(0)] * scene.n
+    for joint, u in zip(scene.actuated_joints, inputs):
+        torques[joint - 1] = u
+    return torques
+
+
+def segment_vectors(model) -> ImmutableMatrix:
+    """(dx, dy) of every segment of every spring of a model, spring by spring."""
+    return ImmutableMatrix([c for term in model.springs for d in term.segment_vectors for c in d])
+
+
+def segment_tolerances(scene: Scene) -> tuple[float, ...]:
+    """The run tolerance of every segment of segment_vectors, spring by spring."""
+    return tuple(run_segment_tolerance(scene, spring)
+                 for spring in scene.springs for _ in spring.joints)
+
+
+def holding_torques(scene: Scene, angles) -> ImmutableMatrix | None:
+    """dV/dphi at the relative angles `angles` (symbols) for an actuated scene, else None."""
+    if not scene.actuated_joints:
+        return None
+    potential = joint_space_potential(scene, angle_directions(angles))
+    return ImmutableMatrix([potential]).jacobian(list(angles)).T
+
+
+def common_fields(scene: Scene, angles) -> dict:
+    """The fields every scheme derives the same way from its scene (angles: the symbols of
+    initial_angles)."""
+    return {"holding_torques": holding_torques(scene, angles),
+            "segment_tolerances": segment_tolerances(scene)}

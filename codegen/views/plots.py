@@ -1,0 +1,274 @@
+"""`chaingen plot`: joint angles, energy error and constraint error of trajectory files.
+
+One file gives one figure of three panels sharing the time axis: the joint angles, the energy
+error |H - H_0| (for an actuated or damped scene the balance error |H - H_0 - W + D|), and the
+constraint error of the scheme's own coordinates (es: max_i |c_i|; vi: max_i ||q_i| - 1|;
+midpoint has none). Several files overlay their error curves in one figure, as the thesis's
+Figs. 5.3 and 5.5 compare schemes. The errors are drawn on a log scale where their positive
+values span more than two decades, linearly otherwise.
+
+Titles and legends name scene, scheme, K and dt from the trajectory's metadata file (written
+by `simulate --out` beside it: FILE.csv.json); without one, dt is read off the time column and
+the file name stands in for the rest.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PlotError
+from ..runtime.trajectory import metadata_path, read_trajectory
+from .figure import matplotlib_figure, save_png
+
+#: Figure size in inches and resolution: 1500 x 1200 pixels.
+FIGURE_SIZE = (10.0, 8.0)
+DPI = 150
+#: Errors whose positive values span more decades than this are drawn on a log scale.
+LOG_DECADES = 2.0
+
+
+@dataclass(frozen=True)
+class TrajectoryRun:
+    """A trajectory file and what is known about the run that wrote it."""
+
+    path: Path
+    columns: tuple[str, ...]
+    rows: np.ndarray
+    n: int
+    scene: str | None   # None: no metadata names it
+    method: str | None
+    quadrature: int | None
+    dt: float | None
+
+    def column(self, name: str) -> np.ndarray:
+        return self.rows[:, self.columns.index(name)]
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.rows[:, 0]
+
+    @property
+    def phi(self) -> np.ndarray:
+        return self.rows[:, 1:1 + self.n]
+
+    @property
+    def balanced(self) -> bool:
+        """True when the file carries the energy flows of an actuated or damped scene."""
+        return "input_work" in self.columns and "dissipated" in self.columns
+
+    @property
+    def energy_error(self) -> np.ndarray:
+        error = self.column("energy") - self.column("energy")[0]
+        if self.balanced:
+            error = error - self.column("input_work") + self.column("dissipated")
+        return np.abs(error)
+
+    @property
+    def constraint_error(self) -> np.ndarray:
+        return np.abs(self.column("constraint_error"))
+
+    def until(self, t_end: float) -> TrajectoryRun:
+        """The samples up to t_end."""
+        keep = self.t <= t_end * (1 + 1e-12)
+        if keep.sum() < 1:
+            raise PlotError(f"--t-end: {t_end:g} s is before the first sample of {self.path}")
+        return dataclasses.replace(self, rows=self.rows[keep])
+
+    @property
+    def label(self) -> str:
+        """'es K=3, dt = 0.01 s', as much of it as is known."""
+        parts = [self.method or self.path.stem]
+        if self.quadrature is not None:
+            parts[0] += f" K={self.quadrature}"
+        if self.dt is not None:
+            parts.append(f"dt = {self.dt:g} s")
+        return ", ".join(parts)
+
+
+def load_run(path) -> TrajectoryRun:
+    """Read a trajectory file (scene-format.md) and its metadata; PlotError names what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise PlotError(f"{path}: no such trajectory file")
+    try:
+        columns, rows = read_trajectory(path)
+    except (ValueError, UnicodeDecodeError) as error:
+        raise PlotError(f"{path}: not a trajectory file (scene-format.md): {error}") from None
+    n = sum(1 for name in columns if name.startswith("phi") and name[3:].isdigit())
+    expected = (["t"] + [f"phi{i}" for i in range(1, n + 1)]
+                + [f"omega{i}" for i in range(1, n + 1)] + ["energy", "constraint_error"])
+    if n == 0 or list(columns[:len(expected)]) != expected:
+        wanted = (", ".join(expected) if n
+                  else "t, phi1..phin, omega1..omegan, energy, constraint_error")
+        raise PlotError(f"{path}: the header must start with the columns {wanted} "
+                        f"(scene-format.md), got {', '.join(columns)}")
+    if rows.shape[0] < 2:
+        raise PlotError(f"{path}: needs at least two samples to plot, has {rows.shape[0]}")
+    if not np.all(np.isfinite(rows)):
+        bad = int(np.argwhere(~np.isfinite(rows))[0][0])
+        raise PlotError(f"{path}: row {bad + 2} holds a value that is not finite")
+    if not np.all(np.diff(rows[:, 0]) > 0):
+        raise PlotError(f"{path}: the time column must increase from row to row")
+    meta = read_metadata(path)
+    dt = meta.get("dt")
+    if dt is None:
+        steps = np.diff(rows[:, 0])
+        dt = float(np.median(steps)) if np.allclose(steps, steps[0], rtol=1e-9) else None
+    quadrature = meta.get("quadrature")
+    return TrajectoryRun(path=path, columns=tuple(columns), rows=rows, n=n,
+                         scene=meta.get("scene"),
+                         method=meta.get("method"),
+                         quadrature=int(quadrature) if quadrature is not None else None,
+                         dt=float(dt) if dt is not None else None)
+
+
+def run_from_result(result, source) -> TrajectoryRun:
+    """A TrajectoryRun of a SimulationResult in memory (source: what to call it)."""
+    n = sum(1 for name in result.columns if name.startswith("phi"))
+    return TrajectoryRun(path=Path(source), columns=tuple(result.columns),
+                         rows=np.asarray(result.samples), n=n, scene=result.scene,
+                         method=result.method, quadrature=result.quadrature,
+                         dt=result.dt)
+
+
+def plot_result(result, out: Path) -> Path:
+    """`simulate --plot`: the figure of a run just made."""
+    return plot_runs([run_from_result(result, out.with_suffix(".csv"))], out)
+
+
+def check_png_path(path: Path, option: str) -> Path:
+    if path.suffix.lower() != ".png":
+        raise PlotError(f"{option}: {path}: give a .png file name")
+    if not (path.parent if str(path.parent) else Path(".")).is_dir():
+        raise PlotError(f"{option}: directory {path.parent} does not exist")
+    return path
+
+
+def read_metadata(path: Path) -> dict:
+    """The metadata file beside a trajectory, or {} when there is none or it is unreadable."""
+    try:
+        meta = json.loads(metadata_path(path).read_text())
+    except (OSError, ValueError):
+        return {}
+    return meta if isinstance(meta, dict) else {}
+
+
+def broken_at_wraps(angle: np.ndarray) -> np.ndarray:
+    """The wrapped angle with NaN at the sample after each jump of more than pi (a wrap at
+    +-pi), so that a plot line breaks there instead of striking across the panel."""
+    shown = np.array(angle, dtype=float)
+    shown[np.flatnonzero(np.abs(np.diff(shown)) > np.pi) + 1] = np.nan
+    return shown
+
+
+def _spans_decades(values: np.ndarray) -> bool:
+    positive = values[values > 0]
+    if positive.size < 2:
+        return False
+    return math.log10(positive.max() / positive.min()) > LOG_DECADES
+
+
+def _error_axis(axis, runs, values, ylabel: str, empty_note: str) -> None:
+    drawn = False
+    log = any(_spans_decades(v) for v in values)
+    for run, value, style in zip(runs, values, _styles(len(runs))):
+        if not np.any(value > 0):
+            if len(runs) > 1:   # a legend entry still says why the run has no curve
+                axis.plot([], [], label=f"{run.label}: 0 at every sample", **style)
+            continue
+        shown = np.where(value > 0, value, np.nan) if log else value
+        axis.plot(run.t, shown, label=run.label, **style)
+        drawn = True
+    if log:
+        axis.set_yscale("log")
+    if not drawn:
+        axis.text(0.5, 0.5, empty_note, transform=axis.transAxes, ha="center", va="center",
+                  color="0.4")
+    axis.set_ylabel(ylabel)
+    axis.grid(True, which="major", alpha=0.3)
+    if drawn and len(runs) > 1:
+        axis.legend(fontsize=8, loc="best")
+
+
+def _styles(count: int) -> list[dict]:
+    colours = ("C0", "C1", "C2", "C3", "C4", "C5", "C6", "C7", "C8", "C9")
+    return [{"color": colours[i % len(colours)], "linewidth": 1.0} for i in range(count)]
+
+
+def title_of(runs: list[TrajectoryRun]) -> str:
+    names = [run.scene or run.path.stem for run in runs]
+    scenes = ", ".join(sorted(set(names)))
+    if len(runs) == 1:
+        return f"{names[0]}: {runs[0].label}"
+    dts = {run.dt for run in runs}
+    if len(dts) == 1 and None not in dts:
+        methods = [run.label.rsplit(", dt = ", 1)[0] for run in runs]
+        return f"{scenes}: {' vs '.join(methods)}, dt = {dts.pop():g} s"
+    return f"{scenes}: {len(runs)} runs compared"
+
+
+def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
+    """Draw the figure of `runs` to the PNG file `out` (written atomically); returns it."""
+    figure = matplotlib_figure(FIGURE_SIZE, DPI, "chaingen plot")
+    angles, energy, constraint = figure.subplots(3, 1, sharex=True)
+    single = len(runs) == 1
+    line_styles = ("-", "--", ":", "-.")
+    for run, style in zip(runs, _styles(len(runs))):
+        for joint in range(run.n):
+            angles.plot(run.t, broken_at_wraps(run.phi[:, joint]),
+                        color=f"C{joint % 10}" if single else style["color"],
+                        linestyle="-" if single else line_styles[joint % 4], linewidth=1.0,
+                        label=f"phi{joint + 1}" if single else None)
+    if single:
+        angles.legend(fontsize=8, loc="upper right", ncol=min(4, runs[0].n))
+    else:
+        from matplotlib.lines import Line2D
+        handles = [Line2D([], [], **style, label=run.label)
+                   for run, style in zip(runs, _styles(len(runs)))]
+        handles += [Line2D([], [], color="0.3", linestyle=line_styles[joint % 4],
+                           label=f"phi{joint + 1}") for joint in range(min(4, runs[0].n))]
+        angles.legend(handles=handles, fontsize=7, loc="upper right", ncol=2)
+    angles.set_ylabel("joint angle phi_i [rad]")
+    angles.grid(True, alpha=0.3)
+    energy_label = ("|H - H0 - W + D| [J]" if any(run.balanced for run in runs)
+                    else "|H - H0| [J]")
+    _error_axis(energy, runs, [run.energy_error for run in runs], energy_label,
+                "energy error 0 at every sample")
+    _error_axis(constraint, runs, [run.constraint_error for run in runs],
+                "constraint error", "no constraints (minimal coordinates): error 0")
+    constraint.set_xlabel("t [s]")
+    figure.suptitle(title_of(runs))
+    figure.tight_layout()
+    return save_png(figure, out)
+
+
+def output_path(paths: list[Path], out: Path | None) -> Path:
+    """Where `chaingen plot` writes: `out` when it names a .png file, else a file in the
+    directory `out` (default: beside the first trajectory) named after the trajectories."""
+    if out is not None and out.suffix.lower() == ".png":
+        return check_png_path(out, "-o")
+    directory = out if out is not None else (paths[0].parent if str(paths[0].parent) else Path("."))
+    if directory.exists() and not directory.is_dir():
+        raise PlotError(f"-o: {directory} is a file; give a directory or a .png file name")
+    if not directory.exists():
+        if not (directory.parent if str(directory.parent) else Path(".")).is_dir():
+            raise PlotError(f"-o: directory {directory.parent} does not exist")
+        directory.mkdir()
+    name = "_vs_".join(path.stem for path in paths) if len(paths) > 1 else paths[0].stem
+    if len(name) > 120:
+        name = f"{paths[0].stem}_and_{len(paths) - 1}_more"
+    return directory / f"{name}.png"
+
+
+def plot_files(paths: list[Path], out: Path | None = None) -> Path:
+    """`chaingen plot`: read, check and draw; returns the written PNG."""
+    if not paths:
+        raise PlotError("plot: give at least one trajectory file")
+    runs = [load_run(path) for path in paths]
+    target = output_path([Path(path) for path in paths], out)
+    return plot_runs(runs, target)

@@ -1,0 +1,306 @@
+"""The C interface of a generated package, stated once.
+
+Every fact a generated package shares with the code around it is written here and nowhere else:
+status codes and their messages, the Newton option fields with their defaults, the
+Jacobian-reuse modes, the depth of the warm-start history, the counters of a run, the columns of
+a sample row, and the parameter list of every exported C entry point. The generator renders the
+header's macros, structs and prototypes from these tables, records the entry points in the
+package's manifest, and the Python loader declares its ctypes signatures from that manifest.
+
+An entry, a parameter or a status code may exist only in packages with a feature:
+
+- ``inputs``: the scene has actuated joints (torques u);
+- ``flows``: energy can enter or leave the chain (actuation or joint damping);
+- ``sensitivities``: the package was generated with the step sensitivities;
+- ``segments``: the scene has springs, whose segments are watched for collapse.
+
+This module is plain data: it imports nothing of chaingen and nothing beyond the standard library.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+#: The features an entry point, a parameter or a status may depend on.
+FEATURES = ("inputs", "flows", "sensitivities", "segments")
+
+
+@dataclass(frozen=True)
+class Features:
+    """Which optional parts a package has (see the module docstring)."""
+
+    inputs: bool = False
+    flows: bool = False
+    sensitivities: bool = False
+    segments: bool = False
+
+    def has(self, when: str | None) -> bool:
+        """Whether something present `when` a feature is there (None: always)."""
+        if when is None:
+            return True
+        if when not in FEATURES:
+            raise ValueError(f"unknown feature {when!r} (known: {', '.join(FEATURES)})")
+        return bool(getattr(self, when))
+
+
+# --------------------------------------------------------------------------------------------
+# Status codes
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Status:
+    """A status code: the header's <PREFIX>_<name>, what it means to a reader of the header,
+    and the message a person gets from the Python runtime."""
+
+    name: str
+    code: int
+    comment: str
+    message: str
+    when: str | None = None
+
+
+STATUSES = (
+    Status("OK", 0, "success", "success"),
+    Status("NOT_CONVERGED", 1, "Newton: max_iterations reached without convergence",
+           "Newton's method did not converge within max_iterations"),
+    Status("SINGULAR_JACOBIAN", 2, "Newton: no usable pivot in the LU factorisation",
+           "the Newton Jacobian is singular (no usable pivot)"),
+    Status("NONFINITE", 3, "NaN or Inf in the residual or the iterate",
+           "NaN or Inf in the residual or the Newton iterate"),
+    Status("BAD_ARGUMENT", 4, "a null pointer, dt <= 0, n_steps < 0, every < 1, interval < 1 or "
+                              "an unknown reuse_jacobian", "bad argument"),
+    Status("EVALUATION_FAILED", 5, "a generated function reported an error",
+           "a generated function reported an evaluation error"),
+    Status("SEGMENT_COLLAPSED", 6,
+           "a spring segment came within {segment_tolerance} of the geometry's size of zero "
+           "length, or passed through it (turned by 90 degrees or more in one step): its "
+           "direction is undefined there (docs/model.md, section 2)",
+           "a spring segment came within {segment_tolerance} of the geometry's size of zero "
+           "length or passed through it (turned by 90 degrees or more in one step), where its "
+           "direction is undefined", when="segments"),
+    Status("INTERRUPTED", 7, "simulate_observed: the observer asked to stop",
+           "interrupted by the observer of the run"),
+)
+STATUS_CODES = {status.name: status.code for status in STATUSES}
+
+
+def status_message(code: int, segment_tolerance: float | None = None) -> str:
+    """The message of a status code for people (the code itself if it is unknown)."""
+    for status in STATUSES:
+        if status.code == code:
+            tolerance = "its tolerance" if segment_tolerance is None else f"{segment_tolerance:g}"
+            return status.message.format(segment_tolerance=tolerance)
+    return f"unknown status {code}"
+
+
+# --------------------------------------------------------------------------------------------
+# Newton options
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class JacobianMode:
+    """A value of the option reuse_jacobian: when dF/dz is evaluated and factorised."""
+
+    name: str
+    value: int
+    comment: str
+
+
+JACOBIAN_MODES = (
+    JacobianMode("JACOBIAN_EVERY_ITERATE", 0, "full Newton"),
+    JacobianMode("JACOBIAN_ACROSS_STEPS", 1, "simplified Newton"),
+    JacobianMode("JACOBIAN_PER_STEP", 2, "Newton-chord: once a step"),
+)
+JACOBIAN_EVERY_ITERATE, JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP = (
+    mode.value for mode in JACOBIAN_MODES)
+
+
+@dataclass(frozen=True)
+class OptionField:
+    """A field of the options struct: C type ("int" or "double"), its default, what a reader
+    of the header needs to know beside the default, and whether it is a switch (0 or 1; a bool
+    in Python)."""
+
+    name: str
+    c_type: str
+    default: int | float
+    comment: str = ""
+    switch: bool = False
+
+    @property
+    def python_type(self) -> type:
+        return bool if self.switch else int if self.c_type == "int" else float
+
+
+NEWTON_OPTIONS = (
+    OptionField("max_iterations", "int", 20, "bounds the work of one step"),
+    OptionField("update_rtol", "double", 1e-10),
+    OptionField("update_atol", "double", 1e-13),
+    OptionField("residual_tol", "double", 1e-8, "units of F"),
+    OptionField("warm_start", "int", 1, "continue from the previous solutions", switch=True),
+    OptionField("reuse_jacobian", "int", JACOBIAN_EVERY_ITERATE, "one of the JACOBIAN_* modes"),
+)
+NEWTON_OPTION_DEFAULTS = {field.name: field.default for field in NEWTON_OPTIONS}
+
+#: Solutions of chained steps kept for the warm start: extrapolation of degree
+#: WARM_START_HISTORY - 1 (quadratic).
+WARM_START_HISTORY = 3
+#: A kept Jacobian (simplified Newton, Newton-chord) is evaluated anew when successive updates
+#: shrink by less than this.
+REFRESH_RATE = 0.1
+#: A kept Jacobian stops when its estimated error is this fraction of the tolerance: simplified
+#: Newton (a speed option) at 0.1, Newton-chord (which stands in for full Newton and must keep
+#: its round-off energy balance) at 1e-3.
+SIMPLIFIED_MARGIN = 0.1
+CHORD_MARGIN = 1e-3
+
+
+# --------------------------------------------------------------------------------------------
+# Counters of a run, and the sample row
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class StructField:
+    name: str
+    c_type: str
+    comment: str
+
+
+STATS_FIELDS = (
+    StructField("steps", "long", "steps completed (the failing one excluded)"),
+    StructField("newton_iterations", "long",
+                "Newton iterations (linear solves) over all completed steps"),
+    StructField("max_newton_iterations", "int", "the most a single completed step took"),
+    StructField("failed_iterations", "int", "iterations spent in the failing step, 0 if none "
+                                            "failed"),
+)
+
+#: Energy flows of one step (flows[2]): the work of the joint torques, then the energy
+#: dissipated by joint damping.
+FLOW_ENTRIES = ("input_work", "dissipated")
+
+
+def sample_columns(n: int, flows: bool = False) -> tuple[tuple[str, str], ...]:
+    """(name, meaning) of the entries of one sample row of simulate, which are also the
+    columns of the trajectory file (docs/scene-format.md).
+
+    A scene with energy flows adds them, cumulative since the start, so that
+    H - H_0 = input_work - dissipated can be read off every row (docs/model.md, section 7).
+    """
+    columns = ([("t", "time (s)")]
+               + [(f"phi{i}", f"relative angle of joint {i}, wrapped to (-pi, pi] (rad)")
+                  for i in range(1, n + 1)]
+               + [(f"omega{i}", f"relative angular velocity of joint {i} (rad/s)")
+                  for i in range(1, n + 1)]
+               + [("energy", "H = T + V (J)"),
+                  ("constraint_error", "largest structural error of the state's coordinates")])
+    if flows:
+        columns += [("input_work", "work of the joint torques since the start (J)"),
+                    ("dissipated", "energy dissipated by joint damping since the start, >= 0 "
+                                   "(J)")]
+    return tuple(columns)
+
+
+# --------------------------------------------------------------------------------------------
+# Entry points
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter of a C function. c_type may name the package's types through {prefix}."""
+
+    name: str
+    c_type: str
+    when: str | None = None
+
+
+@dataclass(frozen=True)
+class EntryPoint:
+    """An exported function, <prefix>_<name>: its result type and parameters."""
+
+    name: str
+    returns: str
+    parameters: tuple[Parameter, ...]
+    when: str | None = None
+
+    def present(self, features: Features) -> tuple[Parameter, ...]:
+        """The parameters a package with `features` has, in order."""
+        return tuple(p for p in self.parameters if features.has(p.when))
+
+
+def _parameters(text: str) -> tuple[Parameter, ...]:
+    """Parameters from 'type name, type name [when], ...' (the tables below stay readable)."""
+    parameters = []
+    for item in text.split(","):
+        item = item.strip()
+        when = None
+        match = re.fullmatch(r"(.*?)\s*\[(\w+)\]", item)
+        if match:
+            item, when = match.group(1), match.group(2)
+        c_type, name = re.fullmatch(r"(.*?[\s*])(\w+)", item).groups()
+        parameters.append(Parameter(name, c_type.strip(), when))
+    return tuple(parameters)
+
+
+_WORKSPACE = "{prefix}_workspace *workspace"
+_OPTIONS = "const {prefix}_options *options"
+
+ENTRY_POINTS = (
+    EntryPoint("workspace_size", "size_t", ()),
+    EntryPoint("workspace_init", "void", _parameters(_WORKSPACE)),
+    EntryPoint("default_options", "void", _parameters("{prefix}_options *options")),
+    EntryPoint("initial_state", "int", _parameters(
+        f"const double *phi, const double *phidot, double *x, {_WORKSPACE}")),
+    EntryPoint("outputs", "int", _parameters(
+        "const double *x, double *phi, double *omega, double *energy, double *constraint_error, "
+        f"{_WORKSPACE}")),
+    EntryPoint("holding_torques", "int", _parameters(
+        f"const double *phi, double *tau, {_WORKSPACE}"), when="inputs"),
+    EntryPoint("residual", "int", _parameters(
+        f"const double *z, const double *x0, const double *u [inputs], double dt, "
+        f"double *residual, {_WORKSPACE}")),
+    EntryPoint("residual_jacobian", "int", _parameters(
+        "const double *z, const double *x0, const double *u [inputs], double dt, "
+        f"double *residual, double *jacobian, {_WORKSPACE}")),
+    EntryPoint("step", "int", _parameters(
+        "const double *x0, const double *u [inputs], double dt, double *x1, "
+        f"double *flows [flows], {_OPTIONS}, {_WORKSPACE}, int *iterations")),
+    EntryPoint("step_sensitivities", "int", _parameters(
+        "const double *x0, const double *u [inputs], double dt, double *x1, double *ds_ds, "
+        f"double *ds_du [inputs], {_OPTIONS}, {_WORKSPACE}, int *iterations"),
+        when="sensitivities"),
+    EntryPoint("sample_count", "long", _parameters("long n_steps, long every")),
+    EntryPoint("simulate", "int", _parameters(
+        "const double *x0, double t0, double dt, long n_steps, long every, "
+        f"const double *u [inputs], {_OPTIONS}, {_WORKSPACE}, double *samples, "
+        "double *x_final, {prefix}_stats *stats")),
+    EntryPoint("simulate_observed", "int", _parameters(
+        "const double *x0, double t0, double dt, long n_steps, long every, "
+        f"const double *u [inputs], {_OPTIONS}, {_WORKSPACE}, double *samples, "
+        "double *x_final, {prefix}_stats *stats, {prefix}_observer observer, void *context, "
+        "long interval")),
+)
+ENTRY_POINTS_BY_NAME = {entry.name: entry for entry in ENTRY_POINTS}
+
+#: The observer type of simulate_observed: called with the steps completed so far and the
+#: caller's context; a nonzero return stops the run.
+OBSERVER_RETURNS = "int"
+OBSERVER_PARAMETERS = _parameters("long steps, void *context")
+
+
+def resolved(c_type: str, prefix: str) -> str:
+    """A parameter's C type with the package's prefix filled in."""
+    return c_type.format(prefix=prefix)
+
+
+def manifest_entry_points(prefix: str, features: Features) -> dict[str, dict]:
+    """The entry points of a package with `features`, as its manifest records them:
+    {name: {"returns": C type, "parameters": [[name, C type], ...]}}."""
+    return {entry.name: {"returns": entry.returns,
+                         "parameters": [[p.name, resolved(p.c_type, prefix)]
+                                        for p in entry.present(features)]}
+            for entry in ENTRY_POINTS if features.has(entry.when)}
+
+
+#: The package's manifest: sizes, layouts, entry points and build flags, read by the loader.
+MANIFEST = "chaingen.json"

@@ -1,0 +1,80 @@
+"""The contract's C types seen from Python: ctypes structures, signatures and NewtonOptions.
+
+Everything here is built from chaingen.runtime.contract (the fields of the options and stats
+structs) and from a package's manifest (the parameter list of each entry point it exports), so
+the loader never states a C signature of its own.
+"""
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+
+from . import contract
+
+_C_SCALARS = {"int": ctypes.c_int, "long": ctypes.c_long, "double": ctypes.c_double,
+              "size_t": ctypes.c_size_t}
+
+
+def _struct(name: str, fields) -> type[ctypes.Structure]:
+    return type(name, (ctypes.Structure,), {
+        "_fields_": [(field.name, _C_SCALARS[field.c_type]) for field in fields]})
+
+
+#: <prefix>_options and <prefix>_stats, field by field as the header declares them.
+OptionsStruct = _struct("OptionsStruct", contract.NEWTON_OPTIONS)
+StatsStruct = _struct("StatsStruct", contract.STATS_FIELDS)
+#: <prefix>_observer.
+Observer = ctypes.CFUNCTYPE(_C_SCALARS[contract.OBSERVER_RETURNS],
+                            *[_C_SCALARS.get(p.c_type, ctypes.c_void_p)
+                              for p in contract.OBSERVER_PARAMETERS])
+
+
+def ctypes_type(c_type: str, prefix: str):
+    """The ctypes type of a C type of the contract (prefix resolved), None for void."""
+    if c_type == "void":
+        return None
+    if c_type in _C_SCALARS:
+        return _C_SCALARS[c_type]
+    if c_type in ("double *", "const double *"):
+        return ctypes.POINTER(ctypes.c_double)
+    if c_type == "int *":
+        return ctypes.POINTER(ctypes.c_int)
+    if c_type in (f"{prefix}_options *", f"const {prefix}_options *"):
+        return ctypes.POINTER(OptionsStruct)
+    if c_type == f"{prefix}_stats *":
+        return ctypes.POINTER(StatsStruct)
+    if c_type == f"{prefix}_observer":
+        return Observer
+    if c_type in (f"{prefix}_workspace *", "void *"):
+        return ctypes.c_void_p
+    raise ValueError(f"no ctypes type for the C type {c_type!r}")
+
+
+def _newton_options_class():
+    fields = [(field.name, field.python_type,
+               dataclasses.field(default=field.python_type(field.default)))
+              for field in contract.NEWTON_OPTIONS]
+    namespace = {
+        "__doc__": "Newton settings of the generated step, the fields of <prefix>_options (the "
+                   "generated header documents them). The defaults here are the contract's "
+                   "(full Newton); a Solver's `default_options` are its package's.",
+        "__post_init__": _check_options,
+        "as_c": lambda self: OptionsStruct(*[
+            int(value) if isinstance(value, bool) else value
+            for value in dataclasses.astuple(self)]),
+    }
+    options = dataclasses.make_dataclass("NewtonOptions", fields, namespace=namespace,
+                                         frozen=True)
+    options.__module__ = __name__
+    return options
+
+
+def _check_options(options) -> None:
+    modes = tuple(mode.value for mode in contract.JACOBIAN_MODES)
+    if options.reuse_jacobian not in modes:
+        names = ", ".join(f"{mode.value} {mode.comment}" for mode in contract.JACOBIAN_MODES)
+        raise ValueError(f"NewtonOptions.reuse_jacobian: must be one of {names}, got "
+                         f"{options.reuse_jacobian!r}")
+
+
+NewtonOptions = _newton_options_class()

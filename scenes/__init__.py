@@ -1,0 +1,1 @@
+"""The reference scenes (TOML data, installed with chaingen as chaingen.scenes)."""

@@ -1,0 +1,86 @@
+"""What the tests share: scene paths, scenes loaded once, solvers built once per session, and
+the `chaingen` command run as a user runs it."""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import shutil
+import subprocess
+import sys
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+REFERENCE_SCENES = ("three_link_gravity", "three_link_mono", "three_link_multi")
+OWN_SCENES = ("four_link_antagonist", "five_link_biarticular")
+
+
+def scene_path(name: str) -> Path:
+    """A reference scene (scenes/) or one of the test suite's own (tests/scenes/)."""
+    for folder in (ROOT / "scenes", ROOT / "tests" / "scenes"):
+        path = folder / f"{name}.toml"
+        if path.exists():
+            return path
+    raise FileNotFoundError(name)
+
+
+@cache
+def load(name: str):
+    from chaingen.scene import load_scene
+    return load_scene(scene_path(name))
+
+
+_solvers: dict = {}
+
+
+def solver_for(name: str, method: str = "es", quadrature: int = 3, *,
+               sensitivities: bool = False):
+    """The built solver of a scene, generated and compiled once per session.
+
+    Without step sensitivities unless asked: they are the largest generated functions, and
+    most tests only step forward.
+    """
+    key = (name, method, quadrature, sensitivities)
+    if key not in _solvers:
+        from chaingen.simulation import build_solver
+        _solvers[key] = build_solver(load(name), method, quadrature, sensitivities=sensitivities)
+    return _solvers[key]
+
+
+def chaingen(*args, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run `python -m chaingen ARGS` in `cwd` (so a default output directory lands there)."""
+    return subprocess.run([sys.executable, "-m", "chaingen", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def chaingen_in_process(*args, cwd: Path) -> subprocess.CompletedProcess:
+    """`chaingen ARGS` as chaingen.cli.main runs it, in this process (for the many bad-input
+    cases, where a process per case would dominate the fast tier): its exit status and what
+    it printed. An exception main lets through propagates (a traceback a user would see)."""
+    from chaingen.cli import main
+
+    arguments = [str(arg) for arg in args]
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.chdir(cwd), contextlib.redirect_stdout(stdout), \
+            contextlib.redirect_stderr(stderr):
+        try:
+            status = main(arguments)
+        except SystemExit as exit_:     # argparse's own errors
+            status = exit_.code
+    return subprocess.CompletedProcess(["chaingen", *arguments], status, stdout.getvalue(),
+                                       stderr.getvalue())
+
+
+def require_tools(*tools: str) -> None:
+    """Skip the calling test when a tool is not on PATH; fail instead when
+    CHAINGEN_REQUIRE_TOOLS=1 (as .ci/run sets it), so CI cannot pass by skipping."""
+    missing = [tool for tool in tools if shutil.which(tool) is None]
+    if not missing:
+        return
+    message = f"required tool(s) not installed: {', '.join(missing)}"
+    if os.environ.get("CHAINGEN_REQUIRE_TOOLS") == "1":
+        pytest.fail(f"{message} (CHAINGEN_REQUIRE_TOOLS=1)", pytrace=False)
+    pytest.skip(message)
