@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from .errors import ChaingenError, NewtonError, UnsupportedSceneError
+from .runtime import contract
+from .runtime.files import check_output_file
 from .scene import METHODS, load_scene
 from .version import VERSION
 
@@ -22,6 +25,8 @@ def _positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    if value >= 2 ** 63:
+        raise argparse.ArgumentTypeError(f"must be below 2^63, got {value}")
     return value
 
 
@@ -41,6 +46,50 @@ def _add_scheme_options(parser: argparse.ArgumentParser) -> None:
                              "(default: the scene's)")
 
 
+def _add_newton_options(parser: argparse.ArgumentParser) -> None:
+    """The Newton options of the contract, each overriding the package's default."""
+    group = parser.add_argument_group("Newton options (default: the package's)")
+    for field in contract.NEWTON_OPTIONS:
+        flag = "--" + field.name.replace("_", "-")
+        if field.name == "reuse_jacobian":
+            group.add_argument(flag, choices=JACOBIAN_CHOICES, metavar="MODE",
+                               help="when dF/dz is evaluated: " + ", ".join(JACOBIAN_CHOICES))
+        elif field.switch:
+            group.add_argument(flag, choices=("on", "off"), help=field.comment or None)
+        elif field.python_type is int:
+            group.add_argument(flag, type=_positive_int, metavar="N",
+                               help=field.comment or None)
+        else:
+            group.add_argument(flag, type=_tolerance, metavar="X", help=field.comment or None)
+
+
+#: reuse_jacobian on the command line: the contract's mode names, e.g. per-step.
+JACOBIAN_CHOICES = {mode.name.removeprefix("JACOBIAN_").lower().replace("_", "-"): mode.value
+                    for mode in contract.JACOBIAN_MODES}
+
+
+def _tolerance(text: str) -> float:
+    value = _number(text)
+    if not (np.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be >= 0 and finite, got {text!r}")
+    return value
+
+
+def newton_overrides(args) -> dict:
+    """The Newton options given on the command line, as contract field values."""
+    overrides = {}
+    for field in contract.NEWTON_OPTIONS:
+        value = getattr(args, field.name, None)
+        if value is None:
+            continue
+        if field.name == "reuse_jacobian":
+            value = JACOBIAN_CHOICES[value]
+        elif field.switch:
+            value = value == "on"
+        overrides[field.name] = value
+    return overrides
+
+
 def _dimension(text: str) -> int:
     value = _positive_int(text)
     if not 100 <= value <= 4000:
@@ -54,6 +103,8 @@ def parser() -> argparse.ArgumentParser:
         description="Structure-preserving solvers for planar elastic robot arms: SymPy derives "
                     "the model, CasADi generates C, and the C solver simulates.")
     main.add_argument("--version", action="version", version=f"chaingen {VERSION}")
+    main.add_argument("--debug", action="store_true",
+                      help="show the traceback of an unexpected error (or CHAINGEN_DEBUG=1)")
     main.add_argument("-q", "--quiet", action="store_true",
                       help="no progress bars (they appear only on a terminal, never in CI)")
     quiet = argparse.ArgumentParser(add_help=False)
@@ -73,6 +124,7 @@ def parser() -> argparse.ArgumentParser:
 
     simulate = command("simulate", help="simulate a scene with a generated solver")
     _add_scheme_options(simulate)
+    _add_newton_options(simulate)
     simulate.add_argument("--dt", type=_number, help="step in s (default: the scene's)")
     simulate.add_argument("--t-end", type=_number, help="duration in s (default: the scene's)")
     simulate.add_argument("--every", type=_positive_int, default=1, metavar="N",
@@ -95,6 +147,7 @@ def parser() -> argparse.ArgumentParser:
     animate = command(
         "animate", help="animate the chain and its springs (GIF, or MP4 with ffmpeg)")
     _add_scheme_options(animate)
+    _add_newton_options(animate)
     animate.add_argument("trajectory", type=Path, nargs="?", metavar="TRAJ.csv",
                          help="trajectory of the scene (default: simulate the scene first)")
     animate.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.gif",
@@ -121,6 +174,7 @@ def parser() -> argparse.ArgumentParser:
     order = command(
         "order", help="time-step study: energy and trajectory error per dt, fitted orders")
     _add_scheme_options(order)
+    _add_newton_options(order)
     order.add_argument("--t-end", type=_number, default=10.0,
                        help="duration of each run in s (default 10)")
     order.add_argument("--plot", type=Path, metavar="FILE.png",
@@ -195,8 +249,9 @@ def command_order(args) -> int:
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                             t_end=args.t_end, source=str(args.scene))
     if args.plot is not None:
-        _check_output_path(args.plot)
-    study = order_study(scene, settings.method, settings.quadrature, t_end=settings.t_end)
+        check_output_file(args.plot, "--plot", [args.scene])
+    study = order_study(scene, settings.method, settings.quadrature, t_end=settings.t_end,
+                        options=newton_overrides(args) or None)
     print(format_table(study))
     if args.plot is not None:
         print(f"plot: {plot_order(study, args.plot)}")
@@ -214,16 +269,9 @@ def command_bench(args) -> int:
     return 0
 
 
-def _check_output_path(path: Path) -> None:
-    if path.is_dir():
-        raise ChaingenError(f"--out: {path} is a directory; give a file name")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise ChaingenError(f"--out: directory {parent} does not exist")
-
-
 def command_simulate(args) -> int:
     from .runtime import write_trajectory
+    from .runtime.trajectory import metadata_path
     from .simulation import run_settings, simulate_scene
 
     scene = load_scene(args.scene)
@@ -231,18 +279,20 @@ def command_simulate(args) -> int:
                             dt=args.dt, t_end=args.t_end, every=args.every,
                             source=str(args.scene))
     if args.out is not None:
-        _check_output_path(args.out)
+        check_output_file(args.out, "--out", [args.scene])
+        check_output_file(metadata_path(args.out), "--out", [args.scene])
     figure = None
     if args.plot is not None:
         from .views.plots import check_png_path
         figure = check_png_path(Path(args.plot) if args.plot else (
             args.out.with_suffix(".png") if args.out is not None
             else Path(f"{args.scene.stem}_{settings.method}.png")), "--plot")
+        check_output_file(figure, "--plot", [args.scene] + ([args.out] if args.out else []))
     try:
-        result = simulate_scene(scene, settings)
+        result = simulate_scene(scene, settings, options=newton_overrides(args))
     except NewtonError as error:
-        print(f"chaingen: simulation of {args.scene} failed: {error}", file=sys.stderr)
-        print("chaingen: no trajectory written", file=sys.stderr)
+        print(f"chaingen: error: simulation of {args.scene} failed: {error}; no trajectory "
+              "written", file=sys.stderr)
         return EXIT_FAILED
     if args.out is not None:
         write_trajectory(result, args.out)
@@ -267,6 +317,8 @@ def command_animate(args) -> int:
 
     scene = load_scene(args.scene)
     check_fps(args.fps)
+    check_output_file(args.output, "-o", [args.scene] + ([args.trajectory]
+                                                         if args.trajectory else []))
     if args.t_end is not None and not (np.isfinite(args.t_end) and args.t_end > 0):
         raise ChaingenError(f"--t-end: must be > 0 and finite, got {args.t_end}")
     if args.trajectory is not None:
@@ -280,9 +332,10 @@ def command_animate(args) -> int:
         settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                                 dt=args.dt, t_end=args.t_end, source=str(args.scene))
         try:
-            result = simulate_scene(scene, settings)
+            result = simulate_scene(scene, settings, options=newton_overrides(args))
         except NewtonError as error:
-            print(f"chaingen: simulation of {args.scene} failed: {error}", file=sys.stderr)
+            print(f"chaingen: error: simulation of {args.scene} failed: {error}",
+                  file=sys.stderr)
             return EXIT_FAILED
         run = run_from_result(result, args.scene)
     if args.t_end is not None:
@@ -319,29 +372,56 @@ def summary(result, settings, out: Path | None) -> str:
         f"  Newton iterations      mean {result.mean_newton_iterations:.2f}, "
         f"max {result.max_newton_iterations}",
     ]
+    if result.full_newton_fallbacks or result.split_steps:
+        lines.append(f"  Newton fallbacks       {result.full_newton_fallbacks} steps by full "
+                     f"Newton, {result.split_steps} steps split into halves")
     if out is not None:
         lines.append(f"  trajectory             {out}")
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line. Every error a user can cause is one line on stderr and exit status 2
+    (bad input) or 1 (a run that failed); Ctrl-C exits with 130; an unexpected error is one
+    line too, with the way to its traceback (--debug or CHAINGEN_DEBUG=1 shows it)."""
     args = parser().parse_args(argv)
     from .progress import set_quiet
     set_quiet(args.quiet)
+    debug = args.debug or os.environ.get("CHAINGEN_DEBUG", "") not in ("", "0")
     handlers = {"generate": command_generate, "simulate": command_simulate,
                 "check": command_check, "order": command_order, "bench": command_bench,
                 "plot": command_plot, "animate": command_animate}
     try:
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take
-        print(f"chaingen: error: {getattr(args, 'scene', '')}: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return _error(f"{getattr(args, 'scene', '')}: {error}", EXIT_BAD_INPUT)
     except ChaingenError as error:
-        print(f"chaingen: error: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        if debug and getattr(error, "details", None):
+            print(error.details, file=sys.stderr)
+        return _error(str(error), error.exit_status)
     except KeyboardInterrupt:
         print("chaingen: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader of our output went away (`chaingen ... | head`): nothing more to say.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_FAILED
+    except RecursionError:
+        if debug:
+            raise
+        return _error("input nested too deeply to process", EXIT_BAD_INPUT)
+    except Exception as error:
+        if debug:
+            raise
+        return _error(f"internal error: {type(error).__name__}: {error} (run again with "
+                      "--debug or CHAINGEN_DEBUG=1 for the traceback)", EXIT_FAILED)
+
+
+def _error(message: str, status: int) -> int:
+    """Print one line: the message's first line, control characters escaped."""
+    line = (message.splitlines() or [""])[0]
+    print(f"chaingen: error: {line}", file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

@@ -92,9 +92,10 @@ def build_solver(scene: Scene, method: str, quadrature: int, *,
 
 
 def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None = None,
-                   options: NewtonOptions | None = None) -> SimulationResult:
+                   options: NewtonOptions | dict | None = None) -> SimulationResult:
     """Simulate `scene` from its initial state; raises NewtonError if a step fails. On a
-    terminal a progress bar follows the run (the samples do not depend on it)."""
+    terminal a progress bar follows the run (the samples do not depend on it). options:
+    Newton options, or a dict of fields that replace the package's defaults."""
     # A forward run needs no step sensitivities: leaving them out builds faster.
     solver = solver or build_solver(scene, settings.method, settings.quadrature,
                                     sensitivities=False)

@@ -3,21 +3,57 @@
 The library's file name carries the hash of its sources and flags: a shared library loaded once
 from a path is never reloaded from it (CasADi issues 1361/2185, acados 905), so a changed
 package must get a new path, and an unchanged one is reused without compiling.
+
+The cache trusts nothing by its name alone:
+
+- every library has a side file (`lib...so.json`) with its size, its sha256 and its build hash,
+  written after the library is complete; a library whose bytes do not match it (truncated,
+  altered, replaced by a link to another) is removed and built again, never loaded;
+- the library exports the build hash it was compiled with (`<prefix>_build_hash()`), which the
+  loader compares with the one it asked for;
+- builders of one library take turns (a lock file beside it): the first compiles, the others
+  wait and load its result;
+- each build works in a directory of its own, locked while it runs; a directory left by a build
+  that was killed is removed by the next build;
+- the compiler processes die with the process that started them (Linux: PR_SET_PDEATHSIG).
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import fcntl
 import hashlib
+import json
 import os
 import shutil
+import signal
 import subprocess
+import sys
 import tempfile
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import BuildError
+from .errors import BuildError, ChaingenError
+from .files import write_text
 
 #: Flags of every build: the generated code must stay clean under all of them.
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 DEFAULT_OPTIMISATION = ("-O2",)
+#: The lock file of a build directory (held while the build runs).
+BUILD_LOCK = ".building"
+
+
+class CacheError(ChaingenError):
+    """The build cache cannot be used (not a directory, not writable): bad set-up, exit 2."""
+
+
+@dataclass(frozen=True)
+class BuiltLibrary:
+    """A verified library in the cache and the build hash it was compiled with."""
+
+    path: Path
+    build_hash: str
 
 
 def cache_directory() -> Path:
@@ -41,11 +77,122 @@ def build_hash(files: dict[str, str], flags: tuple[str, ...], cc: str) -> str:
     return digest.hexdigest()[:20]
 
 
+def file_digest(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def side_file(library: Path) -> Path:
+    return library.with_name(library.name + ".json")
+
+
+def verified(library: Path, expected_hash: str) -> bool:
+    """Whether `library` is a complete, unaltered file of build `expected_hash`: a regular file
+    (not a link), with the size and sha256 its side file records."""
+    try:
+        record = json.loads(side_file(library).read_text())
+        status = library.lstat()
+    except (OSError, ValueError):
+        return False
+    if not isinstance(record, dict) or record.get("build_hash") != expected_hash:
+        return False
+    if not (library.is_file() and not library.is_symlink()):
+        return False
+    return status.st_size == record.get("size") and file_digest(library) == record.get("sha256")
+
+
+def ready_cache(cache: Path) -> Path:
+    """The cache directory, created if needed; CacheError when it cannot be used."""
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise CacheError(f"build cache {cache}: exists and is not a directory (set "
+                         "CHAINGEN_CACHE_DIR to a directory)") from None
+    except OSError as error:
+        raise CacheError(f"build cache {cache}: cannot be created: "
+                         f"{error.strerror or error} (set CHAINGEN_CACHE_DIR)") from None
+    if not cache.is_dir():
+        raise CacheError(f"build cache {cache}: not a directory (set CHAINGEN_CACHE_DIR)")
+    if not os.access(cache, os.W_OK | os.X_OK):
+        raise CacheError(f"build cache {cache}: not writable (set CHAINGEN_CACHE_DIR to a "
+                         "writable directory)")
+    return cache
+
+
+@contextlib.contextmanager
+def locked(path: Path):
+    """An exclusive lock on the file `path` (created if needed), released on leaving."""
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+#: A build directory younger than this is left alone even when its lock is free: its build may
+#: not have taken the lock yet.
+STALE_AFTER_SECONDS = 60.0
+
+
+def remove_stale_builds(cache: Path) -> None:
+    """Remove build directories whose build is no longer running (their lock is free)."""
+    now = time.time()
+    for directory in cache.glob("build-*"):
+        lock = directory / BUILD_LOCK
+        try:
+            if now - directory.stat().st_mtime < STALE_AFTER_SECONDS:
+                continue
+            with open(lock, "a") as handle:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                shutil.rmtree(directory, ignore_errors=True)
+        except (BlockingIOError, FileNotFoundError, NotADirectoryError):
+            continue     # running, or removed meanwhile
+
+
+def _die_with_parent() -> None:
+    """In the compiler's process before exec: be killed when our process dies."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(1, signal.SIGKILL)   # PR_SET_PDEATHSIG
+
+
+def _start(command: list[str], cwd: Path) -> subprocess.Popen:
+    try:
+        return subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True,
+                                preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+    except FileNotFoundError:
+        raise BuildError(f"C compiler {command[0]!r} not found: install one or set CC to "
+                         "a C compiler") from None
+    except PermissionError:
+        raise BuildError(f"C compiler {command[0]!r} cannot be run (permission denied): set CC "
+                         "to a C compiler") from None
+
+
+def _failure(what: str, command: list[str], returncode: int, stderr: str,
+             log: Path) -> BuildError:
+    """A BuildError of one line (the compiler's first error line and where its whole output
+    went); the full output is kept in the log file and on the error (`details`)."""
+    details = f"$ {' '.join(command)}\n{stderr}"
+    with contextlib.suppress(OSError):
+        write_text(log, details)
+    lines = [line for line in stderr.splitlines() if "error" in line] or stderr.splitlines()
+    first = lines[0].strip() if lines else f"exit status {returncode}"
+    error = BuildError(f"{what} failed (exit status {returncode}): {first} (the compiler's "
+                       f"output is in {log})")
+    error.details = details
+    return error
+
+
 def build_shared_library(prefix: str, files: dict[str, str], sources: list[str], *,
                          flags: tuple[str, ...] = DEFAULT_OPTIMISATION,
                          source_flags: dict[str, tuple[str, ...]] | None = None,
-                         cache: Path | None = None) -> Path:
-    """Path of lib<prefix>-<hash>.so built from `files` (reused when it already exists).
+                         cache: Path | None = None) -> BuiltLibrary:
+    """The verified library lib<prefix>-<hash>.so built from `files` (reused when a verified
+    one is in the cache).
 
     Each source is compiled in its own compiler process, all at once (a large model file and
     the solver build side by side), with `flags`, or `source_flags[name]` in their place for
@@ -56,33 +203,60 @@ def build_shared_library(prefix: str, files: dict[str, str], sources: list[str],
     source_flags = {name: tuple(value) for name, value in (source_flags or {}).items()}
     # Hidden visibility: only the header's API (marked <PREFIX>_API) is exported.
     common = STRICT_FLAGS + ("-fPIC", "-fvisibility=hidden")
-    cache = Path(cache) if cache is not None else cache_directory()
+    cache = ready_cache(Path(cache) if cache is not None else cache_directory())
     signature = common + tuple(flags) + tuple(
         f"{name}:{' '.join(value)}" for name, value in sorted(source_flags.items()))
-    library = cache / f"lib{prefix}-{build_hash(files, signature, cc)}.so"
-    if library.exists():
-        return library
-    cache.mkdir(parents=True, exist_ok=True)
+    digest = build_hash(files, signature, cc)
+    library = cache / f"lib{prefix}-{digest}.so"
+    if verified(library, digest):
+        return BuiltLibrary(library, digest)
+    with locked(cache / f"lib{prefix}-{digest}.lock"):
+        if verified(library, digest):     # built by another process while we waited
+            return BuiltLibrary(library, digest)
+        for stale in (library, side_file(library)):
+            with contextlib.suppress(FileNotFoundError):
+                stale.unlink()
+        remove_stale_builds(cache)
+        _compile(prefix, files, sources, cc, common, flags, source_flags, digest, cache,
+                 library)
+    return BuiltLibrary(library, digest)
+
+
+def _compile(prefix, files, sources, cc, common, flags, source_flags, digest, cache,
+             library) -> None:
     workdir = Path(tempfile.mkdtemp(prefix=f"build-{prefix}-", dir=cache))
+    log = cache / f"lib{prefix}-{digest}.log"
     try:
-        for name, text in files.items():
-            (workdir / name).write_text(text)
-        commands = [[cc, *common, *source_flags.get(source, flags), "-c", source, "-o",
-                     f"{source}.o"] for source in sources]
-        processes = [subprocess.Popen(command, cwd=workdir, stdout=subprocess.PIPE,
-                                      stderr=subprocess.PIPE, text=True)
-                     for command in commands]
-        errors = [process.communicate()[1] for process in processes]
-        for command, process, stderr in zip(commands, processes, errors):
-            if process.returncode != 0:
-                raise BuildError(f"compiling {prefix} failed: {' '.join(command)}\n{stderr}")
-        output = workdir / library.name
-        command = [cc, "-shared", "-o", str(output), *(f"{source}.o" for source in sources),
-                   "-lm"]
-        result = subprocess.run(command, cwd=workdir, capture_output=True, text=True)
-        if result.returncode != 0:
-            raise BuildError(f"linking {prefix} failed: {' '.join(command)}\n{result.stderr}")
-        os.replace(output, library)   # atomic: a concurrent loader sees all or nothing
+        with locked(workdir / BUILD_LOCK):
+            for name, text in files.items():
+                (workdir / name).write_text(text)
+            define = f'-D{prefix.upper()}_BUILD_HASH="{digest}"'
+            commands = [[cc, *common, *source_flags.get(source, flags), define, "-c", source,
+                         "-o", f"{source}.o"] for source in sources]
+            processes = []
+            try:
+                for command in commands:
+                    processes.append(_start(command, workdir))
+                errors = [process.communicate()[1] for process in processes]
+            finally:
+                for process in processes:
+                    if process.poll() is None:
+                        process.kill()
+                        process.wait()
+            for command, process, stderr in zip(commands, processes, errors):
+                if process.returncode != 0:
+                    raise _failure(f"compiling {prefix}", command, process.returncode, stderr,
+                                   log)
+            output = workdir / library.name
+            command = [cc, "-shared", "-o", str(output),
+                       *(f"{source}.o" for source in sources), "-lm"]
+            linker = _start(command, workdir)
+            _, stderr = linker.communicate()
+            if linker.returncode != 0:
+                raise _failure(f"linking {prefix}", command, linker.returncode, stderr, log)
+            record = {"build_hash": digest, "size": output.stat().st_size,
+                      "sha256": file_digest(output)}
+            os.replace(output, library)   # atomic: a concurrent loader sees all or nothing
+            write_text(side_file(library), json.dumps(record) + "\n")
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
-    return library

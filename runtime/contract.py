@@ -78,8 +78,8 @@ STATUSES = (
            "a spring segment came within {segment_tolerance} of the geometry's size of zero "
            "length or passed through it (turned by 90 degrees or more in one step), where its "
            "direction is undefined", when="segments"),
-    Status("INTERRUPTED", 7, "simulate_observed: the observer asked to stop",
-           "interrupted by the observer of the run"),
+    Status("INTERRUPTED", 7, "simulate_observed: the observer or control->stop asked to stop",
+           "interrupted"),
 )
 STATUS_CODES = {status.name: status.code for status in STATUSES}
 
@@ -173,7 +173,23 @@ STATS_FIELDS = (
     StructField("max_newton_iterations", "int", "the most a single completed step took"),
     StructField("failed_iterations", "int", "iterations spent in the failing step, 0 if none "
                                             "failed"),
+    StructField("full_newton_fallbacks", "long", "steps whose kept Jacobian failed and that "
+                                                 "full Newton solved"),
+    StructField("split_steps", "long", "steps that Newton failed on whole and that were "
+                                       "taken as two halves (recursively)"),
 )
+
+#: What a caller shares with a running simulate_observed, from another thread or a signal
+#: handler: a request to stop, and the steps completed so far.
+CONTROL_FIELDS = (
+    StructField("stop", "volatile int", "set nonzero to stop the run after the current step "
+                                        "(status INTERRUPTED)"),
+    StructField("steps", "volatile long", "steps completed so far, written after every step"),
+)
+#: The fallback ladder of a step that fails: the kept Jacobian, then full Newton from the
+#: predictor, then the step split into halves, at most this many times in a row (2^depth
+#: substeps).
+MAX_SPLIT_DEPTH = 4
 
 #: Energy flows of one step (flows[2]): the work of the joint torques, then the energy
 #: dissipated by joint damping.
@@ -278,7 +294,8 @@ ENTRY_POINTS = (
         "const double *x0, double t0, double dt, long n_steps, long every, "
         f"const double *u [inputs], {_OPTIONS}, {_WORKSPACE}, double *samples, "
         "double *x_final, {prefix}_stats *stats, {prefix}_observer observer, void *context, "
-        "long interval")),
+        "long interval, {prefix}_control *control")),
+    EntryPoint("build_hash", "const char *", ()),
 )
 ENTRY_POINTS_BY_NAME = {entry.name: entry for entry in ENTRY_POINTS}
 

@@ -9,11 +9,15 @@ the 0600 of a temporary file.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import shutil
+import stat as stat_module
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+
+from .errors import ChaingenError
 
 
 def current_umask() -> int:
@@ -75,8 +79,22 @@ def staged_files(paths) -> Iterator[list[Path]]:
         raise
 
 
+@contextlib.contextmanager
+def directory_lock(directory: str | os.PathLike):
+    """An exclusive lock on `directory` itself (flock on its descriptor): writers of its entries
+    take turns; nothing is left behind."""
+    handle = os.open(directory, os.O_RDONLY)
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(handle)
+
+
 def write_directory(target: str | os.PathLike, files: dict[str, str]) -> Path:
-    """Write `files` ({name: text}) as the directory `target`, all or nothing.
+    """Write `files` ({name: text}) as the directory `target`, all or nothing. Writers of one
+    parent directory take turns (directory_lock), so concurrent writers of one target each
+    replace it whole.
 
     The files are written into a temporary sibling, which then takes the place of `target`.
     An existing `target` is first moved aside (a rename) and deleted only after the new one is
@@ -87,6 +105,11 @@ def write_directory(target: str | os.PathLike, files: dict[str, str]) -> Path:
     target = Path(target)
     parent = target.parent if str(target.parent) else Path(".")
     parent.mkdir(parents=True, exist_ok=True)
+    with directory_lock(parent):
+        return _replace_directory(target, parent, files)
+
+
+def _replace_directory(target: Path, parent: Path, files: dict[str, str]) -> Path:
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
     old = None
     try:
@@ -106,3 +129,35 @@ def write_directory(target: str | os.PathLike, files: dict[str, str]) -> Path:
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
     return target
+
+
+def check_output_file(path: str | os.PathLike, option: str, inputs=()) -> Path:
+    """An output file a command may write, checked before any work is done; ChaingenError
+    (exit status 2) naming the option and saying why not.
+
+    Refused: a directory; a missing or unwritable parent directory; an existing node that is
+    not a regular file (a device, a FIFO, a socket: replacing it would be wrong, writing to it
+    is not a file); and any of `inputs` (the same file, by inode too: a hard link or another
+    spelling of its path), which would be overwritten.
+    """
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise ChaingenError(f"{option}: {path} is a directory; give a file name")
+    if not parent.is_dir():
+        raise ChaingenError(f"{option}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ChaingenError(f"{option}: directory {parent} is not writable")
+    if os.path.lexists(path):
+        status = os.stat(path)
+        if not stat_module.S_ISREG(status.st_mode):
+            raise ChaingenError(f"{option}: {path} exists and is not a regular file (a device, "
+                                "FIFO or socket); give a file name")
+        for source in inputs:
+            try:
+                if os.path.samefile(path, source):
+                    raise ChaingenError(f"{option}: {path} is the input {source}; writing it "
+                                        "would overwrite the input")
+            except FileNotFoundError:
+                continue
+    return path

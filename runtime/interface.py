@@ -12,7 +12,8 @@ import dataclasses
 from . import contract
 
 _C_SCALARS = {"int": ctypes.c_int, "long": ctypes.c_long, "double": ctypes.c_double,
-              "size_t": ctypes.c_size_t}
+              "size_t": ctypes.c_size_t, "volatile int": ctypes.c_int,
+              "volatile long": ctypes.c_long}
 
 
 def _struct(name: str, fields) -> type[ctypes.Structure]:
@@ -20,13 +21,11 @@ def _struct(name: str, fields) -> type[ctypes.Structure]:
         "_fields_": [(field.name, _C_SCALARS[field.c_type]) for field in fields]})
 
 
-#: <prefix>_options and <prefix>_stats, field by field as the header declares them.
+#: <prefix>_options, <prefix>_stats and <prefix>_control, field by field as the header
+#: declares them.
 OptionsStruct = _struct("OptionsStruct", contract.NEWTON_OPTIONS)
 StatsStruct = _struct("StatsStruct", contract.STATS_FIELDS)
-#: <prefix>_observer.
-Observer = ctypes.CFUNCTYPE(_C_SCALARS[contract.OBSERVER_RETURNS],
-                            *[_C_SCALARS.get(p.c_type, ctypes.c_void_p)
-                              for p in contract.OBSERVER_PARAMETERS])
+ControlStruct = _struct("ControlStruct", contract.CONTROL_FIELDS)
 
 
 def ctypes_type(c_type: str, prefix: str):
@@ -39,13 +38,17 @@ def ctypes_type(c_type: str, prefix: str):
         return ctypes.POINTER(ctypes.c_double)
     if c_type == "int *":
         return ctypes.POINTER(ctypes.c_int)
+    if c_type == "const char *":
+        return ctypes.c_char_p
     if c_type in (f"{prefix}_options *", f"const {prefix}_options *"):
         return ctypes.POINTER(OptionsStruct)
     if c_type == f"{prefix}_stats *":
         return ctypes.POINTER(StatsStruct)
-    if c_type == f"{prefix}_observer":
-        return Observer
-    if c_type in (f"{prefix}_workspace *", "void *"):
+    if c_type == f"{prefix}_control *":
+        return ctypes.POINTER(ControlStruct)
+    # The observer is for C callers; Python passes NULL and follows a run through its control
+    # block instead (no Python callback inside the C loop).
+    if c_type in (f"{prefix}_workspace *", "void *", f"{prefix}_observer"):
         return ctypes.c_void_p
     raise ValueError(f"no ctypes type for the C type {c_type!r}")
 

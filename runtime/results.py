@@ -21,6 +21,8 @@ class SimulationResult:
     wall_time: float            # seconds spent in the C loop
     newton_iterations: int      # total over all steps
     max_newton_iterations: int
+    full_newton_fallbacks: int = 0   # steps whose kept Jacobian failed and full Newton solved
+    split_steps: int = 0             # steps taken as halves after Newton failed on them whole
 
     def column(self, name: str) -> np.ndarray:
         return self.samples[:, self.columns.index(name)]

@@ -4,11 +4,22 @@ Python calls C once per simulation (`simulate`), not once per step; the per-step
 (`step`, `residual_jacobian`, ...) are there for verification and studies. The C signatures are
 not written here: they come from the package's manifest, which records the parameter list of
 every entry point it exports (chaingen.runtime.contract).
+
+Threads: one Solver may be used from any number of threads at once. Each thread gets a C
+workspace of its own on its first call (ctypes releases the GIL during the C call, so a shared
+one would be overwritten), so a thread's steps see only its own Newton history (warm start,
+kept Jacobian) and its results equal those of the same calls made alone.
+
+Interrupts: `simulate` runs the C loop in a worker thread when called from the main thread and
+waits for it there, so Ctrl-C (KeyboardInterrupt) and exceptions of a progress callback arrive
+promptly; the loop is told to stop through its control block and stops after the current step.
 """
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import json
+import threading
 import time
 from pathlib import Path
 
@@ -17,13 +28,12 @@ import numpy as np
 from . import contract
 from .build import build_shared_library
 from .errors import NewtonError
-from .interface import NewtonOptions, Observer, StatsStruct, ctypes_type
+from .interface import ControlStruct, NewtonOptions, StatsStruct, ctypes_type
 from .results import Sensitivities, SimulationResult, StepResult
 
 _double_p = ctypes.POINTER(ctypes.c_double)
-#: Observer calls per simulate call with a progress callback (at most): a Python call every
-#: 1/200 of the run costs nothing measurable.
-PROGRESS_CALLS = 200
+#: Seconds between two looks of the waiting thread at a running simulate: progress, Ctrl-C.
+POLL_SECONDS = 0.05
 
 
 def _pointer(array: np.ndarray):
@@ -40,7 +50,7 @@ def _vector(values, size: int, name: str) -> np.ndarray:
 class Solver:
     """A loaded package: its manifest (sizes, layouts, entry points) and its C entry points."""
 
-    def __init__(self, library: Path, manifest: dict):
+    def __init__(self, library: Path, manifest: dict, *, build_hash: str | None = None):
         self.library_path = Path(library)
         self.manifest = manifest
         self.prefix = manifest["prefix"]
@@ -56,8 +66,12 @@ class Solver:
         self._lib = ctypes.CDLL(str(self.library_path))
         self._entry_points = {name: self._declare(name, entry)
                               for name, entry in manifest["entry_points"].items()}
-        self._workspace = ctypes.create_string_buffer(self._call("workspace_size"))
-        self._call("workspace_init", workspace=self._workspace)
+        if build_hash is not None:
+            built = self._call("build_hash").decode()
+            if built != build_hash:
+                raise ValueError(f"{self.library_path}: built as {built!r}, not {build_hash!r}")
+        self._workspace_size = self._call("workspace_size")
+        self._threads = threading.local()
         self.default_options = NewtonOptions(**manifest["newton_defaults"])
 
     @classmethod
@@ -67,7 +81,7 @@ class Solver:
             name: tuple(flags) for name, flags in manifest["source_flags"].items()})
         library = build_shared_library(manifest["prefix"], files, manifest["sources"],
                                        **build_options)
-        return cls(library, manifest)
+        return cls(library.path, manifest, build_hash=library.build_hash)
 
     @classmethod
     def from_directory(cls, directory, **build_options) -> Solver:
@@ -85,6 +99,29 @@ class Solver:
         function.argtypes = [ctypes_type(c_type, self.prefix)
                              for _, c_type in entry["parameters"]]
         return function, tuple(parameter for parameter, _ in entry["parameters"])
+
+    @property
+    def _workspace(self):
+        """The calling thread's C workspace, made (and initialised) on its first use."""
+        workspace = getattr(self._threads, "workspace", None)
+        if workspace is None:
+            workspace = self._threads.workspace = ctypes.create_string_buffer(
+                self._workspace_size)
+            self._call("workspace_init", workspace=workspace)
+        return workspace
+
+    def newton_options(self, options: NewtonOptions | dict | None = None) -> NewtonOptions:
+        """Newton options: given ones as they are, or the package's defaults with the fields
+        of a dict (contract field names) replaced."""
+        if isinstance(options, NewtonOptions):
+            return options
+        fields = {field.name: field for field in contract.NEWTON_OPTIONS}
+        unknown = set(options or {}) - set(fields)
+        if unknown:
+            raise ValueError(f"no Newton option {', '.join(sorted(unknown))} (known: "
+                             f"{', '.join(fields)})")
+        return dataclasses.replace(self.default_options, **{
+            name: fields[name].python_type(value) for name, value in (options or {}).items()})
 
     def has_entry_point(self, name: str) -> bool:
         return name in self._entry_points
@@ -106,7 +143,8 @@ class Solver:
     # -- state maps ---------------------------------------------------------------------------
 
     def reset(self) -> None:
-        """Forget the Newton state carried between steps (warm start, reused Jacobian)."""
+        """Forget the calling thread's Newton state carried between steps (warm start, reused
+        Jacobian)."""
         self._call("workspace_init", workspace=self._workspace)
 
     def initial_state(self, phi, phidot) -> np.ndarray:
@@ -168,10 +206,11 @@ class Solver:
         return NewtonError(f"step failed after {iterations} Newton iterations: "
                            f"{self.status_message(status)}", status=status)
 
-    def step(self, x0, dt: float, u=None, options: NewtonOptions | None = None) -> StepResult:
+    def step(self, x0, dt: float, u=None,
+             options: NewtonOptions | dict | None = None) -> StepResult:
         """One step from x0 with inputs u (actuated scenes). Raises NewtonError if it fails."""
         x1, iterations, flows = np.empty(self.nx), ctypes.c_int(0), np.zeros(2)
-        c_options = (options or self.default_options).as_c()
+        c_options = self.newton_options(options).as_c()
         status = self._call("step", x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
                             dt=dt, x1=_pointer(x1), flows=_pointer(flows),
                             options=ctypes.byref(c_options), workspace=self._workspace,
@@ -181,7 +220,7 @@ class Solver:
         return StepResult(x1, iterations.value, float(flows[0]), float(flows[1]))
 
     def step_sensitivities(self, x0, dt: float, u=None,
-                           options: NewtonOptions | None = None) -> Sensitivities:
+                           options: NewtonOptions | dict | None = None) -> Sensitivities:
         """A step and d s_{k+1}/d s_k, d s_{k+1}/d u_k in s = (phi, omega) (implicit function
         theorem on the converged Newton system)."""
         if not self.has_sensitivities:
@@ -189,7 +228,7 @@ class Solver:
         ns = 2 * self.n
         x1, iterations = np.empty(self.nx), ctypes.c_int(0)
         ds_ds, ds_du = np.empty(ns * ns), np.empty(ns * self.nu)
-        c_options = (options or self.default_options).as_c()
+        c_options = self.newton_options(options).as_c()
         status = self._call("step_sensitivities", x0=_pointer(_vector(x0, self.nx, "x0")),
                             u=self._inputs(u), dt=dt, x1=_pointer(x1), ds_ds=_pointer(ds_ds),
                             ds_du=_pointer(ds_du), options=ctypes.byref(c_options),
@@ -200,15 +239,16 @@ class Solver:
                              ds_du.reshape((ns, self.nu), order="F"))
 
     def simulate(self, phi0, omega0, *, dt: float, n_steps: int, every: int = 1,
-                 torques=None, options: NewtonOptions | None = None, scene: str = "",
-                 quadrature: int | None = None, progress=None) -> SimulationResult:
+                 torques=None, options: NewtonOptions | dict | None = None, scene: str = "",
+                 progress=None) -> SimulationResult:
         """Run n_steps steps from joint space (phi0, omega0) in one C call.
 
         torques: (n_steps, nu) inputs of the actuated joints, row k held over step k (zero if
-        None). progress: called as progress(steps_done) about 200 times during the run (the
-        run's samples do not depend on it); Ctrl-C in it stops the run and raises
-        KeyboardInterrupt. Raises NewtonError naming the failing step and time; the rows
-        written before it are in its `result`.
+        None). progress: called as progress(steps_done) about 20 times a second during the run
+        (the run's samples do not depend on it). Ctrl-C, or an exception raised by progress,
+        stops the run within a step and propagates (KeyboardInterrupt, or the exception itself).
+        Raises NewtonError naming the failing step and time; the rows written before it are in
+        its `result`.
         """
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
@@ -226,25 +266,15 @@ class Solver:
         x0 = self.initial_state(phi0, omega0)
         rows = self._call("sample_count", n_steps=n_steps, every=every)
         samples = np.zeros((rows, self.nsample))
-        stats = StatsStruct()
-        c_options = (options or self.default_options).as_c()
+        stats, control = StatsStruct(), ControlStruct()
+        c_options = self.newton_options(options).as_c()
         arguments = dict(x0=_pointer(x0), t0=0.0, dt=dt, n_steps=n_steps, every=every, u=inputs,
                          options=ctypes.byref(c_options), workspace=self._workspace,
-                         samples=_pointer(samples), x_final=None, stats=ctypes.byref(stats))
-        interrupted = []
+                         samples=_pointer(samples), x_final=None, stats=ctypes.byref(stats),
+                         observer=None, context=None, interval=1,
+                         control=ctypes.byref(control))
         started = time.perf_counter()
-        if progress is not None:
-            def observe(steps, _context):
-                try:
-                    progress(int(steps))
-                except KeyboardInterrupt:
-                    interrupted.append(True)
-                    return 1
-                return 0
-            status = self._call("simulate_observed", **arguments, observer=Observer(observe),
-                                context=None, interval=max(1, n_steps // PROGRESS_CALLS))
-        else:
-            status = self._call("simulate", **arguments)
+        status = self._run_controlled(arguments, control, progress)
         wall = time.perf_counter() - started
         valid = stats.steps // every + 1
         result = SimulationResult(
@@ -253,9 +283,9 @@ class Solver:
             every=every, columns=tuple(self.manifest["sample_columns"]),
             samples=samples[:valid] if status else samples, wall_time=wall,
             newton_iterations=int(stats.newton_iterations),
-            max_newton_iterations=int(stats.max_newton_iterations))
-        if interrupted:
-            raise KeyboardInterrupt(f"simulation interrupted after {stats.steps} steps")
+            max_newton_iterations=int(stats.max_newton_iterations),
+            full_newton_fallbacks=int(stats.full_newton_fallbacks),
+            split_steps=int(stats.split_steps))
         if status:
             failed = stats.steps + 1
             raise NewtonError(
@@ -264,3 +294,33 @@ class Solver:
                 f"{self.status_message(status)}",
                 status=status, step=failed, time=stats.steps * dt, result=result)
         return result
+
+    def _run_controlled(self, arguments: dict, control, progress) -> int:
+        """simulate_observed with `arguments`: in this thread, or, from the main thread or with
+        a progress callback, in a worker while this thread waits, reports progress and stays
+        interruptible; an exception here (Ctrl-C, progress's own) stops the loop through
+        `control` and propagates once the worker has returned."""
+        if progress is None and threading.current_thread() is not threading.main_thread():
+            return self._call("simulate_observed", **arguments)
+        outcome: list = []
+
+        def run() -> None:
+            try:
+                outcome.append(self._call("simulate_observed", **arguments))
+            except BaseException as error:    # raised again in the waiting thread
+                outcome.append(error)
+
+        worker = threading.Thread(target=run, name=f"{self.prefix} simulate", daemon=True)
+        worker.start()
+        try:
+            while worker.is_alive():
+                worker.join(POLL_SECONDS)
+                if progress is not None:
+                    progress(int(control.steps))
+        except BaseException:
+            control.stop = 1
+            worker.join()
+            raise
+        if isinstance(outcome[0], BaseException):
+            raise outcome[0]
+        return outcome[0]

@@ -45,14 +45,15 @@ def struct_fields(header: str, name: str) -> list[tuple[str, str, str]]:
 def prototypes(header: str, prefix: str) -> dict[str, tuple[str, list[list[str]]]]:
     """{entry point: (result type, [[parameter, C type], ...])} of the header's declarations."""
     found = {}
-    pattern = re.compile(r"^(\w[\w ]*?) " + re.escape(prefix) + r"_(\w+)\(([^)]*)\);", re.M | re.S)
+    pattern = re.compile(r"^(\w[\w ]*?\**) ?" + re.escape(prefix) + r"_(\w+)\(([^)]*)\);",
+                         re.M | re.S)
     for returns, name, parameters in pattern.findall(header):
         parameters = " ".join(parameters.split())
         parsed = [] if parameters == "void" else [
             [re.fullmatch(r"(.*?[\s*])(\w+)", p.strip()).group(2),
              re.fullmatch(r"(.*?[\s*])(\w+)", p.strip()).group(1).strip()]
             for p in parameters.split(",")]
-        found[name] = (returns, parsed)
+        found[name] = (returns.strip(), parsed)
     return found
 
 

@@ -2,6 +2,7 @@
 runtime."""
 from __future__ import annotations
 
+import ctypes
 import re
 import subprocess
 
@@ -207,6 +208,19 @@ def test_bad_arguments_are_refused():
         solver.step(np.zeros(solver.nx), -0.01)
     with pytest.raises(ValueError, match="12 entries"):
         solver.step(np.zeros(3), 0.01)
+    # Every entry point checks its pointers: NULL gives BAD_ARGUMENT (or, for the two that
+    # return nothing, no effect), never a crash.
+    library = ctypes.CDLL(str(solver.library_path))   # its own function objects, untyped
+    for name, entry in solver.manifest["entry_points"].items():
+        function = getattr(library, f"{solver.prefix}_{name}")
+        if not entry["parameters"] or name == "sample_count":
+            continue
+        function.argtypes = None
+        function.restype = ctypes.c_int
+        status = function(*[None if "*" in c_type else 0
+                            for _, c_type in entry["parameters"]])
+        if entry["returns"] == "int":
+            assert status == 4, name
 
 
 def _symbols(library, *flags):
@@ -223,7 +237,7 @@ def test_exactly_the_header_api_is_exported(name, method):
     solver = solver_for(name, method, 3, sensitivities=True)
     exported = set(_symbols(solver.library_path, "--defined-only"))
     header = (GENERATED / solver.prefix / f"{solver.prefix}.h").read_text()
-    api = set(re.findall(rf"^{solver.prefix.upper()}_API\n\w+ ({solver.prefix}_\w+)\(",
+    api = set(re.findall(rf"^{solver.prefix.upper()}_API\n[\w ]+?\**\s*({solver.prefix}_\w+)\(",
                          header, flags=re.M))
     assert f"{solver.prefix}_step" in api and f"{solver.prefix}_step_sensitivities" in api
     assert exported == api

@@ -16,7 +16,7 @@ import pytest
 import chaingen.generate.package as package_module
 from chaingen.generate.package import generate_package, write_package
 from chaingen.runtime import JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP, NewtonOptions, Solver
-from chaingen.studies.bench.knobs import KnobRow, knob_table, newton_options, with_source_flags
+from chaingen.studies.bench.knobs import KnobRow, knob_table, with_source_flags
 
 from helpers import load
 
@@ -75,10 +75,12 @@ def test_newton_defaults_per_scheme(method, reuse):
 def test_knob_options_start_from_the_package_defaults():
     solver = Solver.from_files(generate_package(load("three_link_mono"), "vi", 3,
                                                 sensitivities=False).files)
-    assert newton_options(solver, {}) == solver.default_options
-    options = newton_options(solver, {"warm_start": 0, "update_rtol": 1e-6})
+    assert solver.newton_options({}) == solver.default_options
+    options = solver.newton_options({"warm_start": 0, "update_rtol": 1e-6})
     assert options == NewtonOptions(warm_start=False, reuse_jacobian=JACOBIAN_ACROSS_STEPS,
                                     update_rtol=1e-6)
+    with pytest.raises(ValueError, match="no Newton option unknown"):
+        solver.newton_options({"unknown": 1})
 
 
 def test_with_source_flags_changes_one_source_only():

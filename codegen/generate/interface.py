@@ -37,6 +37,10 @@ INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
     EntryPoint("finish_step", "static int", _parameters(
         "const double *x0, const double *u [inputs], double dt, double *x1, "
         "double *flows [flows], {prefix}_workspace *workspace")),
+    EntryPoint("advance", "static int", _parameters(
+        "const double *x0, const double *u [inputs], double dt, double *x1, "
+        "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
+        "int *iterations, int depth")),
     EntryPoint("write_sample", "static int", _parameters(
         "const double *x, double t, const compensated_sum *totals [flows], double *row, "
         "{prefix}_workspace *workspace")),
@@ -98,7 +102,7 @@ class CInterface:
         entry, c_name = self._entry(name)
         parameters = [_declaration(contract.resolved(p.c_type, self.prefix), p.name)
                       for p in self._parameters(name)]
-        head = f"{entry.returns} {c_name}("
+        head = f"{_declaration(entry.returns, c_name)}("
         return _wrap(head, parameters or ["void"], ")")
 
     def prototype(self, name: str) -> str:

@@ -185,6 +185,8 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "jacobian_mode_macros": interface.jacobian_mode_macros(),
         "options_struct": interface.struct(contract.NEWTON_OPTIONS, "options", defaults),
         "stats_struct": interface.struct(contract.STATS_FIELDS, "stats"),
+        "control_struct": interface.struct(contract.CONTROL_FIELDS, "control"),
+        "max_split": contract.MAX_SPLIT_DEPTH,
         "observer_typedef": interface.observer_typedef(),
         "history": contract.WARM_START_HISTORY,
         "refresh_rate": c_literal(contract.REFRESH_RATE),
@@ -246,10 +248,22 @@ def check_package_target(directory: str | os.PathLike) -> Path:
             raise PackageWriteError(
                 f"{target}: exists and is not a chaingen package (no {contract.MANIFEST}); "
                 "choose an empty or new directory")
+    ancestor = target.absolute().parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise PackageWriteError(f"{target}: {ancestor} is not a directory")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise PackageWriteError(f"{target}: directory {ancestor} is not writable")
     return target
 
 
 def write_package(package: GeneratedPackage, directory: str | os.PathLike) -> Path:
     """Write the package's files into `directory`, all or nothing (chaingen.runtime.files),
     where check_package_target allows it."""
-    return write_directory(check_package_target(directory), package.files)
+    target = check_package_target(directory)
+    try:
+        return write_directory(target, package.files)
+    except OSError as error:
+        raise PackageWriteError(f"{target}: cannot write the package: "
+                                f"{error.strerror or error}") from None

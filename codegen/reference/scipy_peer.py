@@ -352,7 +352,7 @@ def compile_ode(scene: Scene, directory: str | Path | None = None) -> CompiledOD
     functions = ode_functions(ode, prefix)
     files = render_peer_sources(functions, prefix, scene.n, digest)
     path = build_shared_library(prefix, files, [f"{prefix}_model.c", f"{prefix}_peer.c"],
-                                cache=directory)
+                                cache=directory).path
     fun, jac = _bind(ctypes.CDLL(str(path)), scene.n)
     compiled = CompiledODE(ode=ode, code_hash=digest, library_path=path, fun=fun, jac=jac,
                            energy_function=functions.energy)

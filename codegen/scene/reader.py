@@ -78,11 +78,20 @@ def parse_scene(text: str, source: str, default_name: str) -> Scene:
         match = re.search(r"\d{4000,}", text)
         line = text.count("\n", 0, match.start()) + 1 if match else 1
         raise SceneError(f"{source}:{line}: TOML syntax error: {_printable(str(error))}") from None
-    return _SceneReader(source, default_name).read(document)
+    except RecursionError:
+        raise SceneError(f"{source}: TOML nested too deeply for a scene file (arrays or inline "
+                         "tables within each other hundreds of levels deep)") from None
+    return SceneReader(source, default_name).read(document)
 
 
-def _show(value: Any) -> str:
+#: Nesting that `_show` writes out; deeper arrays and tables are shown as "...".
+_SHOW_DEPTH = 8
+
+
+def _show(value: Any, depth: int = 0) -> str:
     """A value as it would be written in TOML, on one line and shortened if long."""
+    if depth > _SHOW_DEPTH and isinstance(value, (list, dict)):
+        return "..."
     if isinstance(value, bool):
         text = "true" if value else "false"
     elif isinstance(value, (int, float)):
@@ -90,9 +99,10 @@ def _show(value: Any) -> str:
     elif isinstance(value, str):
         text = json.dumps(value, ensure_ascii=False)
     elif isinstance(value, list):
-        text = "[" + ", ".join(_show(item) for item in value) + "]"
+        text = "[" + ", ".join(_show(item, depth + 1) for item in value) + "]"
     elif isinstance(value, dict):
-        text = "{" + ", ".join(f"{key} = {_show(item)}" for key, item in value.items()) + "}"
+        text = "{" + ", ".join(f"{key} = {_show(item, depth + 1)}"
+                               for key, item in value.items()) + "}"
     elif hasattr(value, "isoformat"):
         text = value.isoformat()
     else:
@@ -140,7 +150,7 @@ def _is_integer(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-class _SceneReader:
+class SceneReader:
     """Validates one parsed TOML document; `fail` raises the one-line SceneError."""
 
     def __init__(self, source: str, default_name: str):

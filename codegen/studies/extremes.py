@@ -54,7 +54,7 @@ def chain(n: int, *, masses=None, inertias=None, stiffness: float = 1.0,
 
 
 def run(scene: Scene, method: str, *, dt: float, t_end: float, every: int = 1,
-        quadrature: int = 3, options: NewtonOptions | None = None, solver=None):
+        quadrature: int = 3, options: NewtonOptions | dict | None = None, solver=None):
     """(result "works"/"stops", details) of one simulation."""
     solver = solver or build_solver(scene, method, quadrature, sensitivities=False)
     steps = round(t_end / dt)
@@ -69,6 +69,9 @@ def run(scene: Scene, method: str, *, dt: float, t_end: float, every: int = 1,
                f"constraint {result.constraint_error.max():.1e}, Newton mean "
                f"{result.mean_newton_iterations:.2f} / max {result.max_newton_iterations}, "
                f"{result.wall_time / max(steps, 1) * 1e6:.2f} us/step")
+    if result.full_newton_fallbacks or result.split_steps:
+        details += (f"; fallbacks: {result.full_newton_fallbacks} steps by full Newton, "
+                    f"{result.split_steps} split")
     return "works", details
 
 
@@ -106,6 +109,32 @@ def edge_mass_ratios(quick: bool) -> list[Outcome]:
             result, details = run(scene, method, dt=0.01, t_end=10.0 if quick else 50.0)
             rows.append(Outcome("mass and inertia ratio", method,
                                 f"links 1:2:3 = 1:{ratio:g}:1, dt = 0.01 s", result, details))
+    return rows
+
+
+def edge_hard_newton(quick: bool) -> list[Outcome]:
+    """The steps that made Newton give up before the fallback ladder and the scaled tests: an
+    ill-conditioned 1:1000:1 chain with full Newton, masses of 1e12 kg, the 20-link scaling
+    chain over 200 s and a 40-link chain, all with the default options otherwise."""
+    from .bench.scenes import scaling_scene
+
+    rows = []
+    masses = [1.0, 1e3, 1.0]
+    ratio = chain(3, masses=masses, inertias=list(masses))
+    rows.append(Outcome("hard Newton steps", "es", "links 1:1000:1, full Newton, dt = 0.01 s, "
+                        "50 s", *run(ratio, "es", dt=0.01, t_end=10.0 if quick else 50.0,
+                                     options={"reuse_jacobian": 0})))
+    heavy = chain(3, masses=[1e12] * 3, inertias=[1e12] * 3)
+    rows.append(Outcome("hard Newton steps", "es", "masses and inertias 1e12, dt = 0.01 s, 50 s",
+                        *run(heavy, "es", dt=0.01, t_end=10.0 if quick else 50.0)))
+    n_long = 5 if quick else 20
+    rows.append(Outcome("hard Newton steps", "es", f"scaling chain n = {n_long}, dt = 0.01 s, "
+                        f"{20 if quick else 200} s",
+                        *run(scaling_scene(n_long), "es", dt=0.01,
+                             t_end=20.0 if quick else 200.0, every=10)))
+    n_chain = 6 if quick else 40
+    rows.append(Outcome("hard Newton steps", "es", f"chain of {n_chain} unit links, dt = 0.01 s, "
+                        "10 s", *run(chain(n_chain), "es", dt=0.01, t_end=10.0, every=10)))
     return rows
 
 
@@ -240,7 +269,8 @@ def edge_newton_failure(quick: bool) -> list[Outcome]:
     return rows
 
 
-EDGES = (edge_large_steps, edge_stiff_springs, edge_mass_ratios, edge_zero_inertia,
+EDGES = (edge_large_steps, edge_stiff_springs, edge_mass_ratios, edge_hard_newton,
+         edge_zero_inertia,
          edge_chain_length, edge_largest_n, edge_long_run, edge_com_at_joint,
          edge_collapsing_spring, edge_newton_failure)
 

@@ -219,7 +219,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
                 solver: Solver | None = None, sample_interval: float = SAMPLE_INTERVAL,
                 energy_floor: float = ENERGY_FLOOR, trajectory_floor: float = TRAJECTORY_FLOOR,
                 slope_tolerance: float = SLOPE_TOLERANCE,
-                options: NewtonOptions | None = None) -> OrderStudy:
+                options: NewtonOptions | dict | None = None) -> OrderStudy:
     """Run the time-step study of `scene` (a Scene or a scene file) with one scheme.
 
     The solver is built once (without step sensitivities) unless given; a given solver must be

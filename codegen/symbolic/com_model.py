@@ -19,8 +19,11 @@ from ..scene import Scene, Spring
 S = ImmutableMatrix([[0, -1], [1, 0]])
 
 
-def number(value: float) -> sp.Expr:
-    """A scene number as an exact SymPy number (integers stay integers, so 1.0 * x is x)."""
+def number(value) -> sp.Expr:
+    """A scene number as an exact SymPy number (integers stay integers, so 1.0 * x is x); a
+    run-time parameter (a SymPy expression in the scene's place) as it is."""
+    if isinstance(value, sp.Basic):
+        return value
     value = float(value)
     if value.is_integer():
         return sp.Integer(int(value))
@@ -120,10 +123,12 @@ def linear_coefficients(expressions, symbols) -> tuple[ImmutableMatrix, Immutabl
         row = [sp.Integer(0)] * len(symbols)
         offset = sp.Integer(0)
         for term, coefficient in sp.expand(expression).as_coefficients_dict().items():
-            if term == 1:
-                offset += coefficient
-            elif term in index:
-                row[index[term]] += coefficient
+            # A coefficient may hold run-time parameters (a link length L1 in L1 x1 / a1).
+            factor, variable = term.as_independent(*symbols, as_Add=False)
+            if variable == 1:
+                offset += coefficient * factor
+            elif variable in index:
+                row[index[variable]] += coefficient * factor
             else:
                 raise ValueError(f"{expression} is not affine in the coordinates ({term})")
         rows.append(row)

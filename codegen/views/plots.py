@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PlotError
+from ..runtime.files import check_output_file
 from ..runtime.trajectory import metadata_path, read_trajectory
 from .figure import matplotlib_figure, save_png
 
@@ -271,4 +272,5 @@ def plot_files(paths: list[Path], out: Path | None = None) -> Path:
         raise PlotError("plot: give at least one trajectory file")
     runs = [load_run(path) for path in paths]
     target = output_path([Path(path) for path in paths], out)
+    check_output_file(target, "-o", [*paths, *(metadata_path(path) for path in paths)])
     return plot_runs(runs, target)

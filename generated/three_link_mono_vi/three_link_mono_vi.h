@@ -76,7 +76,8 @@ extern "C" {
                                                 * through it (turned by 90 degrees or more in one
                                                 * step): its direction is undefined there
                                                 * (docs/model.md, section 2) */
-#define THREE_LINK_MONO_VI_INTERRUPTED 7       /* simulate_observed: the observer asked to stop */
+#define THREE_LINK_MONO_VI_INTERRUPTED 7       /* simulate_observed: the observer or
+                                                * control->stop asked to stop */
 
 /* Values of the option reuse_jacobian. */
 #define THREE_LINK_MONO_VI_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
@@ -85,10 +86,16 @@ extern "C" {
 
 /* Newton options. A step solves F(z; x0, dt) = 0 for z by Newton's method with dense LU.
  *
+ * The residual test is relative to the residual's own scale: |F_i| <= residual_tol (1 + S_i)
+ * with S_i = sum_j |dF_i/dz_j| |z_j| at the latest Jacobian, so that it means the same for a
+ * chain of grams and one of tonnes.
+ *
  * reuse_jacobian chooses when dF/dz is evaluated and factorised:
  * - THREE_LINK_MONO_VI_JACOBIAN_EVERY_ITERATE (0), full Newton: at every iterate. It has converged
- *   when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and max_i |F_i| <= residual_tol
- *   at the iterate the update was computed from.
+ *   when, for every i, |dz_i| <= update_atol + update_rtol |z_i| and the residual test holds
+ *   at the iterate the update was computed from; or, at the round-off floor, when the residual
+ *   relative to its scale is at round-off (1024 machine epsilons) and the update stopped
+ *   shrinking (it is then round-off of an ill-conditioned dF/dz, which no iterate reduces).
  * - THREE_LINK_MONO_VI_JACOBIAN_ACROSS_STEPS (1), simplified Newton: kept in the workspace over
  *   iterations and steps, evaluating only F.
  * - THREE_LINK_MONO_VI_JACOBIAN_PER_STEP (2), Newton-chord: evaluated at each step's first iterate
@@ -98,18 +105,23 @@ extern "C" {
  * update norms within the step, it has converged when theta / (1 - theta) times the update norm
  * above, the estimated error of the new iterate, is <= a margin (simplified Newton
  * 0.1; Newton-chord 1e-3, which stands in for full Newton and keeps its error far
- * below the tolerance), and max_i |F_i| <= residual_tol; on a step's first iteration, when the
+ * below the tolerance), and the residual test holds; on a step's first iteration, when the
  * update norm itself is <= the margin. The Jacobian is evaluated anew when there is none for
- * this dt, or when theta exceeds 0.1 (slow contraction).
+ * this dt, or when theta exceeds 0.1 (slow contraction). A Jacobian evaluated within the
+ * step also accepts the round-off floor as full Newton does.
  *
  * Warm start (warm_start = 1): when x0 is bitwise the state the workspace's previous step
  * produced, with the same dt, the first guess extrapolates the previous steps' solutions z
  * (quadratically from three, linearly from two, constantly from one) instead of the scheme's predictor from x0 alone.
- * The solution then depends on the workspace's history within the Newton tolerances. A warm
- * start that fails is retried once from the predictor with a fresh Jacobian.
+ * The solution then depends on the workspace's history within the Newton tolerances.
  *
- * A step does at most max_iterations linear solves per attempt (2 max_iterations when a warm
- * start is retried), which bounds its time. */
+ * A step that fails climbs a ladder, each rung at most max_iterations linear solves: a warm
+ * start is retried from the predictor with a fresh Jacobian; a kept Jacobian (chord,
+ * simplified) is replaced by full Newton; and then step() and simulate() take the step as two
+ * halves, each climbing the same ladder, at most 4 halvings deep (16 substeps). "es" conserves
+ * energy on any sequence of steps, so a split step keeps its energy balance. The counters of
+ * simulate report how often the last two rungs were needed. The step sensitivities never
+ * split (their Jacobians are those of one step). */
 typedef struct {
     int max_iterations;     /* default 20; bounds the work of one step */
     double update_rtol;     /* default 1e-10 */
@@ -125,7 +137,16 @@ typedef struct {
     long newton_iterations; /* Newton iterations (linear solves) over all completed steps */
     int max_newton_iterations; /* the most a single completed step took */
     int failed_iterations;  /* iterations spent in the failing step, 0 if none failed */
+    long full_newton_fallbacks; /* steps whose kept Jacobian failed and that full Newton solved */
+    long split_steps;       /* steps that Newton failed on whole and that were taken as two halves (recursively) */
 } three_link_mono_vi_stats;
+
+/* Shared with a running simulate_observed (control may be NULL): another thread or a signal
+ * handler sets stop to end the run after the current step, and reads steps for progress. */
+typedef struct {
+    volatile int stop;      /* set nonzero to stop the run after the current step (status INTERRUPTED) */
+    volatile long steps;    /* steps completed so far, written after every step */
+} three_link_mono_vi_control;
 
 /* Scratch memory of one solver instance: declare one (static, on the stack, or inside your own
  * struct) per concurrent user. Its contents are not part of the API. */
@@ -149,6 +170,10 @@ typedef struct {
     int history;                       /* solutions in previous_z: 0 to 3 */
     int chained;                       /* this step continues the previous one */
     int factors_valid;                 /* jacobian/pivot hold a usable factorisation */
+    double residual_scale[THREE_LINK_MONO_VI_NZ];  /* 1 + S_i of the residual test */
+    double split_state[4][THREE_LINK_MONO_VI_NX];  /* mid-points of split steps */
+    long step_fallbacks;               /* full-Newton fallbacks of the last step() */
+    long step_splits;                  /* halvings of the last step() */
     double sensitivity_rhs[THREE_LINK_MONO_VI_NZ * 6];
     double s1_z[6 * THREE_LINK_MONO_VI_NZ];
 } three_link_mono_vi_workspace;
@@ -157,15 +182,15 @@ typedef struct {
 THREE_LINK_MONO_VI_API
 size_t three_link_mono_vi_workspace_size(void);
 
-/* Forget the Newton state carried between steps (warm start, reused Jacobian). Call it once
- * on a new workspace before stepping with warm_start or reuse_jacobian set (a zero-filled
- * workspace, e.g. a static one, is already in this state), and whenever the model's
- * trajectory is restarted. (The warm start uses that state only when x0 is bitwise the state
- * it recorded, and the kept Jacobian only with reuse_jacobian = 1 and the recorded dt.) */
+/* Initialise a workspace: every field zeroed, so no Newton state is carried (warm start, reused
+ * Jacobian). Call it once on a new workspace before its first use (a zero-filled workspace,
+ * e.g. a static one, is already in this state), and whenever the model's trajectory is
+ * restarted. (The warm start uses that state only when x0 is bitwise the state it recorded, and
+ * the kept Jacobian only with reuse_jacobian = 1 and the recorded dt.) NULL: nothing. */
 THREE_LINK_MONO_VI_API
 void three_link_mono_vi_workspace_init(three_link_mono_vi_workspace *workspace);
 
-/* Fill options with the defaults above. */
+/* Fill options with the defaults above (NULL: nothing). */
 THREE_LINK_MONO_VI_API
 void three_link_mono_vi_default_options(three_link_mono_vi_options *options);
 
@@ -227,15 +252,22 @@ int three_link_mono_vi_simulate(const double *x0, double t0, double dt, long n_s
 typedef int (*three_link_mono_vi_observer)(long steps, void *context);
 
 /* simulate, calling observer(steps, context) after every `interval` completed steps (interval
- * >= 1; observer NULL: never), for a progress display or to cancel a long run. The samples are
- * those of simulate: observing does not change the run. */
+ * >= 1; observer NULL: never), for a progress display or to cancel a long run, and with a
+ * control block (may be NULL) that another thread or a signal handler uses to stop the run
+ * (status THREE_LINK_MONO_VI_INTERRUPTED, checked after every step) and to read its progress. The
+ * samples are those of simulate: observing does not change the run. */
 THREE_LINK_MONO_VI_API
 int three_link_mono_vi_simulate_observed(const double *x0, double t0, double dt, long n_steps,
                                          long every, const three_link_mono_vi_options *options,
                                          three_link_mono_vi_workspace *workspace, double *samples,
                                          double *x_final, three_link_mono_vi_stats *stats,
                                          three_link_mono_vi_observer observer, void *context,
-                                         long interval);
+                                         long interval, three_link_mono_vi_control *control);
+
+/* The hash chaingen's build gave this library (-DTHREE_LINK_MONO_VI_BUILD_HASH), so a loader can check
+ * that a cached library is the one it asked for; "" when built otherwise (make, CMake). */
+THREE_LINK_MONO_VI_API
+const char *three_link_mono_vi_build_hash(void);
 
 #ifdef __cplusplus
 }

@@ -13,8 +13,8 @@ from pathlib import Path
 
 from ...errors import BenchError
 from ...runtime import JACOBIAN_ACROSS_STEPS, NewtonOptions, Solver
+from ...runtime.files import check_output_file
 from ...scene import METHODS, STANDARD_SCENES, load_reference_scene
-from .knobs import newton_options
 
 #: The report and its figures, relative to the working directory, unless --out says otherwise.
 DEFAULT_OUT = "benchmarks.md"
@@ -38,8 +38,8 @@ class Variant:
 
     def newton_options(self, solver: Solver) -> NewtonOptions:
         """The same options for Solver.simulate (the error run): the package's defaults with
-        this variant's fields (chaingen.studies.bench.knobs.newton_options)."""
-        return newton_options(solver, self.options)
+        this variant's fields."""
+        return solver.newton_options(self.options)
 
 
 #: The Newton variants every scheme is run with: the package's defaults (warm start; Newton-chord,
@@ -176,10 +176,7 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
                                  f"multi-articular spring needs two joints), got {n}")
     out_default = out is None
     out = Path(out) if out is not None else Path(DEFAULT_OUT)
-    if out.is_dir():
-        raise BenchError(f"--out: {out} is a directory; give a file name")
-    if not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise BenchError(f"--out: directory {out.parent} does not exist")
+    check_output_file(out, "--out")
     figures_default = figures is None
     figures = Path(figures) if figures is not None else out.parent / "figures"
     if figures.exists() and not figures.is_dir():

@@ -21,9 +21,7 @@ from ...runtime import (
     JACOBIAN_ACROSS_STEPS,
     JACOBIAN_EVERY_ITERATE,
     JACOBIAN_PER_STEP,
-    NewtonOptions,
     Solver,
-    contract,
 )
 from ...scene import Scene
 from .harness import Harness, HarnessError
@@ -69,14 +67,6 @@ def with_source_flags(package: GeneratedPackage, name: str, flags) -> GeneratedP
     return dataclasses.replace(package, manifest=manifest)
 
 
-def newton_options(solver: Solver, fields: dict) -> NewtonOptions:
-    """The package's default options with `fields` (the contract's option names) set."""
-    defaults = solver.default_options
-    kinds = {field.name: field.python_type for field in contract.NEWTON_OPTIONS}
-    return dataclasses.replace(defaults, **{key: kinds[key](value)
-                                            for key, value in fields.items()})
-
-
 def option_rows(scene: Scene, name: str, method: str, quadrature: int, dt: float,
                 t_end: float, *, n_steps: int, repeats: int, progress) -> list[KnobRow]:
     """The option knobs and solver flags of one scheme on one scene."""
@@ -109,7 +99,7 @@ def _row(name, method, label, harness, solver, x0, dt, fields, steps, n_steps, r
     if solver is not None:
         try:
             result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
-                                     n_steps=steps, options=newton_options(solver, fields))
+                                     n_steps=steps, options=solver.newton_options(fields))
             energy = float(np.abs(result.energy_error).max())
         except NewtonError as error:
             return KnobRow(name, method, label, timing.step_ns * 1e-9, timing.mean_iterations,

@@ -1,0 +1,162 @@
+"""Numbers of a scene by their key path: `links[1].mass`, `springs[0].offsets[2]`, `gravity`.
+
+A key path names one number exactly as the reader's error messages name it. Paths serve two
+purposes: a compiled solver can take some of a scene's numbers as run-time parameters
+(`parameter_paths` lists which may be), and a study can vary any number, the run-time ones too
+(`initial.angles[0]`, `simulation.dt`). `with_values` applies values to a scene and validates
+the result by the scene format's own rules, so a study's value out of range gets the same
+one-line message a scene file would.
+"""
+from __future__ import annotations
+
+import dataclasses
+import re
+from dataclasses import dataclass
+
+from ..errors import SceneError
+from .values import Scene
+
+#: The numbers of a link and of a spring that a solver may take as parameters, with their unit.
+LINK_NUMBERS = {"mass": "kg", "inertia": "kg m^2", "length": "m", "com": "m",
+                "com_normal": "m", "fastening": "m", "damping": "N m s/rad"}
+SPRING_NUMBERS = {"stiffness": "N/m", "rest_length": "m"}
+#: Run-time numbers: every solver takes them per run; a study may vary them.
+RUN_NUMBERS = {"initial.angles": "rad", "initial.velocities": "rad/s", "simulation.dt": "s",
+               "simulation.t_end": "s"}
+
+_PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>\d+)\]\.(?P<key>\w+)"
+                   r"(?:\[(?P<entry>\d+)\])?|(?P<top>gravity|base\.fastening)"
+                   r"|(?P<run>initial\.angles|initial\.velocities)\[(?P<joint>\d+)\]"
+                   r"|(?P<setting>simulation\.dt|simulation\.t_end)")
+
+
+@dataclass(frozen=True)
+class NumberPath:
+    """One number of a scene: its key path, its unit, and whether it is compiled into a
+    solver (a structural number never is: n, the joints a spring spans, the actuated joints)."""
+
+    path: str
+    unit: str
+    compiled: bool
+
+    def value(self, scene: Scene) -> float:
+        return float(_get(scene, self.path))
+
+
+def number_path(scene: Scene, path: str, *, where: str = "") -> NumberPath:
+    """The number of `scene` at `path`, or SceneError naming the path and why it names no
+    number (an unknown key, an index beyond the chain, a structural integer)."""
+    prefix = f"{where}: " if where else ""
+    match = _PATH.fullmatch(path.strip())
+    if not match:
+        raise SceneError(f"{prefix}{path}: names no number of the scene (a key path such as "
+                         "links[0].mass, springs[1].stiffness, springs[0].offsets[1], "
+                         "base.fastening, gravity, initial.angles[0] or simulation.dt)")
+    if match["top"]:
+        return NumberPath(path, "m/s^2" if path == "gravity" else "m", True)
+    if match["setting"]:
+        return NumberPath(path, RUN_NUMBERS[path], False)
+    if match["run"]:
+        joint = int(match["joint"])
+        if joint >= scene.n:
+            raise SceneError(f"{prefix}{path}: joint {joint + 1} does not exist: the chain has "
+                             f"{scene.n} (indices 0..{scene.n - 1})")
+        return NumberPath(path, RUN_NUMBERS[match["run"]], False)
+    table, index, key, entry = match["table"], int(match["index"]), match["key"], match["entry"]
+    rows = scene.links if table == "links" else scene.springs
+    if index >= len(rows):
+        raise SceneError(f"{prefix}{path}: {table}[{index}] does not exist: the scene has "
+                         f"{len(rows)} {table}")
+    if table == "links":
+        if key not in LINK_NUMBERS or entry is not None:
+            raise SceneError(f"{prefix}{path}: names no number of a link (numbers: "
+                             f"{', '.join(LINK_NUMBERS)})")
+        return NumberPath(path, LINK_NUMBERS[key], True)
+    spring = rows[index]
+    if key == "offsets" and entry is not None:
+        count = spring.last - spring.first + 2
+        if spring.offsets is None:
+            raise SceneError(f"{prefix}{path}: springs[{index}] has no offsets of its own (it "
+                             "uses the chain's fastenings: vary base.fastening or "
+                             "links[i].fastening)")
+        if int(entry) >= count:
+            raise SceneError(f"{prefix}{path}: springs[{index}] has {count} offsets "
+                             f"(indices 0..{count - 1})")
+        return NumberPath(path, "m", True)
+    if key not in SPRING_NUMBERS or entry is not None:
+        raise SceneError(f"{prefix}{path}: names no number of a spring (numbers: "
+                         f"{', '.join(SPRING_NUMBERS)}, offsets[j]; joints is structure)")
+    return NumberPath(path, SPRING_NUMBERS[key], True)
+
+
+def _split(path: str) -> list:
+    """links[1].mass -> ["links", 1, "mass"]; springs[0].offsets[2] -> [..., "offsets", 2]."""
+    parts: list = []
+    for name, index in re.findall(r"(\w+)|\[(\d+)\]", path):
+        parts.append(name if name else int(index))
+    return parts
+
+
+def _get(scene: Scene, path: str):
+    parts = _split(path)
+    if parts[0] == "gravity":
+        return scene.gravity
+    if parts[:2] == ["base", "fastening"]:
+        return scene.base_fastening
+    if parts[0] == "initial":
+        values = scene.initial_angles if parts[1] == "angles" else scene.initial_velocities
+        return values[parts[2]]
+    if parts[0] == "simulation":
+        return getattr(scene.simulation, parts[1])
+    row = (scene.links if parts[0] == "links" else scene.springs)[parts[1]]
+    value = getattr(row, parts[2])
+    return value[parts[3]] if len(parts) > 3 else value
+
+
+def _replaced(scene: Scene, path: str, value) -> Scene:
+    """`scene` with the number at `path` replaced (no validation)."""
+    parts = _split(path)
+    if parts[0] == "gravity":
+        return dataclasses.replace(scene, gravity=value)
+    if parts[:2] == ["base", "fastening"]:
+        return dataclasses.replace(scene, base_fastening=value)
+    if parts[0] == "initial":
+        name = "initial_angles" if parts[1] == "angles" else "initial_velocities"
+        values = list(getattr(scene, name))
+        values[parts[2]] = value
+        return dataclasses.replace(scene, **{name: tuple(values)})
+    if parts[0] == "simulation":
+        return dataclasses.replace(
+            scene, simulation=dataclasses.replace(scene.simulation, **{parts[1]: value}))
+    field = "links" if parts[0] == "links" else "springs"
+    rows = list(getattr(scene, field))
+    row = rows[parts[1]]
+    if len(parts) > 3:
+        entries = list(getattr(row, parts[2]))
+        entries[parts[3]] = value
+        rows[parts[1]] = dataclasses.replace(row, **{parts[2]: tuple(entries)})
+    else:
+        rows[parts[1]] = dataclasses.replace(row, **{parts[2]: value})
+    return dataclasses.replace(scene, **{field: tuple(rows)})
+
+
+def with_symbols(scene: Scene, symbols: dict[str, object]) -> Scene:
+    """`scene` with SymPy symbols in place of the numbers at the given paths: the scene the
+    symbolic stage derives a parameterised solver from (its other numbers stay constants)."""
+    for path, symbol in symbols.items():
+        scene = _replaced(scene, path, symbol)
+    return scene
+
+
+def with_values(scene: Scene, values: dict[str, float], *, where: str = "") -> Scene:
+    """`scene` with the numbers at `values`' paths replaced, validated by the scene format's
+    rules (the reader's own checks and messages); SceneError names the path and value."""
+    from .document import scene_document
+    from .reader import SceneReader
+
+    changed = scene
+    for path, value in values.items():
+        number_path(scene, path, where=where)
+        changed = _replaced(changed, path, float(value))
+    source = where or "values"
+    return SceneReader(source, scene.name).read(scene_document(changed))
