@@ -78,15 +78,17 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
 
 
 def build_solver(scene: Scene, method: str, quadrature: int, *,
-                 sensitivities: bool = True) -> Solver:
+                 sensitivities: bool = True, parameters=()) -> Solver:
     """Generate and build (or load from the cache) a scene's solver; on a terminal a progress
-    bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while."""
+    bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while.
+    parameters: key paths of the scene's numbers the solver takes at run time (every call
+    then takes their values, the scene's own by default)."""
     from .generate.package import GENERATE_STAGES, generate_package
 
     with Progress(f"generate {scene.name} ({method})", total=GENERATE_STAGES + 1,
                   unit="stages") as progress:
         package = generate_package(scene, method, quadrature, sensitivities=sensitivities,
-                                   progress=progress)
+                                   parameters=parameters, progress=progress)
         progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
         return Solver.from_files(package.files)
 

@@ -12,7 +12,8 @@ An entry, a parameter or a status code may exist only in packages with a feature
 - ``inputs``: the scene has actuated joints (torques u);
 - ``flows``: energy can enter or leave the chain (actuation or joint damping);
 - ``sensitivities``: the package was generated with the step sensitivities;
-- ``segments``: the scene has springs, whose segments are watched for collapse.
+- ``segments``: the scene has springs, whose segments are watched for collapse;
+- ``parameters``: the package takes some of the scene's numbers as run-time parameters p.
 
 This module is plain data: it imports nothing of chaingen and nothing beyond the standard library.
 """
@@ -22,7 +23,7 @@ import re
 from dataclasses import dataclass
 
 #: The features an entry point, a parameter or a status may depend on.
-FEATURES = ("inputs", "flows", "sensitivities", "segments")
+FEATURES = ("inputs", "flows", "sensitivities", "segments", "parameters")
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,15 @@ class Features:
     flows: bool = False
     sensitivities: bool = False
     segments: bool = False
+    parameters: bool = False
+
+    @classmethod
+    def from_manifest(cls, manifest: dict) -> Features:
+        """The features a package's manifest records."""
+        return cls(inputs=bool(manifest["nu"]), flows=bool(manifest["energy_flows"]),
+                   sensitivities=bool(manifest["sensitivities"]),
+                   segments=manifest["segment_tolerance"] is not None,
+                   parameters=bool(manifest["parameters"]))
 
     def has(self, when: str | None) -> bool:
         """Whether something present `when` a feature is there (None: always)."""
@@ -259,6 +269,8 @@ def _parameters(text: str) -> tuple[Parameter, ...]:
 
 
 _WORKSPACE = "{prefix}_workspace *workspace"
+#: The run-time parameters of a package with the feature "parameters".
+P_ARGUMENT = "const double *p [parameters]"
 _OPTIONS = "const {prefix}_options *options"
 
 ENTRY_POINTS = (
@@ -266,33 +278,33 @@ ENTRY_POINTS = (
     EntryPoint("workspace_init", "void", _parameters(_WORKSPACE)),
     EntryPoint("default_options", "void", _parameters("{prefix}_options *options")),
     EntryPoint("initial_state", "int", _parameters(
-        f"const double *phi, const double *phidot, double *x, {_WORKSPACE}")),
+        f"const double *phi, const double *phidot, {P_ARGUMENT}, double *x, {_WORKSPACE}")),
     EntryPoint("outputs", "int", _parameters(
-        "const double *x, double *phi, double *omega, double *energy, double *constraint_error, "
-        f"{_WORKSPACE}")),
+        f"const double *x, {P_ARGUMENT}, double *phi, double *omega, double *energy, "
+        f"double *constraint_error, {_WORKSPACE}")),
     EntryPoint("holding_torques", "int", _parameters(
-        f"const double *phi, double *tau, {_WORKSPACE}"), when="inputs"),
+        f"const double *phi, {P_ARGUMENT}, double *tau, {_WORKSPACE}"), when="inputs"),
     EntryPoint("residual", "int", _parameters(
-        f"const double *z, const double *x0, const double *u [inputs], double dt, "
+        f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
         f"double *residual, {_WORKSPACE}")),
     EntryPoint("residual_jacobian", "int", _parameters(
-        "const double *z, const double *x0, const double *u [inputs], double dt, "
+        f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
         f"double *residual, double *jacobian, {_WORKSPACE}")),
     EntryPoint("step", "int", _parameters(
-        "const double *x0, const double *u [inputs], double dt, double *x1, "
+        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
         f"double *flows [flows], {_OPTIONS}, {_WORKSPACE}, int *iterations")),
     EntryPoint("step_sensitivities", "int", _parameters(
-        "const double *x0, const double *u [inputs], double dt, double *x1, double *ds_ds, "
-        f"double *ds_du [inputs], {_OPTIONS}, {_WORKSPACE}, int *iterations"),
-        when="sensitivities"),
+        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
+        f"double *ds_ds, double *ds_du [inputs], double *ds_dp [parameters], {_OPTIONS}, "
+        f"{_WORKSPACE}, int *iterations"), when="sensitivities"),
     EntryPoint("sample_count", "long", _parameters("long n_steps, long every")),
     EntryPoint("simulate", "int", _parameters(
         "const double *x0, double t0, double dt, long n_steps, long every, "
-        f"const double *u [inputs], {_OPTIONS}, {_WORKSPACE}, double *samples, "
+        f"const double *u [inputs], {P_ARGUMENT}, {_OPTIONS}, {_WORKSPACE}, double *samples, "
         "double *x_final, {prefix}_stats *stats")),
     EntryPoint("simulate_observed", "int", _parameters(
         "const double *x0, double t0, double dt, long n_steps, long every, "
-        f"const double *u [inputs], {_OPTIONS}, {_WORKSPACE}, double *samples, "
+        f"const double *u [inputs], {P_ARGUMENT}, {_OPTIONS}, {_WORKSPACE}, double *samples, "
         "double *x_final, {prefix}_stats *stats, {prefix}_observer observer, void *context, "
         "long interval, {prefix}_control *control")),
     EntryPoint("build_hash", "const char *", ()),

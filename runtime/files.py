@@ -80,12 +80,12 @@ def staged_files(paths) -> Iterator[list[Path]]:
 
 
 @contextlib.contextmanager
-def directory_lock(directory: str | os.PathLike):
+def directory_lock(directory: str | os.PathLike, *, wait: bool = True):
     """An exclusive lock on `directory` itself (flock on its descriptor): writers of its entries
-    take turns; nothing is left behind."""
+    take turns; nothing is left behind. With wait=False, BlockingIOError if another holds it."""
     handle = os.open(directory, os.O_RDONLY)
     try:
-        fcntl.flock(handle, fcntl.LOCK_EX)
+        fcntl.flock(handle, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         yield
     finally:
         os.close(handle)

@@ -23,6 +23,7 @@ class SimulationResult:
     max_newton_iterations: int
     full_newton_fallbacks: int = 0   # steps whose kept Jacobian failed and full Newton solved
     split_steps: int = 0             # steps taken as halves after Newton failed on them whole
+    parameters: dict = field(default_factory=dict)   # run-time parameters: path -> value
 
     def column(self, name: str) -> np.ndarray:
         return self.samples[:, self.columns.index(name)]
@@ -99,3 +100,4 @@ class Sensitivities:
     iterations: int
     ds_ds: np.ndarray   # (2n, 2n): d s_{k+1} / d s_k
     ds_du: np.ndarray   # (2n, nu): d s_{k+1} / d u_k
+    ds_dp: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (2n, np): d/dp

@@ -13,6 +13,8 @@ kept Jacobian) and its results equal those of the same calls made alone.
 Interrupts: `simulate` runs the C loop in a worker thread when called from the main thread and
 waits for it there, so Ctrl-C (KeyboardInterrupt) and exceptions of a progress callback arrive
 promptly; the loop is told to stop through its control block and stops after the current step.
+Runs in other threads (a pool running a study) are stopped from outside with a StopSignal passed
+to their simulate calls: `signal.stop()` ends every run that holds it after its current step.
 """
 from __future__ import annotations
 
@@ -34,6 +36,32 @@ from .results import Sensitivities, SimulationResult, StepResult
 _double_p = ctypes.POINTER(ctypes.c_double)
 #: Seconds between two looks of the waiting thread at a running simulate: progress, Ctrl-C.
 POLL_SECONDS = 0.05
+
+
+class StopSignal:
+    """Stops the simulate calls given it, from any thread: each running one ends after its
+    current step (NewtonError with status INTERRUPTED), and a later one does not start."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._blocks: dict[int, ControlStruct] = {}
+        self.stopped = False
+
+    def stop(self) -> None:
+        with self._lock:
+            self.stopped = True
+            for block in self._blocks.values():
+                block.stop = 1
+
+    def _attach(self, block: ControlStruct) -> None:
+        with self._lock:
+            if self.stopped:
+                block.stop = 1
+            self._blocks[id(block)] = block
+
+    def _detach(self, block: ControlStruct) -> None:
+        with self._lock:
+            self._blocks.pop(id(block), None)
 
 
 def _pointer(array: np.ndarray):
@@ -63,6 +91,10 @@ class Solver:
         self.energy_flows = bool(manifest["energy_flows"])
         self.has_sensitivities = bool(manifest["sensitivities"])
         self.segment_tolerance = manifest.get("segment_tolerance")
+        #: The run-time parameters by key path, with the scene's own values as defaults.
+        self.parameters = tuple(entry["path"] for entry in manifest["parameters"])
+        self.default_parameters = np.array([entry["value"] for entry in manifest["parameters"]],
+                                           dtype=float)
         self._lib = ctypes.CDLL(str(self.library_path))
         self._entry_points = {name: self._declare(name, entry)
                               for name, entry in manifest["entry_points"].items()}
@@ -147,22 +179,47 @@ class Solver:
         Jacobian)."""
         self._call("workspace_init", workspace=self._workspace)
 
-    def initial_state(self, phi, phidot) -> np.ndarray:
+    def initial_state(self, phi, phidot, parameters=None) -> np.ndarray:
         x = np.empty(self.nx)
         self._check(self._call("initial_state", phi=_pointer(_vector(phi, self.n, "phi")),
+                               p=self._p(parameters),
                                phidot=_pointer(_vector(phidot, self.n, "phidot")),
                                x=_pointer(x), workspace=self._workspace), "initial_state")
         return x
 
-    def outputs(self, x) -> tuple[np.ndarray, np.ndarray, float, float]:
+    def outputs(self, x, parameters=None) -> tuple[np.ndarray, np.ndarray, float, float]:
         """(phi, omega, energy, constraint error) of a state."""
         phi, omega, scalars = np.empty(self.n), np.empty(self.n), np.empty(2)
         self._check(self._call("outputs", x=_pointer(_vector(x, self.nx, "x")),
+                               p=self._p(parameters),
                                phi=_pointer(phi), omega=_pointer(omega),
                                energy=_pointer(scalars[:1]),
                                constraint_error=_pointer(scalars[1:]),
                                workspace=self._workspace), "outputs")
         return phi, omega, float(scalars[0]), float(scalars[1])
+
+    def parameter_values(self, parameters=None) -> np.ndarray:
+        """The parameter vector p: the defaults, a full sequence in the order of
+        `self.parameters`, or a dict of paths whose values replace the defaults."""
+        if parameters is None:
+            return self.default_parameters.copy()
+        if isinstance(parameters, dict):
+            values = self.default_parameters.copy()
+            for path, value in parameters.items():
+                if path not in self.parameters:
+                    raise ValueError(f"{self.prefix} has no parameter {path!r} (its parameters: "
+                                     f"{', '.join(self.parameters) or 'none'})")
+                values[self.parameters.index(path)] = float(value)
+            return values
+        return _vector(parameters, len(self.parameters), "parameters")
+
+    def _p(self, parameters):
+        """The p argument: a pointer for a package with parameters, else None (none)."""
+        if not self.parameters:
+            if parameters is not None and len(parameters):
+                raise ValueError(f"{self.prefix} takes no parameters")
+            return None
+        return _pointer(self.parameter_values(parameters))
 
     def _inputs(self, u):
         """The u argument of a step function: a pointer for an actuated scene, else None (the
@@ -175,28 +232,32 @@ class Solver:
             u = np.zeros(self.nu)
         return _pointer(_vector(u, self.nu, "u"))
 
-    def residual(self, z, x0, dt: float, u=None) -> np.ndarray:
+    def residual(self, z, x0, dt: float, u=None, parameters=None) -> np.ndarray:
         out = np.empty(self.nz)
         self._check(self._call("residual", z=_pointer(_vector(z, self.nz, "z")),
+                               p=self._p(parameters),
                                x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
                                dt=dt, residual=_pointer(out), workspace=self._workspace),
                     "residual")
         return out
 
-    def residual_jacobian(self, z, x0, dt: float, u=None) -> tuple[np.ndarray, np.ndarray]:
+    def residual_jacobian(self, z, x0, dt: float, u=None,
+                          parameters=None) -> tuple[np.ndarray, np.ndarray]:
         residual, jacobian = np.empty(self.nz), np.empty(self.nz * self.nz)
         self._check(self._call("residual_jacobian", z=_pointer(_vector(z, self.nz, "z")),
+                               p=self._p(parameters),
                                x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
                                dt=dt, residual=_pointer(residual), jacobian=_pointer(jacobian),
                                workspace=self._workspace), "residual_jacobian")
         return residual, jacobian.reshape((self.nz, self.nz), order="F")
 
-    def holding_torques(self, phi) -> np.ndarray:
+    def holding_torques(self, phi, parameters=None) -> np.ndarray:
         """dV/dphi: the joint torques that hold the chain still at phi (actuated scenes)."""
         if not self.has_entry_point("holding_torques"):
             raise ValueError(f"{self.prefix} has no actuated joints: no holding_torques")
         tau = np.empty(self.n)
         self._check(self._call("holding_torques", phi=_pointer(_vector(phi, self.n, "phi")),
+                               p=self._p(parameters),
                                tau=_pointer(tau), workspace=self._workspace), "holding_torques")
         return tau
 
@@ -206,12 +267,13 @@ class Solver:
         return NewtonError(f"step failed after {iterations} Newton iterations: "
                            f"{self.status_message(status)}", status=status)
 
-    def step(self, x0, dt: float, u=None,
-             options: NewtonOptions | dict | None = None) -> StepResult:
+    def step(self, x0, dt: float, u=None, options: NewtonOptions | dict | None = None,
+             parameters=None) -> StepResult:
         """One step from x0 with inputs u (actuated scenes). Raises NewtonError if it fails."""
         x1, iterations, flows = np.empty(self.nx), ctypes.c_int(0), np.zeros(2)
         c_options = self.newton_options(options).as_c()
         status = self._call("step", x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
+                            p=self._p(parameters),
                             dt=dt, x1=_pointer(x1), flows=_pointer(flows),
                             options=ctypes.byref(c_options), workspace=self._workspace,
                             iterations=ctypes.byref(iterations))
@@ -220,33 +282,38 @@ class Solver:
         return StepResult(x1, iterations.value, float(flows[0]), float(flows[1]))
 
     def step_sensitivities(self, x0, dt: float, u=None,
-                           options: NewtonOptions | dict | None = None) -> Sensitivities:
-        """A step and d s_{k+1}/d s_k, d s_{k+1}/d u_k in s = (phi, omega) (implicit function
-        theorem on the converged Newton system)."""
+                           options: NewtonOptions | dict | None = None,
+                           parameters=None) -> Sensitivities:
+        """A step and d s_{k+1}/d s_k, d s_{k+1}/d u_k, d s_{k+1}/d p in s = (phi, omega)
+        (implicit function theorem on the converged Newton system; d/dp with s_k held)."""
         if not self.has_sensitivities:
             raise ValueError(f"{self.prefix} was generated without step sensitivities")
-        ns = 2 * self.n
+        ns, n_p = 2 * self.n, len(self.parameters)
         x1, iterations = np.empty(self.nx), ctypes.c_int(0)
-        ds_ds, ds_du = np.empty(ns * ns), np.empty(ns * self.nu)
+        ds_ds, ds_du, ds_dp = np.empty(ns * ns), np.empty(ns * self.nu), np.empty(ns * n_p)
         c_options = self.newton_options(options).as_c()
         status = self._call("step_sensitivities", x0=_pointer(_vector(x0, self.nx, "x0")),
-                            u=self._inputs(u), dt=dt, x1=_pointer(x1), ds_ds=_pointer(ds_ds),
-                            ds_du=_pointer(ds_du), options=ctypes.byref(c_options),
+                            u=self._inputs(u), p=self._p(parameters), dt=dt, x1=_pointer(x1),
+                            ds_ds=_pointer(ds_ds), ds_du=_pointer(ds_du),
+                            ds_dp=_pointer(ds_dp), options=ctypes.byref(c_options),
                             workspace=self._workspace, iterations=ctypes.byref(iterations))
         if status:
             raise self._step_failed(status, iterations.value)
         return Sensitivities(x1, iterations.value, ds_ds.reshape((ns, ns), order="F"),
-                             ds_du.reshape((ns, self.nu), order="F"))
+                             ds_du.reshape((ns, self.nu), order="F"),
+                             ds_dp.reshape((ns, n_p), order="F"))
 
     def simulate(self, phi0, omega0, *, dt: float, n_steps: int, every: int = 1,
                  torques=None, options: NewtonOptions | dict | None = None, scene: str = "",
-                 progress=None) -> SimulationResult:
+                 progress=None, parameters=None,
+                 stop: StopSignal | None = None) -> SimulationResult:
         """Run n_steps steps from joint space (phi0, omega0) in one C call.
 
         torques: (n_steps, nu) inputs of the actuated joints, row k held over step k (zero if
         None). progress: called as progress(steps_done) about 20 times a second during the run
         (the run's samples do not depend on it). Ctrl-C, or an exception raised by progress,
         stops the run within a step and propagates (KeyboardInterrupt, or the exception itself).
+        stop: a StopSignal another thread may use to end the run after its current step.
         Raises NewtonError naming the failing step and time; the rows written before it are in
         its `result`.
         """
@@ -263,18 +330,27 @@ class Solver:
             inputs = _pointer(u)
         elif torques is not None:
             raise ValueError(f"{self.prefix} has no actuated joints; torques must be None")
-        x0 = self.initial_state(phi0, omega0)
+        self._p(parameters)    # checks them
+        p_values = self.parameter_values(parameters) if self.parameters else np.zeros(0)
+        x0 = self.initial_state(phi0, omega0, p_values)
         rows = self._call("sample_count", n_steps=n_steps, every=every)
         samples = np.zeros((rows, self.nsample))
         stats, control = StatsStruct(), ControlStruct()
         c_options = self.newton_options(options).as_c()
         arguments = dict(x0=_pointer(x0), t0=0.0, dt=dt, n_steps=n_steps, every=every, u=inputs,
+                         p=_pointer(p_values) if self.parameters else None,
                          options=ctypes.byref(c_options), workspace=self._workspace,
                          samples=_pointer(samples), x_final=None, stats=ctypes.byref(stats),
                          observer=None, context=None, interval=1,
                          control=ctypes.byref(control))
         started = time.perf_counter()
-        status = self._run_controlled(arguments, control, progress)
+        if stop is not None:
+            stop._attach(control)
+        try:
+            status = self._run_controlled(arguments, control, progress)
+        finally:
+            if stop is not None:
+                stop._detach(control)
         wall = time.perf_counter() - started
         valid = stats.steps // every + 1
         result = SimulationResult(
@@ -285,7 +361,8 @@ class Solver:
             newton_iterations=int(stats.newton_iterations),
             max_newton_iterations=int(stats.max_newton_iterations),
             full_newton_fallbacks=int(stats.full_newton_fallbacks),
-            split_steps=int(stats.split_steps))
+            split_steps=int(stats.split_steps),
+            parameters=dict(zip(self.parameters, map(float, p_values))))
         if status:
             failed = stats.steps + 1
             raise NewtonError(

@@ -48,8 +48,8 @@ class Perturbed:
 def test_check_catches_a_wrong_jacobian_entry():
     good = solver_for("three_link_mono", "es", 3, sensitivities=True)
 
-    def residual_jacobian(z, x0, dt, u=None):
-        residual, jacobian = good.residual_jacobian(z, x0, dt, u=u)
+    def residual_jacobian(z, x0, dt, u=None, parameters=None):
+        residual, jacobian = good.residual_jacobian(z, x0, dt, u=u, parameters=parameters)
         jacobian = jacobian.copy()
         jacobian[1, 4] += 1e-4 * np.abs(jacobian).max()     # one entry off by 1e-4
         return residual, jacobian
@@ -65,8 +65,8 @@ def test_check_catches_a_wrong_jacobian_entry():
 def test_check_catches_wrong_sensitivities():
     good = solver_for("four_link_underactuated", "vi", 3, sensitivities=True)
 
-    def step_sensitivities(x0, dt, u=None, options=None):
-        result = good.step_sensitivities(x0, dt, u=u, options=options)
+    def step_sensitivities(x0, dt, u=None, options=None, parameters=None):
+        result = good.step_sensitivities(x0, dt, u=u, options=options, parameters=parameters)
         return dataclasses.replace(result, ds_du=result.ds_du * (1 + 1e-5))
 
     report = report_for("four_link_underactuated", "vi",
@@ -98,3 +98,31 @@ def test_check_command_refuses_bad_options_with_status_2(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 2
     assert "--dt" in result.stderr and "Traceback" not in result.stderr
+
+
+@pytest.mark.compile
+def test_check_with_parameters_compares_the_parameter_derivatives():
+    result = subprocess.run([sys.executable, "-m", "chaingen", "check",
+                             str(scene_path("four_link_actuated")), "--method", "vi",
+                             "--parameters", "springs[1].stiffness,links[2].damping,gravity",
+                             "--samples", "3"], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "d s1 / d p" in result.stdout and "FAIL" not in result.stdout
+
+
+@pytest.mark.compile
+def test_check_catches_wrong_parameter_sensitivities():
+    from chaingen.simulation import build_solver
+
+    paths = ("springs[0].stiffness", "links[1].mass")
+    scheme = build_scheme(load("three_link_mono"), "midpoint", 3, paths)
+    good = build_solver(load("three_link_mono"), "midpoint", 3, parameters=paths)
+
+    def step_sensitivities(x0, dt, u=None, options=None, parameters=None):
+        result = good.step_sensitivities(x0, dt, u=u, options=options, parameters=parameters)
+        return dataclasses.replace(result, ds_dp=result.ds_dp * (1 + 1e-5))
+
+    assert report_for("three_link_mono", "midpoint", solver=good, scheme=scheme).passed
+    report = report_for("three_link_mono", "midpoint", scheme=scheme,
+                        solver=Perturbed(good, step_sensitivities=step_sensitivities))
+    assert [row.quantity for row in report.rows if not row.passed] == ["d s1 / d p"]

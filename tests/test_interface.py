@@ -28,12 +28,6 @@ def package(request):
     return generate_package(load(request.param), SCENES[request.param], 3, sensitivities=True)
 
 
-def features_of(manifest: dict) -> Features:
-    return Features(inputs=bool(manifest["nu"]), flows=manifest["energy_flows"],
-                    sensitivities=manifest["sensitivities"],
-                    segments=manifest["segment_tolerance"] is not None)
-
-
 def struct_fields(header: str, name: str) -> list[tuple[str, str, str]]:
     """(C type, field, comment) of `typedef struct { ... } name;`."""
     body = re.search(r"typedef struct \{\n([^{}]*)\n\} " + re.escape(name) + ";",
@@ -88,7 +82,7 @@ def header_differences(header: str, prefix: str, features: Features, facts) -> l
 
 def test_the_header_equals_the_contract(package):
     prefix = package.prefix
-    features = features_of(package.manifest)
+    features = Features.from_manifest(package.manifest)
     header = package.files[f"{prefix}.h"]
     assert header_differences(header, prefix, features, contract) == []
     # The defaults the header documents are the package's (the contract's, the scheme's reuse).
@@ -130,7 +124,8 @@ def test_a_contract_that_differs_from_the_header_is_noticed(package, change):
 
     facts.manifest_entry_points = manifest_entry_points
     header = package.files[f"{package.prefix}.h"]
-    assert header_differences(header, package.prefix, features_of(package.manifest), facts)
+    features = Features.from_manifest(package.manifest)
+    assert header_differences(header, package.prefix, features, facts)
 
 
 def test_the_loader_structs_are_the_contract():

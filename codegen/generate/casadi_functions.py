@@ -38,14 +38,27 @@ def check_free_symbols(name: str, expressions, inputs) -> None:
 
 
 class SympyToCasadi:
-    """Translate SymPy expressions into CasADi SX over given symbol -> SX bindings."""
+    """Translate SymPy expressions into CasADi SX over given symbol -> SX bindings.
 
-    def __init__(self, bindings: dict[sp.Symbol, ca.SX]):
+    `parametric`: symbols of run-time parameters. A sum or product then combines its terms that
+    depend on parameters alone first, so that they form subexpressions of their own (m1 * m2 *
+    x as (m1 * m2) * x): those are what `extract_parametric` hoists out of the step.
+    """
+
+    def __init__(self, bindings: dict[sp.Symbol, ca.SX], parametric=()):
         self._memo: dict[sp.Basic, ca.SX] = dict(bindings)
+        self._parametric: set[sp.Basic] = set(parametric)
+        self._grouping = bool(self._parametric)
 
-    def bind(self, symbol: sp.Symbol, value: ca.SX) -> None:
+    def bind(self, symbol: sp.Symbol, value: ca.SX, parametric: bool = False) -> None:
         """Bind one more symbol (an intermediate defined by earlier bindings)."""
         self._memo[symbol] = value
+        if parametric:
+            self._parametric.add(symbol)
+
+    def is_parametric(self, expr: sp.Basic) -> bool:
+        """Whether a translated expression depends on the parameters (and numbers) alone."""
+        return expr in self._parametric or expr.is_Number
 
     def __call__(self, expr: sp.Basic) -> ca.SX:
         # Iterative post-order walk: deep recursive expressions (long chains) must not hit
@@ -65,7 +78,16 @@ class SympyToCasadi:
                 stack.append((node, True))
                 stack.extend((arg, False) for arg in node.args if arg not in memo)
                 continue
-            memo[node] = self._combine(node, [memo[arg] for arg in node.args])
+            args = node.args
+            if self._grouping:
+                flags = [self.is_parametric(arg) for arg in args]
+                if all(flags):
+                    self._parametric.add(node)
+                elif (node.is_Add or node.is_Mul) and any(flags):
+                    # parameter-only terms first: they combine into one hoistable subtotal
+                    args = tuple(arg for arg, flag in zip(args, flags) if flag) + tuple(
+                        arg for arg, flag in zip(args, flags) if not flag)
+            memo[node] = self._combine(node, [memo[arg] for arg in args])
         return memo[expr]
 
     @staticmethod
@@ -119,11 +141,14 @@ class SchemeFunctions:
     holding_torques: ca.Function | None  # (phi) -> dV/dphi, actuated scenes only
     segment_margins: ca.Function | None  # (x0, x1) -> (s_j(x1) / tol_j, cos of each segment's
                                          # turn over the step), scenes with springs only
+    parameters: ca.Function | None = None  # p -> q, the derived parameters every other
+                                           # function takes in p's place (packages with p)
 
     def all(self) -> tuple[ca.Function, ...]:
         functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
                      self.outputs, self.initial_state, self.sensitivity_rhs,
-                     self.sensitivity_map, self.holding_torques, self.segment_margins)
+                     self.sensitivity_map, self.holding_torques, self.segment_margins,
+                     self.parameters)
         return tuple(function for function in functions if function is not None)
 
 
@@ -136,15 +161,21 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
                      sensitivities: bool = True) -> SchemeFunctions:
     """CasADi Functions for the residual, its Jacobian, and the state maps of `scheme`.
 
+    Every function that depends on the model takes the run-time parameters (when the scheme
+    has any) after its state-like inputs: step functions (z, x0, u, q, dt), the predictor
+    (x0, q, dt), outputs (x, q), initial_state (phi, phidot, q), holding_torques (phi, q),
+    where q = parameters(p) are the derived parameters (see _build).
     sensitivities=False leaves out the step-map Jacobians, the largest generated functions
     (for "vi" about three times the Newton Jacobian), when a package does not need them.
     """
     nz, nx, nu = scheme.unknowns.shape[0], scheme.state.shape[0], scheme.inputs.shape[0]
-    n = scheme.scene.n
+    n, n_p = scheme.scene.n, scheme.parameters.shape[0]
+    if 2 * len(scheme.segment_tolerances) != scheme.segment_vectors.shape[0]:
+        raise ValueError(f"{scheme.method}: one segment tolerance per spring segment")
     z, x0, u = ca.SX.sym("z", nz), ca.SX.sym("x0", nx), ca.SX.sym("u", nu)
-    dt = ca.SX.sym("dt")
-    step_inputs = (list(scheme.unknowns) + list(scheme.state) + list(scheme.inputs)
-                   + [scheme.dt])
+    p, dt = ca.SX.sym("p", n_p), ca.SX.sym("dt")
+    parameters = list(scheme.parameters)
+    step_inputs = scheme.step_inputs
     for symbol, expression in scheme.definitions:
         check_free_symbols(f"definition of {symbol}", [expression], step_inputs)
         step_inputs.append(symbol)
@@ -153,41 +184,47 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
         check_free_symbols(name, exprs, step_inputs)
     solve = scheme.output_solve
     solved = list(solve.symbols) if solve else []
-    check_free_symbols("predictor", scheme.predictor, list(scheme.state) + solved + [scheme.dt])
+    state_inputs = list(scheme.state) + parameters
+    check_free_symbols("predictor", scheme.predictor, state_inputs + solved + [scheme.dt])
     if solve:
-        check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), scheme.state)
+        check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), state_inputs)
     check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
                        + [scheme.energy] + list(scheme.constraint_residuals),
-                       list(scheme.state) + solved)
-    check_free_symbols("segment_vectors", scheme.segment_vectors, scheme.state)
+                       state_inputs + solved)
+    check_free_symbols("segment_vectors", scheme.segment_vectors, state_inputs)
     if scheme.holding_torques is not None:
-        check_free_symbols("holding_torques", scheme.holding_torques, scheme.initial_angles)
+        check_free_symbols("holding_torques", scheme.holding_torques,
+                           list(scheme.initial_angles) + parameters)
     check_free_symbols("initial_state", scheme.initial_state,
-                       list(scheme.initial_angles) + list(scheme.initial_velocities))
+                       list(scheme.initial_angles) + list(scheme.initial_velocities)
+                       + parameters)
 
+    parameter_bindings = dict(zip(parameters, ca.vertsplit(p)))
     bindings = dict(zip(scheme.unknowns, ca.vertsplit(z)))
     bindings.update(zip(scheme.state, ca.vertsplit(x0)))
     bindings.update(zip(scheme.inputs, ca.vertsplit(u)))
+    bindings.update(parameter_bindings)
     bindings[scheme.dt] = dt
-    step = SympyToCasadi(bindings)
+    step = SympyToCasadi(bindings, parameters)
     for symbol, expression in scheme.definitions:
-        step.bind(symbol, step(expression))
+        step.bind(symbol, step(expression), step.is_parametric(expression))
     residual = _vector(step, scheme.residual)
     jacobian = ca.densify(ca.jacobian(residual, z))
     x1 = _vector(step, scheme.next_state)
     options = {"cse": True}
 
     def state_translator(state: ca.SX, extra: dict | None = None) -> SympyToCasadi:
-        """Expressions in the state and the output_solve symbols, bound to `state`."""
+        """Expressions in the state, p and the output_solve symbols, bound to `state`."""
         state_bindings = dict(zip(scheme.state, ca.vertsplit(state)))
+        state_bindings.update(parameter_bindings)
         state_bindings.update(extra or {})
         if solve:
-            bound = SympyToCasadi(state_bindings)
+            bound = SympyToCasadi(state_bindings, parameters)
             matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
                                   for row in solve.matrix.tolist()])
             solution = ca.solve(matrix, _vector(bound, solve.rhs))
             state_bindings.update(zip(solve.symbols, ca.vertsplit(solution)))
-        return SympyToCasadi(state_bindings)
+        return SympyToCasadi(state_bindings, parameters)
 
     def joint_space(state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
@@ -199,74 +236,123 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     x = ca.SX.sym("x", nx)
     phi, phidot = ca.SX.sym("phi", n), ca.SX.sym("phidot", n)
     initial = SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
-                             **dict(zip(scheme.initial_velocities, ca.vertsplit(phidot)))})
+                             **dict(zip(scheme.initial_velocities, ca.vertsplit(phidot))),
+                             **parameter_bindings}, parameters)
     initial_state = _vector(initial, scheme.initial_state)
 
-    step_args = [z, x0] + ([u] if nu else []) + [dt]
-    step_names = ["z", "x0"] + (["u"] if nu else []) + ["dt"]
+    with_p = ([p] if n_p else [], ["p"] if n_p else [])
+    step_args = [z, x0] + ([u] if nu else []) + with_p[0] + [dt]
+    step_names = ["z", "x0"] + (["u"] if nu else []) + with_p[1] + ["dt"]
     flows = ([ca.vertcat(step(scheme.input_work), step(scheme.dissipated))]
              if scheme.has_energy_flows else [])
 
+    specs: dict[str, tuple] = {}
+
     def fn(name, inputs, input_names, outputs, output_names):
-        return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
-                           options)
+        """Record a function (built at the end, once its parameter-only parts are known)."""
+        specs[name] = (inputs, input_names, outputs, output_names)
+        return name
 
     def sensitivity_functions() -> tuple[ca.Function, ca.Function]:
-        """The controller's state is s = (phi, omega); x0 = X(s0) (initial_state), s1 = S(x1)
-        (outputs). With F(z*, x0, u) = 0, dz*/d(s0, u) = -J^-1 [F_x0 X_s, F_u] (the C code
-        solves it with one LU of J at z*), and ds1/d(s0, u) = S_x1 (x1_z dz* + [x1_x0 X_s,
-        x1_u]). X_s is evaluated at s0 = S(x0), so the functions take x0 as the step does."""
+        """The controller's state is s = (phi, omega); x0 = X(s0, p) (initial_state), s1 =
+        S(x1, p) (outputs). With F(z*, x0, u, p) = 0, dz*/d(s0, u, p) = -J^-1 [F_x0 X_s, F_u,
+        F_x0 X_p + F_p] (the C code solves it with one LU of J at z*), and ds1/d(s0, u, p) =
+        S_x1 (x1_z dz* + [x1_x0 X_s, x1_u, x1_x0 X_p + x1_p]) + [0, 0, S_p]. X is evaluated at
+        s0 = S(x0, p), so the functions take x0 as the step does."""
         s_of_x0 = ca.vertcat(*joint_space(x0)[:2])
-        state_jacobian = ca.Function("X_s", [phi, phidot],
-                                     [ca.jacobian(initial_state, ca.vertcat(phi, phidot))])
-        x_s = state_jacobian(s_of_x0[:n], s_of_x0[n:])
+        joint_state = ca.vertcat(phi, phidot)
+        state_maps = ca.Function("X", [phi, phidot, p],
+                                 [ca.jacobian(initial_state, joint_state),
+                                  ca.jacobian(initial_state, p)])
+        x_s, x_p = state_maps(s_of_x0[:n], s_of_x0[n:], p)
         s1 = ca.vertcat(*joint_space(x1)[:2])
-        rhs = ca.densify(ca.horzcat(ca.mtimes(ca.jacobian(residual, x0), x_s),
-                                    ca.jacobian(residual, u)))
+        f_x0 = ca.jacobian(residual, x0)
+        rhs = ca.densify(ca.horzcat(ca.mtimes(f_x0, x_s), ca.jacobian(residual, u),
+                                    ca.mtimes(f_x0, x_p) + ca.jacobian(residual, p)))
         s1_z = ca.densify(ca.jacobian(s1, z))
-        s1_s0 = ca.densify(ca.mtimes(ca.jacobian(s1, x0), x_s))
+        s1_x0 = ca.jacobian(s1, x0)
+        s1_s0 = ca.densify(ca.mtimes(s1_x0, x_s))
         s1_u = ca.densify(ca.jacobian(s1, u))
+        s1_p = ca.densify(ca.mtimes(s1_x0, x_p) + ca.jacobian(s1, p))
+        outputs = [s1_z, s1_s0] + ([s1_u] if nu else []) + ([s1_p] if n_p else [])
+        names = ["s1_z", "s1_s0"] + (["s1_u"] if nu else []) + (["s1_p"] if n_p else [])
         return (fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
-                fn("sensitivity_map", step_args, step_names,
-                   [s1_z, s1_s0] + ([s1_u] if nu else []),
-                   ["s1_z", "s1_s0"] + (["s1_u"] if nu else [])))
+                fn("sensitivity_map", step_args, step_names, outputs, names))
 
     sensitivity_rhs = sensitivity_map = None
     if sensitivities:
         sensitivity_rhs, sensitivity_map = sensitivity_functions()
     margins = None
     if scheme.segment_vectors.shape[0]:
+        # The segments at the scene's own numbers: their tolerances are the scene's.
         tolerances = ca.DM(list(scheme.segment_tolerances))
-        before = ca.reshape(_vector(SympyToCasadi(dict(zip(scheme.state, ca.vertsplit(x0)))),
-                                    scheme.segment_vectors), 2, -1)
-        after = ca.reshape(_vector(SympyToCasadi(dict(zip(scheme.state, ca.vertsplit(x)))),
-                                   scheme.segment_vectors), 2, -1)
+        before = ca.reshape(_vector(state_translator(x0), scheme.segment_vectors), 2, -1)
+        after = ca.reshape(_vector(state_translator(x), scheme.segment_vectors), 2, -1)
         lengths_before = ca.sqrt(ca.sum1(before ** 2)).T
         lengths_after = ca.sqrt(ca.sum1(after ** 2)).T
         turn = ca.sum1(before * after).T / (lengths_before * lengths_after)
-        margins = fn("segment_margins", [x0, x], ["x0", "x1"],
+        margins = fn("segment_margins", [x0, x] + with_p[0], ["x0", "x1"] + with_p[1],
                      [ca.vertcat(lengths_after / tolerances, turn)], ["margins"])
     holding = None
     if scheme.holding_torques is not None:
-        torques = _vector(SympyToCasadi(dict(zip(scheme.initial_angles, ca.vertsplit(phi)))),
+        torques = _vector(SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
+                                         **parameter_bindings}, parameters),
                           scheme.holding_torques)
-        holding = fn("holding_torques", [phi], ["phi"], [torques], ["tau"])
-    return SchemeFunctions(
+        holding = fn("holding_torques", [phi] + with_p[0], ["phi"] + with_p[1], [torques],
+                     ["tau"])
+    names = dict(
         residual=fn("residual", step_args, step_names, [residual], ["F"]),
         residual_jacobian=fn("residual_jacobian", step_args, step_names,
                              [residual, jacobian], ["F", "J"]),
-        predictor=fn("predictor", [x0, dt], ["x0", "dt"], [_predictor(scheme, x0, dt,
-                                                                      state_translator)],
-                     ["z"]),
+        predictor=fn("predictor", [x0] + with_p[0] + [dt], ["x0"] + with_p[1] + ["dt"],
+                     [_predictor(scheme, x0, dt, state_translator)], ["z"]),
         next_state=fn("next_state", step_args, step_names, [x1] + flows,
                       ["x1"] + (["flows"] if flows else [])),
-        outputs=fn("outputs", [x], ["x"], list(joint_space(x)),
+        outputs=fn("outputs", [x] + with_p[0], ["x"] + with_p[1], list(joint_space(x)),
                    ["phi", "omega", "energy", "constraint"]),
-        initial_state=fn("initial_state", [phi, phidot], ["phi", "phidot"], [initial_state],
-                         ["x"]),
+        initial_state=fn("initial_state", [phi, phidot] + with_p[0],
+                         ["phi", "phidot"] + with_p[1], [initial_state], ["x"]),
         sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map,
         holding_torques=holding, segment_margins=margins,
     )
+    built = _build(specs, prefix, p, options)
+    return SchemeFunctions(**{field: None if name is None else built[name]
+                              for field, name in names.items()},
+                           parameters=built.get(PARAMETERS_FUNCTION))
+
+
+#: The name of the generated function that computes the derived parameters q from p.
+PARAMETERS_FUNCTION = "parameters"
+
+
+def _build(specs: dict[str, tuple], prefix: str, p: ca.SX, options: dict) -> dict:
+    """The recorded functions as CasADi Functions. With run-time parameters p, every
+    subexpression that depends on p alone is hoisted out of them (CasADi's extract_parametric,
+    one pass over all of them, so a subexpression they share is one entry): a function
+    `parameters` computes those, q = Q(p), and every other function takes q in p's place. The
+    C code evaluates Q once when p changes instead of in every residual of every step."""
+    def function(name, inputs, input_names, outputs, output_names):
+        return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
+                           options)
+
+    if p.shape[0] == 0:
+        return {name: function(name, *spec) for name, spec in specs.items()}
+    order = [(name, index) for name, spec in specs.items() for index in range(len(spec[2]))]
+    expressions = [specs[name][2][index] for name, index in order]
+    hoisted, symbols, values = ca.extract_parametric(expressions, p,
+                                                     {"extract_trivial": True, "prefix": "q_"})
+    q = ca.vertcat(*symbols) if symbols else ca.SX(0, 1)
+    rewritten: dict[str, list] = {name: [] for name in specs}
+    for (name, _), expression in zip(order, hoisted):
+        rewritten[name].append(expression)
+    built = {PARAMETERS_FUNCTION: function(PARAMETERS_FUNCTION, [p], ["p"],
+                                           [ca.vertcat(*values) if values else ca.SX(0, 1)],
+                                           ["q"])}
+    for name, (inputs, input_names, _, output_names) in specs.items():
+        inputs = [q if item is p else item for item in inputs]
+        input_names = ["q" if item == "p" else item for item in input_names]
+        built[name] = function(name, inputs, input_names, rewritten[name], output_names)
+    return built
 
 
 def _predictor(scheme: DiscreteScheme, x0: ca.SX, dt: ca.SX, state_translator) -> ca.SX:

@@ -17,7 +17,7 @@ import textwrap
 from dataclasses import dataclass
 
 from ..runtime import contract
-from ..runtime.contract import EntryPoint, Features, Parameter, _parameters
+from ..runtime.contract import P_ARGUMENT, EntryPoint, Features, Parameter, _parameters
 
 #: Width of the generated C text.
 WIDTH = 100
@@ -25,25 +25,27 @@ WIDTH = 100
 #: The solver's static functions whose parameters follow the scene's features.
 INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
     EntryPoint("step_arguments", "static void", _parameters(
-        "const double *z, const double *x0, const double *u [inputs], const double *dt, "
-        "{prefix}_workspace *workspace")),
+        f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, "
+        "const double *dt, {prefix}_workspace *workspace")),
+    EntryPoint("first_guess", "static int", _parameters(
+        f"const double *x0, {P_ARGUMENT}, double dt, int warm, {{prefix}}_workspace *workspace")),
     EntryPoint("newton", "static int", _parameters(
-        "const double *x0, const double *u [inputs], double dt, "
+        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
         "const {prefix}_options *options, int warm, {prefix}_workspace *workspace, "
         "int *iterations")),
     EntryPoint("solve_step", "static int", _parameters(
-        "const double *x0, const double *u [inputs], double dt, "
+        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
         "const {prefix}_options *options, {prefix}_workspace *workspace, int *iterations")),
     EntryPoint("finish_step", "static int", _parameters(
-        "const double *x0, const double *u [inputs], double dt, double *x1, "
+        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
         "double *flows [flows], {prefix}_workspace *workspace")),
     EntryPoint("advance", "static int", _parameters(
-        "const double *x0, const double *u [inputs], double dt, double *x1, "
+        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
         "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
         "int *iterations, int depth")),
     EntryPoint("write_sample", "static int", _parameters(
-        "const double *x, double t, const compensated_sum *totals [flows], double *row, "
-        "{prefix}_workspace *workspace")),
+        f"const double *x, {P_ARGUMENT}, double t, const compensated_sum *totals [flows], "
+        "double *row, {prefix}_workspace *workspace")),
 )}
 
 

@@ -73,10 +73,12 @@ def package_prefix(scene: Scene, method: str) -> str:
     return f"{scene.c_name}_{method}"
 
 
-def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool = True) -> str:
+def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool = True,
+               parameters=()) -> str:
     """sha256 of everything the generated code depends on, and nothing else.
 
-    The initial state and the simulation defaults do not enter the code; the tool versions do.
+    The initial state and the simulation defaults do not enter the code; the tool versions and
+    the paths of the run-time parameters do.
     """
     code_relevant = dataclasses.asdict(scene)
     for key in ("initial_angles", "initial_velocities", "simulation"):
@@ -84,7 +86,7 @@ def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool =
     payload = {
         "scene": code_relevant, "method": method,
         "quadrature": quadrature_used(scene, method, quadrature),
-        "sensitivities": sensitivities,
+        "sensitivities": sensitivities, "parameters": list(parameters),
         "chaingen": VERSION, "sympy": sympy.__version__, "casadi": casadi.__version__,
     }
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
@@ -115,7 +117,8 @@ def scheme_label(scheme: DiscreteScheme) -> str:
 
 def package_features(scheme: DiscreteScheme, sensitivities: bool) -> Features:
     return Features(inputs=bool(scheme.inputs.shape[0]), flows=scheme.has_energy_flows,
-                    sensitivities=sensitivities, segments=bool(scheme.segment_tolerances))
+                    sensitivities=sensitivities, segments=bool(scheme.segment_tolerances),
+                    parameters=bool(scheme.parameter_paths))
 
 
 def newton_defaults(scheme: DiscreteScheme) -> dict:
@@ -133,7 +136,8 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     """
     scene = scheme.scene
     prefix = package_prefix(scene, scheme.method)
-    digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities)
+    digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities,
+                        scheme.parameter_paths)
     if progress is not None:
         progress.update(1, "CasADi functions and derivatives")
     functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
@@ -156,12 +160,13 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     c_banner = f"/* {banner_text} */"
     n = scene.n
     nu = len(scene.actuated_joints)
+    n_p = len(scheme.parameter_paths)
     columns = contract.sample_columns(n, features.flows)
     flows = scheme.flow_description
     context = {
         "nu": nu, "actuated_joints": scene.actuated_joints, "flows": features.flows,
         "sensitivities": sensitivities, "segments": len(scheme.segment_tolerances),
-        "nsens": 2 * n + nu,
+        "nsens": 2 * n + nu + n_p,
         "flows_work": flows.input_work if flows else "",
         "flows_dissipated": flows.dissipated if flows else "",
         "flows_balance": flows.balance if flows else "",
@@ -178,7 +183,14 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "unknowns_description": scheme.unknowns_layout.description,
         "residual_description": scheme.residual_description,
         "sample_columns": columns,
-        "step_inputs": ["z", "x0"] + (["u"] if nu else []) + ["dt"],
+        "step_inputs": ["z", "x0"] + (["u"] if nu else []) + (["p"] if n_p else []) + ["dt"],
+        "np": n_p,
+        "nq": functions.parameters.size1_out(0) if functions.parameters is not None else 0,
+        "parameters": list(zip(scheme.parameter_paths, scheme.parameter_units,
+                                          map(c_literal, scheme.parameter_values))),
+        "sensitivity_outputs": (["ds_du"] if nu else []) + (["ds_dp"] if n_p else []),
+        "sensitivity_checks": ([("ds_du", "NU")] if nu else []) + ([("ds_dp", "NP")]
+                                                                     if n_p else []),
         "work": {key: max(1, value) for key, value in dataclasses.asdict(sizes).items()},
         "defaults": {name: c_literal(value) for name, value in defaults.items()},
         "status_macros": interface.status_macros(segment_tolerance),
@@ -208,6 +220,9 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "scene": scene.name, "method": scheme.method, "quadrature": scheme.quadrature,
         "n_joints": n, "nx": context["nx"], "nz": context["nz"], "nsample": context["nsample"],
         "actuated_joints": list(scene.actuated_joints), "nu": nu,
+        "parameters": [{"path": path, "unit": unit, "value": value} for path, unit, value
+                       in zip(scheme.parameter_paths, scheme.parameter_units,
+                              scheme.parameter_values)],
         "energy_flows": features.flows, "sensitivities": sensitivities,
         "segment_tolerance": scheme.segment_relative_tolerance if features.segments else None,
         "state": list(scheme.state_layout.entries),
@@ -224,11 +239,13 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
 
 
 def generate_package(scene: Scene, method: str, quadrature: int, *,
-                     sensitivities: bool = True, progress=None) -> GeneratedPackage:
-    """Scene -> scheme -> C package, all in memory. progress: see render_package."""
+                     sensitivities: bool = True, parameters=(),
+                     progress=None) -> GeneratedPackage:
+    """Scene -> scheme -> C package, all in memory. parameters: key paths of the scene's
+    numbers the solver takes at run time. progress: see render_package."""
     if progress is not None:
         progress.update(0, "deriving the model and the scheme (SymPy)")
-    package = render_package(build_scheme(scene, method, quadrature),
+    package = render_package(build_scheme(scene, method, quadrature, parameters),
                              sensitivities=sensitivities, progress=progress)
     if progress is not None:
         progress.update(GENERATE_STAGES)

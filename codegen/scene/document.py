@@ -2,6 +2,8 @@
 scene whose numbers a study changed, and for writing it out."""
 from __future__ import annotations
 
+import json
+
 from .values import Scene
 
 
@@ -29,3 +31,27 @@ def scene_document(scene: Scene) -> dict:
     document["simulation"] = {"method": simulation.method, "quadrature": simulation.quadrature,
                               "dt": simulation.dt, "t_end": simulation.t_end}
     return document
+
+
+def scene_toml(scene: Scene) -> str:
+    """The scene as a scene file's text (reads back as `scene`): for writing out a scene a
+    study made, e.g. one run of a sweep to simulate on its own."""
+    document = scene_document(scene)
+    lines = [f"name = {_value(document['name'])}", f"gravity = {_value(document['gravity'])}"]
+    for table in ("base", "actuation", "initial", "simulation"):
+        if table in document:
+            lines += ["", f"[{table}]"]
+            lines += [f"{key} = {_value(value)}" for key, value in document[table].items()]
+    for table in ("links", "springs"):
+        for row in document[table]:
+            lines += ["", f"[[{table}]]"]
+            lines += [f"{key} = {_value(value)}" for key, value in row.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _value(value) -> str:
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_value(item) for item in value) + "]"
+    return repr(value)

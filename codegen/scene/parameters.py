@@ -29,6 +29,11 @@ _PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>\d+)\]\.(?P<key>\w+)"
                    r"|(?P<run>initial\.angles|initial\.velocities)\[(?P<joint>\d+)\]"
                    r"|(?P<setting>simulation\.dt|simulation\.t_end)")
 
+#: Keys that are the structure of a solver, not numbers: named as such when a study tries them.
+_STRUCTURE = re.compile(r"springs\[\d+\]\.joints(?:\[\d+\])?|actuation(?:\.joints"
+                        r"(?:\[\d+\])?)?|simulation\.(?:method|quadrature)|links|springs"
+                        r"|name")
+
 
 @dataclass(frozen=True)
 class NumberPath:
@@ -47,6 +52,10 @@ def number_path(scene: Scene, path: str, *, where: str = "") -> NumberPath:
     """The number of `scene` at `path`, or SceneError naming the path and why it names no
     number (an unknown key, an index beyond the chain, a structural integer)."""
     prefix = f"{where}: " if where else ""
+    if _STRUCTURE.fullmatch(path.strip()):
+        raise SceneError(f"{prefix}{path}: is structure, compiled into the solver (n, the "
+                         "joints a spring spans, the actuated joints, the method, K): a study "
+                         "varies numbers only; make a scene per structure")
     match = _PATH.fullmatch(path.strip())
     if not match:
         raise SceneError(f"{prefix}{path}: names no number of the scene (a key path such as "
@@ -160,3 +169,17 @@ def with_values(scene: Scene, values: dict[str, float], *, where: str = "") -> S
         changed = _replaced(changed, path, float(value))
     source = where or "values"
     return SceneReader(source, scene.name).read(scene_document(changed))
+
+
+def compiled_paths(scene: Scene) -> tuple[str, ...]:
+    """Every number of `scene` a solver can take as a parameter, in a stable order: gravity,
+    the base fastening, each link's numbers, each spring's (its offsets when it has its own)."""
+    paths = ["gravity", "base.fastening"]
+    for index, _ in enumerate(scene.links):
+        paths += [f"links[{index}].{key}" for key in LINK_NUMBERS]
+    for index, spring in enumerate(scene.springs):
+        paths += [f"springs[{index}].{key}" for key in SPRING_NUMBERS]
+        if spring.offsets is not None:
+            paths += [f"springs[{index}].offsets[{entry}]"
+                      for entry in range(len(spring.offsets))]
+    return tuple(paths)

@@ -96,7 +96,7 @@ class _SympyFunctions:
     """The scheme's expressions, lambdified over the same inputs as the C functions."""
 
     def __init__(self, scheme: DiscreteScheme):
-        state = list(scheme.state)
+        state = list(scheme.state) + list(scheme.parameters)
         solve = scheme.output_solve
         solved = list(solve.symbols) if solve else []
 
@@ -105,8 +105,8 @@ class _SympyFunctions:
 
         self.residual = scheme.step_function(scheme.residual)
         self.next_state = scheme.step_function(scheme.next_state)
-        self.initial_state = lam(list(scheme.initial_angles) + list(scheme.initial_velocities),
-                                 scheme.initial_state)
+        self.initial_state = lam(list(scheme.initial_angles) + list(scheme.initial_velocities)
+                                 + list(scheme.parameters), scheme.initial_state)
         self.outputs = lam(state + solved, list(scheme.joint_angles)
                            + list(scheme.joint_velocities) + [scheme.energy]
                            + list(scheme.constraint_residuals))
@@ -114,14 +114,14 @@ class _SympyFunctions:
         self.n = scheme.scene.n
         self.nconstraint = scheme.constraint_residuals.shape[0]
 
-    def evaluate_outputs(self, x) -> np.ndarray:
+    def evaluate_outputs(self, x, p) -> np.ndarray:
         solved = []
         if self.solve:
-            matrix = np.array(self.solve[0](*x), float)
+            matrix = np.array(self.solve[0](*x, *p), float)
             size = int(round(np.sqrt(matrix.size)))
             solved = list(np.linalg.solve(matrix.reshape(size, size),
-                                          np.array(self.solve[1](*x), float)))
-        return np.array(self.outputs(*x, *solved), float)
+                                          np.array(self.solve[1](*x, *p), float)))
+        return np.array(self.outputs(*x, *p, *solved), float)
 
 
 def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
@@ -143,54 +143,66 @@ def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
                              rng.uniform(-1.0, 1.0, n)])
         u = rng.uniform(-1.0, 1.0, nu) if nu else None
         u_list = list(u) if nu else []
-        x0 = solver.initial_state(s0[:n], s0[n:])
+        # Parameters (if any) 10 % around the scene's own values.
+        p = solver.default_parameters * (1 + 0.1 * rng.uniform(-1, 1, len(solver.parameters)))
+        p_list = list(p)
+        x0 = solver.initial_state(s0[:n], s0[n:], p)
         z = 0.01 * rng.standard_normal(solver.nz)
 
         # The residual Jacobian against central differences of the C residual.
-        _, jacobian = solver.residual_jacobian(z, x0, dt, u=u)
+        _, jacobian = solver.residual_jacobian(z, x0, dt, u=u, parameters=p)
         steps = 1e-6 * np.maximum(1.0, np.abs(z))
-        numeric = central_differences(lambda v, x0=x0, u=u: solver.residual(v, x0, dt, u=u), z,
-                                      steps)
+        numeric = central_differences(
+            lambda v, x0=x0, u=u, p=p: solver.residual(v, x0, dt, u=u, parameters=p), z, steps)
         record("residual Jacobian", relative_error(jacobian, numeric))
 
         # The step sensitivities against central differences of the joint-space step map.
         if solver.has_sensitivities:
-            def step_map(s, v):
-                x = solver.initial_state(s[:n], s[n:])
-                phi, omega, _, _ = solver.outputs(solver.step(x, dt, u=v, options=TIGHT).x1)
+            def step_map(s, v, q):
+                x = solver.initial_state(s[:n], s[n:], q)
+                x1 = solver.step(x, dt, u=v, options=TIGHT, parameters=q).x1
+                phi, omega, _, _ = solver.outputs(x1, q)
                 return np.concatenate([phi, omega])
 
-            sens = solver.step_sensitivities(x0, dt, u=u)
+            sens = solver.step_sensitivities(x0, dt, u=u, parameters=p)
             record("d s1 / d s0", relative_error(sens.ds_ds, central_differences(
-                lambda s, u=u: step_map(s, u), s0, np.full(2 * n, 1e-4))))
+                lambda s, u=u, p=p: step_map(s, u, p), s0, np.full(2 * n, 1e-4))))
             if nu:
                 record("d s1 / d u", relative_error(sens.ds_du, central_differences(
-                    lambda v, s0=s0: step_map(s0, v), u, np.full(nu, 1e-3))))
+                    lambda v, s0=s0, p=p: step_map(s0, v, p), u, np.full(nu, 1e-3))))
+            if len(p):
+                # A parameter acts on s1 through one step only (ds1/dp ~ dt): relative steps of
+                # 1e-3 keep the differences' noise (solved steps, 1e-12 / h) below 1e-8 of it,
+                # and its truncation (h^2) as small.
+                record("d s1 / d p", relative_error(sens.ds_dp, central_differences(
+                    lambda q, s0=s0, u=u: step_map(s0, u, q), p,
+                    1e-3 * np.maximum(1.0, np.abs(p)))))
 
         # Generated functions against their SymPy expressions.
-        args = list(z) + list(x0) + u_list + [dt]
-        record("residual", relative_error(solver.residual(z, x0, dt, u=u),
+        args = list(z) + list(x0) + u_list + p_list + [dt]
+        record("residual", relative_error(solver.residual(z, x0, dt, u=u, parameters=p),
                                           reference.residual(*args)))
-        record("initial state", relative_error(x0, reference.initial_state(*s0)))
-        x1 = solver.step(x0, dt, u=u).x1
-        converged = _converged_unknowns(solver, x0, x1, dt, u)
+        record("initial state", relative_error(x0, reference.initial_state(*s0, *p_list)))
+        x1 = solver.step(x0, dt, u=u, parameters=p).x1
+        converged = _converged_unknowns(solver, x0, x1, dt, u, p)
         if converged is not None:
             record("next state", relative_error(
-                x1, reference.next_state(*converged, *x0, *u_list, dt)))
+                x1, reference.next_state(*converged, *x0, *u_list, *p_list, dt)))
         # Off the constraint manifold too, where the constraint residuals are O(1e-3).
         off = x0 + 1e-3 * rng.standard_normal(len(x0)) * np.maximum(1.0, np.abs(x0))
         for x in (x0, off):
-            phi, omega, energy, _ = solver.outputs(x)
-            expected = reference.evaluate_outputs(x)
+            phi, omega, energy, _ = solver.outputs(x, p)
+            expected = reference.evaluate_outputs(x, p_list)
             record("joint angles", relative_error(phi, expected[:n]))
             record("joint rates", relative_error(omega, expected[n:2 * n]))
             record("energy", relative_error(energy, expected[2 * n]))
         if reference.nconstraint:   # on the manifold both are round-off: compare off it
             record("constraint error", relative_error(
-                solver.outputs(off)[3], np.abs(reference.evaluate_outputs(off)[2 * n + 1:]).max()))
+                solver.outputs(off, p)[3],
+                np.abs(reference.evaluate_outputs(off, p_list)[2 * n + 1:]).max()))
 
     against = {"residual Jacobian": "central differences", "d s1 / d s0": "central differences",
-               "d s1 / d u": "central differences"}
+               "d s1 / d u": "central differences", "d s1 / d p": "central differences"}
     rows = tuple(CheckRow(name, against.get(name, "SymPy"), error,
                           DERIVATIVE_TOLERANCE if name in against else VALUE_TOLERANCE)
                  for name, error in worst.items())
@@ -199,11 +211,11 @@ def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
                        samples=samples, rows=rows)
 
 
-def _converged_unknowns(solver: Solver, x0, x1, dt, u):
+def _converged_unknowns(solver: Solver, x0, x1, dt, u, p):
     """z of the step x0 -> x1, by Newton on the C residual from zero (None if it fails)."""
     z = np.zeros(solver.nz)
     for _ in range(50):
-        residual, jacobian = solver.residual_jacobian(z, x0, dt, u=u)
+        residual, jacobian = solver.residual_jacobian(z, x0, dt, u=u, parameters=p)
         update = np.linalg.solve(jacobian, -residual)
         z = z + update
         if np.abs(update).max() <= 1e-14 * max(1.0, np.abs(z).max()):

@@ -1,26 +1,64 @@
 """The time-stepping schemes, by the name a scene or the command line gives them
-(chaingen.scene.METHODS): each module derives its DiscreteScheme from a scene."""
+(chaingen.scene.METHODS): each module derives its DiscreteScheme from a scene.
+
+A scheme may take some of the scene's numbers as run-time parameters: they enter the derivation
+as symbols (chaingen.scene.parameters.with_symbols), every other number as a constant."""
 from __future__ import annotations
 
-from ...errors import SettingsError
+import dataclasses
+
+import sympy as sp
+from sympy import ImmutableMatrix
+
+from ...errors import SceneError, SettingsError
 from ...scene import METHODS, Scene
+from ...scene.parameters import compiled_paths, number_path, with_symbols
 from . import es, midpoint, vi
-from .base import DiscreteScheme, FlowDescription, Layout, LinearSolve
+from .base import DiscreteScheme, FlowDescription, Layout, LinearSolve, segment_tolerances
 
 BUILDERS = {"es": es.build, "vi": vi.build, "midpoint": midpoint.build}
 if tuple(BUILDERS) != METHODS:
     raise ImportError(f"schemes {tuple(BUILDERS)} do not match the methods {METHODS}")
 
 
-def build_scheme(scene: Scene, method: str, quadrature: int) -> DiscreteScheme:
-    """The discrete scheme `method` for `scene` (quadrature: Gauss points for spring terms)."""
+def build_scheme(scene: Scene, method: str, quadrature: int,
+                 parameters=()) -> DiscreteScheme:
+    """The discrete scheme `method` for `scene` (quadrature: Gauss points for spring terms),
+    with the numbers at the key paths `parameters` as run-time parameters p, in that order
+    ("all": every number of the scene a solver can take, chaingen.scene.parameters.
+    compiled_paths)."""
     try:
         builder = BUILDERS[method]
     except KeyError:
         raise SettingsError(
             f"method {method!r} is not available in this version of chaingen "
             f"(available: {', '.join(METHODS)})") from None
-    return builder(scene, quadrature)
+    if tuple(parameters) == ("all",):
+        parameters = compiled_paths(scene)
+    numbers = []
+    for path in parameters:
+        try:
+            number = number_path(scene, path)
+        except SceneError as error:
+            raise SettingsError(f"--parameters: {str(error)}") from None
+        if not number.compiled:
+            raise SettingsError(f"--parameters: {path}: a run-time value every solver takes "
+                                "per run (initial state, dt), not a parameter")
+        if number.path in [known.path for known in numbers]:
+            raise SettingsError(f"--parameters: {path}: named twice")
+        numbers.append(number)
+    # Dummies: a parameter can never be mistaken for a symbol of the model (vi calls its
+    # momenta p1, p2, ...).
+    symbols = {number.path: sp.Dummy(f"parameter{index}", real=True)
+               for index, number in enumerate(numbers)}
+    scheme = builder(with_symbols(scene, symbols), quadrature)
+    return dataclasses.replace(
+        scheme, scene=scene, segment_tolerances=segment_tolerances(scene),
+        parameters=ImmutableMatrix(list(symbols.values()))
+        if symbols else ImmutableMatrix.zeros(0, 1),
+        parameter_paths=tuple(number.path for number in numbers),
+        parameter_units=tuple(number.unit for number in numbers),
+        parameter_values=tuple(number.value(scene) for number in numbers))
 
 
 __all__ = ["DiscreteScheme", "FlowDescription", "Layout", "LinearSolve", "build_scheme"]

@@ -104,11 +104,18 @@ class DiscreteScheme:
     segment_relative_tolerance: float = RUN_SEGMENT_RELATIVE_TOLERANCE
     # The Newton Jacobian reuse the package defaults to (a JACOBIAN_* mode of the contract).
     jacobian_reuse: int = JACOBIAN_EVERY_ITERATE
+    # Run-time parameters: scene numbers left as symbols p (every other number is a constant
+    # folded into the code), with their key paths, units and the scene's own values.
+    parameters: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
+    parameter_paths: tuple[str, ...] = ()
+    parameter_units: tuple[str, ...] = ()
+    parameter_values: tuple[float, ...] = ()
 
     @property
     def step_inputs(self) -> list[sp.Symbol]:
-        """The inputs of the step's functions, in order: z, x_k, u, dt."""
-        return list(self.unknowns) + list(self.state) + list(self.inputs) + [self.dt]
+        """The inputs of the step's functions, in order: z, x_k, u, p, dt."""
+        return (list(self.unknowns) + list(self.state) + list(self.inputs)
+                + list(self.parameters) + [self.dt])
 
     def step_function(self, expressions):
         """A numpy function of the step_inputs' values that evaluates `expressions`, which may
@@ -123,11 +130,10 @@ class DiscreteScheme:
 
     @property
     def has_energy_flows(self) -> bool:
-        return has_energy_flows(self.scene)
+        """Whether energy can enter (inputs) or leave (damping, a constant or a parameter)."""
+        return bool(self.inputs.shape[0]) or self.dissipated != 0
 
     def __post_init__(self) -> None:
-        if 2 * len(self.segment_tolerances) != self.segment_vectors.shape[0]:
-            raise ValueError(f"{self.method}: one tolerance per spring segment")
         if self.residual.shape[0] != self.unknowns.shape[0]:
             raise ValueError(f"{self.method}: {self.residual.shape[0]} residual entries for "
                              f"{self.unknowns.shape[0]} unknowns")
@@ -175,5 +181,4 @@ def holding_torques(scene: Scene, angles) -> ImmutableMatrix | None:
 def common_fields(scene: Scene, angles) -> dict:
     """The fields every scheme derives the same way from its scene (angles: the symbols of
     initial_angles)."""
-    return {"holding_torques": holding_torques(scene, angles),
-            "segment_tolerances": segment_tolerances(scene)}
+    return {"holding_torques": holding_torques(scene, angles)}
