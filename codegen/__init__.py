@@ -12,6 +12,11 @@ chaingen derives its model with SymPy, generates C with CasADi, builds it, and s
     step = solver.step(solver.initial_state(phi, omega), 0.01)
     sens = solver.step_sensitivities(x, 0.01)               # d s1/d s0, d s1/d u
 
+    # numbers of the scene as run-time parameters: one build, values per call
+    solver = chaingen.build_solver(scene, "es", 3, parameters=["springs[0].stiffness"])
+    result = solver.simulate(..., parameters={"springs[0].stiffness": 20.0})
+    runs = chaingen.sweep("study.toml", out="study")        # many runs, all cores (pandas)
+
 The pipeline runs down through the subpackages, each a stage: scene (the validated numbers),
 symbolic (SymPy model and schemes), generate (CasADi and the C package), runtime (build, load,
 run: the thin runtime, numpy only), with studies, reference (MuJoCo and SciPy peers) and views
@@ -32,6 +37,7 @@ from .runtime import (
                      SimulationResult,
                      Solver,
                      StepResult,
+                     StopSignal,
                      read_trajectory,
                      write_trajectory,
 )
@@ -47,11 +53,12 @@ from .scene import (
                      parse_scene,
 )
 from .simulation import RunSettings, build_solver, run_settings, simulate_scene
+from .studies.sweep import sweep
 from .version import VERSION as __version__
 
 __all__ = ["METHODS", "QUADRATURE_RANGE", "BuildError", "ChaingenError", "Link", "NewtonError",
            "NewtonOptions", "RunFailedError", "RunSettings", "Scene", "SceneError",
            "Sensitivities", "SettingsError", "Simulation", "SimulationResult", "Solver",
-           "Spring", "StepResult", "UnsupportedSceneError", "__version__", "build_solver",
-           "load_reference_scene", "load_scene", "parse_scene", "read_trajectory",
-           "run_settings", "simulate_scene", "write_trajectory"]
+           "Spring", "StepResult", "StopSignal", "UnsupportedSceneError", "__version__",
+           "build_solver", "load_reference_scene", "load_scene", "parse_scene",
+           "read_trajectory", "run_settings", "simulate_scene", "sweep", "write_trajectory"]

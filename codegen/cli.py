@@ -8,93 +8,22 @@ from pathlib import Path
 
 import numpy as np
 
+from .arguments import (
+    add_newton_options,
+    add_parameters_option,
+    add_scheme_options,
+    dimension,
+    newton_overrides,
+    number,
+    positive_int,
+)
 from .errors import ChaingenError, NewtonError, UnsupportedSceneError
-from .runtime import contract
 from .runtime.files import check_output_file
-from .scene import METHODS, load_scene
+from .scene import load_scene
 from .version import VERSION
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    if value >= 2 ** 63:
-        raise argparse.ArgumentTypeError(f"must be below 2^63, got {value}")
-    return value
-
-
-def _number(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
-
-
-def _add_scheme_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format.md)")
-    parser.add_argument("--method", choices=METHODS,
-                        help="time-stepping scheme (default: the scene's [simulation].method)")
-    parser.add_argument("--quadrature", type=_positive_int, metavar="K",
-                        help="Gauss-Legendre points for the spring terms of 'es' "
-                             "(default: the scene's)")
-
-
-def _add_newton_options(parser: argparse.ArgumentParser) -> None:
-    """The Newton options of the contract, each overriding the package's default."""
-    group = parser.add_argument_group("Newton options (default: the package's)")
-    for field in contract.NEWTON_OPTIONS:
-        flag = "--" + field.name.replace("_", "-")
-        if field.name == "reuse_jacobian":
-            group.add_argument(flag, choices=JACOBIAN_CHOICES, metavar="MODE",
-                               help="when dF/dz is evaluated: " + ", ".join(JACOBIAN_CHOICES))
-        elif field.switch:
-            group.add_argument(flag, choices=("on", "off"), help=field.comment or None)
-        elif field.python_type is int:
-            group.add_argument(flag, type=_positive_int, metavar="N",
-                               help=field.comment or None)
-        else:
-            group.add_argument(flag, type=_tolerance, metavar="X", help=field.comment or None)
-
-
-#: reuse_jacobian on the command line: the contract's mode names, e.g. per-step.
-JACOBIAN_CHOICES = {mode.name.removeprefix("JACOBIAN_").lower().replace("_", "-"): mode.value
-                    for mode in contract.JACOBIAN_MODES}
-
-
-def _tolerance(text: str) -> float:
-    value = _number(text)
-    if not (np.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be >= 0 and finite, got {text!r}")
-    return value
-
-
-def newton_overrides(args) -> dict:
-    """The Newton options given on the command line, as contract field values."""
-    overrides = {}
-    for field in contract.NEWTON_OPTIONS:
-        value = getattr(args, field.name, None)
-        if value is None:
-            continue
-        if field.name == "reuse_jacobian":
-            value = JACOBIAN_CHOICES[value]
-        elif field.switch:
-            value = value == "on"
-        overrides[field.name] = value
-    return overrides
-
-
-def _dimension(text: str) -> int:
-    value = _positive_int(text)
-    if not 100 <= value <= 4000:
-        raise argparse.ArgumentTypeError(f"must be between 100 and 4000 pixels, got {value}")
-    return value
 
 
 def parser() -> argparse.ArgumentParser:
@@ -116,18 +45,19 @@ def parser() -> argparse.ArgumentParser:
         return commands.add_parser(name, parents=[quiet], **kwargs)
 
     generate = command("generate", help="write the C package of a scene's solver")
-    _add_scheme_options(generate)
+    add_scheme_options(generate)
     generate.add_argument("-o", "--output", type=Path, metavar="DIR",
                           help="package directory (default: ./<scene>_<method>)")
     generate.add_argument("--no-sensitivities", dest="sensitivities", action="store_false",
                           help="leave out step_sensitivities (smaller code, faster build)")
+    add_parameters_option(generate)
 
     simulate = command("simulate", help="simulate a scene with a generated solver")
-    _add_scheme_options(simulate)
-    _add_newton_options(simulate)
-    simulate.add_argument("--dt", type=_number, help="step in s (default: the scene's)")
-    simulate.add_argument("--t-end", type=_number, help="duration in s (default: the scene's)")
-    simulate.add_argument("--every", type=_positive_int, default=1, metavar="N",
+    add_scheme_options(simulate)
+    add_newton_options(simulate)
+    simulate.add_argument("--dt", type=number, help="step in s (default: the scene's)")
+    simulate.add_argument("--t-end", type=number, help="duration in s (default: the scene's)")
+    simulate.add_argument("--every", type=positive_int, default=1, metavar="N",
                           help="write every N-th step (t = 0 always included; default 1)")
     simulate.add_argument("--out", type=Path, metavar="FILE.csv",
                           help="write the trajectory file (scene-format.md) and its metadata "
@@ -137,45 +67,67 @@ def parser() -> argparse.ArgumentParser:
                                "else ./<scene>_<method>.png")
 
     plot = command(
-        "plot", help="figures of trajectory files: angles, energy and constraint errors")
-    plot.add_argument("trajectories", type=Path, nargs="+", metavar="TRAJ.csv",
-                      help="trajectory files; several overlay their error curves")
+        "plot", help="figures of trajectory files (angles, energy and constraint errors) or of "
+                     "a sweep's metric")
+    plot.add_argument("trajectories", type=Path, nargs="+", metavar="TRAJ.csv|OUT",
+                      help="trajectory files (several overlay their error curves), or a sweep's "
+                           "result directory")
     plot.add_argument("-o", "--output", type=Path, metavar="DIR|FILE.png",
                       help="a .png file, or a directory (created; default: beside the first "
                            "trajectory)")
+    plot.add_argument("--metric", metavar="METRIC",
+                      help="for a sweep: the column of runs.parquet to draw, or "
+                           "amplitude_phi<i>")
+
+    sweep = command("sweep", help="many runs of a scene with its numbers varied, one compiled "
+                                  "solver (docs/sweeps.md)")
+    sweep.add_argument("spec", type=Path, metavar="SPEC.toml",
+                       help="the sweep spec (docs/sweep-format.md)")
+    sweep.add_argument("-o", "--output", type=Path, required=True, metavar="OUT",
+                       help="the result directory (a rerun of the same spec resumes it)")
+    engine = sweep.add_mutually_exclusive_group()
+    engine.add_argument("--dask-local", type=positive_int, metavar="N",
+                        help="run on a Dask LocalCluster of N worker processes")
+    engine.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run on the Dask cluster at ADDRESS (tcp://host:8786)")
+    engine.add_argument("--jobs", type=positive_int, metavar="N",
+                        help="local engine: run on N threads (default: one per core)")
+    sweep.add_argument("--plot", metavar="METRIC",
+                       help="draw METRIC against the axes into OUT/METRIC.png")
 
     animate = command(
         "animate", help="animate the chain and its springs (GIF, or MP4 with ffmpeg)")
-    _add_scheme_options(animate)
-    _add_newton_options(animate)
+    add_scheme_options(animate)
+    add_newton_options(animate)
     animate.add_argument("trajectory", type=Path, nargs="?", metavar="TRAJ.csv",
                          help="trajectory of the scene (default: simulate the scene first)")
     animate.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.gif",
                          help="the animation: .gif (Pillow) or .mp4 (needs ffmpeg)")
-    animate.add_argument("--dt", type=_number, help="step in s when simulating (default: the "
+    animate.add_argument("--dt", type=number, help="step in s when simulating (default: the "
                                                     "scene's)")
-    animate.add_argument("--t-end", type=_number,
+    animate.add_argument("--t-end", type=number,
                          help="animate up to this time in s (default: the whole run)")
-    animate.add_argument("--fps", type=_number,
+    animate.add_argument("--fps", type=number,
                          help="frames per second (default 25, in real time)")
-    animate.add_argument("--every", type=_positive_int, metavar="N",
+    animate.add_argument("--every", type=positive_int, metavar="N",
                          help="draw every N-th sample (default: real time at --fps)")
-    animate.add_argument("--size", type=_dimension, default=480, metavar="PIXELS",
+    animate.add_argument("--size", type=dimension, default=480, metavar="PIXELS",
                          help="width and height of the frames (default 480)")
 
     check = command(
         "check", help="compare the generated functions with finite differences and SymPy")
-    _add_scheme_options(check)
-    check.add_argument("--samples", type=_positive_int, default=5, metavar="N",
+    add_scheme_options(check)
+    add_parameters_option(check)
+    check.add_argument("--samples", type=positive_int, default=5, metavar="N",
                        help="random states to check at (default 5)")
     check.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    check.add_argument("--dt", type=_number, help="step in s (default: the scene's)")
+    check.add_argument("--dt", type=number, help="step in s (default: the scene's)")
 
     order = command(
         "order", help="time-step study: energy and trajectory error per dt, fitted orders")
-    _add_scheme_options(order)
-    _add_newton_options(order)
-    order.add_argument("--t-end", type=_number, default=10.0,
+    add_scheme_options(order)
+    add_newton_options(order)
+    order.add_argument("--t-end", type=number, default=10.0,
                        help="duration of each run in s (default 10)")
     order.add_argument("--plot", type=Path, metavar="FILE.png",
                        help="write the log-log order plot (needs matplotlib)")
@@ -195,7 +147,9 @@ def parser() -> argparse.ArgumentParser:
     bench.add_argument("--skip-scaling", action="store_true", help="leave out the scaling series")
     bench.add_argument("--skip-reference", action="store_true",
                        help="leave out the reference scenes")
-    bench.add_argument("--timeout", type=_number, default=300.0, metavar="SECONDS",
+    bench.add_argument("--skip-sweep", action="store_true",
+                       help="leave out the sweeps of the studies part (no sweep extra needed)")
+    bench.add_argument("--timeout", type=number, default=300.0, metavar="SECONDS",
                        help="limit of generate + build per scheme and n (default 300)")
     return main
 
@@ -217,7 +171,7 @@ def command_generate(args) -> int:
     target = args.output or Path(package_prefix(scene, settings.method))
     check_package_target(target)
     package = generate_package(scene, settings.method, settings.quadrature,
-                               sensitivities=args.sensitivities)
+                               sensitivities=args.sensitivities, parameters=args.parameters)
     directory = write_package(package, target)
     print(f"wrote {directory}/: {', '.join(package.files)}")
     return 0
@@ -233,7 +187,7 @@ def command_check(args) -> int:
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature, dt=args.dt,
                             source=str(args.scene))
-    scheme = build_scheme(scene, settings.method, settings.quadrature)
+    scheme = build_scheme(scene, settings.method, settings.quadrature, args.parameters)
     solver = Solver.from_files(render_package(scheme, sensitivities=True).files)
     report = check_solver(scheme, solver, samples=args.samples, seed=args.seed, dt=settings.dt)
     print(report.table())
@@ -263,7 +217,8 @@ def command_bench(args) -> int:
 
     config = bench_config(quick=args.quick, dts=args.dts, scaling_n=args.scaling_n,
                           timeout=args.timeout, skip_scaling=args.skip_scaling,
-                          skip_reference=args.skip_reference, out=args.out,
+                          skip_reference=args.skip_reference, skip_sweep=args.skip_sweep,
+                          out=args.out,
                           figures=args.figures)
     run_bench(config)
     return 0
@@ -304,9 +259,47 @@ def command_simulate(args) -> int:
 
 
 def command_plot(args) -> int:
+    if len(args.trajectories) == 1 and args.trajectories[0].is_dir():
+        from .views.sweep_plot import plot_sweep
+
+        if args.metric is None:
+            raise ChaingenError(f"--metric: {args.trajectories[0]} is a sweep directory: name "
+                                "the metric to draw")
+        print(f"wrote {plot_sweep(args.trajectories[0], args.metric, args.output)}")
+        return 0
     from .views.plots import plot_files
 
     print(f"wrote {plot_files(args.trajectories, args.output)}")
+    return 0
+
+
+def command_sweep(args) -> int:
+    import time
+
+    from .studies.sweep import load_spec, require_extra, run_sweep
+
+    require_extra()
+    spec = load_spec(args.spec)
+    if args.plot:
+        from .views.sweep_plot import check_metric
+        check_metric(args.plot, spec.scene.n, [axis.path for axis in spec.axes],
+                     spec.every > 0)
+    started = time.perf_counter()
+    outcome = run_sweep(spec, args.output, engine="local" if not (args.dask_local
+                                                                  or args.scheduler)
+                        else "dask", scheduler=args.scheduler, dask_local=args.dask_local,
+                        workers=args.jobs)
+    import pandas as pd
+
+    runs = pd.read_parquet(outcome.out / "runs.parquet")
+    failed = int((runs["status"] != "ok").sum())
+    print(f"{spec.scene.name}: {spec.method}, {outcome.runs} runs ({outcome.computed} computed "
+          f"now), {failed} failed, solver {outcome.build_hash} (generate and build "
+          f"{outcome.generate_seconds:.1f} s), {time.perf_counter() - started:.1f} s in all")
+    print(f"  results                {outcome.out}")
+    if args.plot:
+        from .views.sweep_plot import plot_sweep
+        print(f"  figure                 {plot_sweep(outcome.out, args.plot)}")
     return 0
 
 
@@ -390,7 +383,7 @@ def main(argv: list[str] | None = None) -> int:
     debug = args.debug or os.environ.get("CHAINGEN_DEBUG", "") not in ("", "0")
     handlers = {"generate": command_generate, "simulate": command_simulate,
                 "check": command_check, "order": command_order, "bench": command_bench,
-                "plot": command_plot, "animate": command_animate}
+                "plot": command_plot, "animate": command_animate, "sweep": command_sweep}
     try:
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take

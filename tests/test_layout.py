@@ -147,3 +147,23 @@ def test_nothing_links_outside_the_repository():
     for document in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
         for target in re.findall(r"\]\((?!https?:|#)([^)#]+)", document.read_text()):
             assert (document.parent / target).exists(), f"{document.name} links {target}"
+
+
+def test_the_core_path_imports_no_extra():
+    """import chaingen, read a scene, derive and render a package: none of the extras (the
+    sweep's results and engines, plotting, the reference peers) is imported."""
+    import subprocess
+    import sys
+
+    code = ("import sys, chaingen\n"
+            "from chaingen.generate.package import generate_package\n"
+            "scene = chaingen.load_reference_scene('three_link_mono')\n"
+            "generate_package(scene, 'es', 1, sensitivities=False,\n"
+            "                 parameters=('springs[0].stiffness',))\n"
+            "extras = ('pandas', 'pyarrow', 'xarray', 'zarr', 'dask', 'distributed',\n"
+            "          'matplotlib', 'mujoco', 'scipy')\n"
+            "print(' '.join(m for m in extras if m in sys.modules))\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == ""

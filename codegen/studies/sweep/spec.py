@@ -13,6 +13,7 @@ a one-line SweepError naming the key, before anything runs or is written.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -75,15 +76,18 @@ class SweepSpec:
     seed: int
     sampler: str
     document: dict = field(repr=False)
+    scene_text: str = field(repr=False, default="")
 
     @property
     def parameters(self) -> tuple[str, ...]:
         """The varied numbers compiled into the solver, which it takes as parameters."""
         return tuple(axis.path for axis in self.axes if axis.number.compiled)
 
+    @functools.cached_property
     def digest(self) -> str:
-        """What identifies the sweep's results: the expanded spec and the base scene."""
-        text = json.dumps({"document": self.document, "scene": self.scene_path.read_text(),
+        """What identifies the sweep's results: the expanded spec and the base scene (as read
+        when the spec was checked, so a worker elsewhere needs no scene file)."""
+        text = json.dumps({"document": self.document, "scene": self.scene_text,
                            "runs": list(self.runs)}, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()
 
@@ -171,7 +175,7 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
     spec = SweepSpec(source=source, scene_path=scene_path, scene=scene, method=method,
                      quadrature=quadrature, mode=mode, axes=axes, runs=tuple(runs),
                      t_end=float(t_end), every=every, seed=seed, sampler=sampler,
-                     document=document)
+                     document=document, scene_text=scene_path.read_text(encoding="utf-8"))
     _check_values(spec)
     return spec
 

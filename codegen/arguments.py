@@ -1,0 +1,99 @@
+"""The command line's option types and shared options: numbers and paths as argparse reads them,
+the scheme options, the run-time parameters, the Newton options of the C-interface contract."""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from .runtime import contract
+from .scene import METHODS
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    if value >= 2 ** 63:
+        raise argparse.ArgumentTypeError(f"must be below 2^63, got {value}")
+    return value
+
+
+def number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+
+
+def add_scheme_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format.md)")
+    parser.add_argument("--method", choices=METHODS,
+                        help="time-stepping scheme (default: the scene's [simulation].method)")
+    parser.add_argument("--quadrature", type=positive_int, metavar="K",
+                        help="Gauss-Legendre points for the spring terms of 'es' "
+                             "(default: the scene's)")
+
+
+def paths(text: str) -> tuple[str, ...]:
+    return tuple(path.strip() for path in text.split(",") if path.strip())
+
+
+def add_parameters_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--parameters", type=paths, default=(), metavar="PATH[,PATH...]",
+                        help="numbers of the scene the solver takes at run time, by key path "
+                             "(e.g. springs[0].stiffness,links[1].mass), or all of them: all")
+
+
+def add_newton_options(parser: argparse.ArgumentParser) -> None:
+    """The Newton options of the contract, each overriding the package's default."""
+    group = parser.add_argument_group("Newton options (default: the package's)")
+    for field in contract.NEWTON_OPTIONS:
+        flag = "--" + field.name.replace("_", "-")
+        if field.name == "reuse_jacobian":
+            group.add_argument(flag, choices=JACOBIAN_CHOICES, metavar="MODE",
+                               help="when dF/dz is evaluated: " + ", ".join(JACOBIAN_CHOICES))
+        elif field.switch:
+            group.add_argument(flag, choices=("on", "off"), help=field.comment or None)
+        elif field.python_type is int:
+            group.add_argument(flag, type=positive_int, metavar="N",
+                               help=field.comment or None)
+        else:
+            group.add_argument(flag, type=tolerance, metavar="X", help=field.comment or None)
+
+
+#: reuse_jacobian on the command line: the contract's mode names, e.g. per-step.
+JACOBIAN_CHOICES = {mode.name.removeprefix("JACOBIAN_").lower().replace("_", "-"): mode.value
+                    for mode in contract.JACOBIAN_MODES}
+
+
+def tolerance(text: str) -> float:
+    value = number(text)
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be >= 0 and finite, got {text!r}")
+    return value
+
+
+def newton_overrides(args) -> dict:
+    """The Newton options given on the command line, as contract field values."""
+    overrides = {}
+    for field in contract.NEWTON_OPTIONS:
+        value = getattr(args, field.name, None)
+        if value is None:
+            continue
+        if field.name == "reuse_jacobian":
+            value = JACOBIAN_CHOICES[value]
+        elif field.switch:
+            value = value == "on"
+        overrides[field.name] = value
+    return overrides
+
+
+def dimension(text: str) -> int:
+    value = positive_int(text)
+    if not 100 <= value <= 4000:
+        raise argparse.ArgumentTypeError(f"must be between 100 and 4000 pixels, got {value}")
+    return value
