@@ -2,9 +2,9 @@
 
     chaingen bench [--quick] [--out FILE.md] [--figures DIR] [--dts 0.04,0.02,...]
                    [--scaling-n 2,3,5,10,20] [--skip-scaling] [--skip-reference]
-                   [--timeout SECONDS]
+                   [--skip-sweep] [--timeout SECONDS]
 
-Three parts, all measured side by side on one machine in one process (the scaling series in
+Four parts, all measured side by side on one machine in one process (the scaling series in
 child processes, so that a size that takes too long can be stopped):
 
 1. Reference scenes (scenes/three_link_*.toml, the scene's own run: 50 s from its initial
@@ -17,6 +17,8 @@ child processes, so that a size that takes too long can be stopped):
 2. A scaling series: `scaling_scene(n)` for n = 2 ... 20; generate and build seconds, peak
    memory, model C size, per-step time, and MuJoCo RK4's per-step time at the same n.
 3. Headline ratios with the issue's targets, computed from parts 1 and 2.
+4. Studies: run-time parameters against constants compiled in, and a sweep of many runs on
+   this machine's cores and on Dask against a loop of single runs (the studies module).
 
 The parts live in their own modules: config (what runs), runs (part 1), scaling (part 2),
 headlines (part 3), knobs (the speed knobs), harness (the C timing program), report and figures.
@@ -38,6 +40,7 @@ from .report import headline_table, machine_description, markdown, reference_tab
 from .runs import reference_study
 from .scaling import scaling_study
 from .scenes import scaling_scene
+from .studies import study_part, study_tables
 
 __all__ = ["BenchConfig", "BenchReport", "bench_config", "run_bench", "scaling_scene"]
 
@@ -94,6 +97,8 @@ def _run_bench(config: BenchConfig, progress, emit, started: float) -> BenchRepo
         scaling = scaling_study(config, progress)
         emit(f"\nscaling series\n\n{scaling_table(scaling)}")
     knobs = knob_study(config, progress, emit)
+    studies = study_part(config, progress)
+    emit(f"\nstudies\n\n{study_tables(studies)}")
     found = headlines(reference, scaling, config)
     emit(f"\nheadline\n\n{headline_table(found)}")
     figures = {}
@@ -103,7 +108,8 @@ def _run_bench(config: BenchConfig, progress, emit, started: float) -> BenchRepo
         figures["scaling"] = plot_scaling(scaling, config.figures / "bench_scaling.png")
     wall = time.perf_counter() - started
     document = write_text(config.out, markdown(config, found, reference, scaling,
-                                                     figures, machine, wall, knobs))
+                                                     figures, machine, wall, knobs,
+                                                     studies))
     emit(f"\nwrote {document} and {len(figures)} figures in {config.figures} "
          f"({wall / 60:.1f} min)")
     return BenchReport(found, reference, scaling, document, figures, wall)

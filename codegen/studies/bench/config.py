@@ -109,6 +109,7 @@ class BenchConfig:
     scaling_steps: int                   # steps timed per repeat in the scaling series
     run_reference: bool
     run_scaling: bool
+    run_sweep: bool                      # part 4's sweeps (the parameter timings always run)
     out: Path
     figures: Path
     command: str
@@ -141,17 +142,17 @@ def _check_divides(dt: float, t_end: float, option: str) -> None:
 
 def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str | None = None,
                  timeout: float = 300.0, skip_scaling: bool = False,
-                 skip_reference: bool = False, out: Path | None = None,
-                 figures: Path | None = None) -> BenchConfig:
+                 skip_reference: bool = False, skip_sweep: bool = False,
+                 out: Path | None = None, figures: Path | None = None) -> BenchConfig:
     """The run's settings from the command line's values; BenchError names a bad one."""
-    if skip_scaling and skip_reference:
-        raise BenchError("--skip-scaling and --skip-reference: nothing left to run; drop one")
     if not (math.isfinite(timeout) and timeout > 0):
         raise BenchError(f"--timeout: must be > 0 seconds and finite, got {timeout}")
-    for module in ("mujoco", "scipy", "matplotlib"):
+    for module in ("mujoco", "scipy", "matplotlib") + (
+            () if skip_sweep else ("pyarrow", "pandas", "xarray", "zarr", "distributed")):
         if importlib.util.find_spec(module) is None:
             raise BenchError(f"chaingen bench needs {module}, which is not installed "
-                             "(pip install -e '.[test]')")
+                             "(pip install -e '.[test]'; --skip-sweep runs without the sweep "
+                             "extra)")
     scenes = (HEADLINE_SCENE,) if quick else STANDARD_SCENES
     t_end = 2.0 if quick else None
     if dts is None:
@@ -190,6 +191,7 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
     command += ["--scaling-n", scaling_n] if scaling_n is not None else []
     command += ["--skip-scaling"] if skip_scaling else []
     command += ["--skip-reference"] if skip_reference else []
+    command += ["--skip-sweep"] if skip_sweep else []
     command += ["--timeout", f"{timeout:g}"] if timeout != 300.0 else []
     command += [] if out_default else ["--out", str(out)]
     command += [] if figures_default else ["--figures", str(figures)]
@@ -204,6 +206,7 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
         repeats=3 if quick else 7, scipy_repeats=1 if quick else 3,
         scaling_steps=200 if quick else 1000,
         run_reference=not skip_reference, run_scaling=not skip_scaling,
+        run_sweep=not skip_sweep,
         out=out, figures=figures, command=" ".join(command))
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...generate.interface import CInterface
+from ...generate.interface import CInterface, c_literal
 from ...generate.package import GeneratedPackage, template_environment
 from ...runtime import contract
 from ...runtime.build import STRICT_FLAGS, compiler
@@ -56,13 +56,12 @@ class Harness:
         for name, text in package.files.items():
             (self.workdir / name).write_text(text)
         manifest = package.manifest
-        features = Features(inputs=bool(manifest["nu"]), flows=manifest["energy_flows"],
-                            sensitivities=manifest["sensitivities"],
-                            segments=manifest["segment_tolerance"] is not None)
-        environment = template_environment(CInterface(package.prefix, features))
+        environment = template_environment(
+            CInterface(package.prefix, Features.from_manifest(manifest)))
         source = environment.get_template("bench_harness.c.j2").render(
             prefix=package.prefix, PREFIX=package.prefix.upper(), nu=manifest["nu"],
             flows=manifest["energy_flows"],
+            parameters=[c_literal(entry["value"]) for entry in manifest["parameters"]],
             option_fields=[(field.name, field.c_type) for field in contract.NEWTON_OPTIONS])
         (self.workdir / "bench_harness.c").write_text(source)
         self.program = self.workdir / "bench_harness"
@@ -118,3 +117,81 @@ class Harness:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@dataclass(frozen=True)
+class PairedTimings:
+    """Per-step CPU times of two packages in paired blocks (seconds), and their iterations."""
+
+    a: tuple[float, ...]
+    b: tuple[float, ...]
+    iterations_a: float          # Newton iterations per step of the last block
+    iterations_b: float
+
+    @property
+    def ratios(self) -> tuple[float, ...]:
+        """b / a of each round."""
+        return tuple(b / a for a, b in zip(self.a, self.b))
+
+
+def time_pair(first: GeneratedPackage, second: GeneratedPackage, x0, dt: float, *,
+              n_steps: int = 2000, rounds: int = 21,
+              flags: tuple[str, ...] = ("-O2",)) -> PairedTimings:
+    """Time `first` and `second` (packages of one scheme with one state layout, distinct
+    prefixes) in one process, block by block in alternating order (templates/bench_pair.c.j2):
+    the fair comparison on a machine whose speed drifts."""
+    if first.prefix == second.prefix:
+        raise ValueError(f"time_pair needs two prefixes, got {first.prefix} twice")
+    blocks = []
+    for package in (first, second):
+        manifest = package.manifest
+        environment = template_environment(
+            CInterface(package.prefix, Features.from_manifest(manifest)))
+        blocks.append(environment.get_template("bench_pair_block.c.j2").render(
+            prefix=package.prefix, PREFIX=package.prefix.upper(), nu=manifest["nu"],
+            parameters=[c_literal(entry["value"]) for entry in manifest["parameters"]]))
+    source = template_environment(CInterface(first.prefix, Features.from_manifest(
+        first.manifest))).get_template("bench_pair.c.j2").render(
+        a=first.prefix, A=first.prefix.upper(), b=second.prefix, blocks="\n".join(blocks))
+    with tempfile.TemporaryDirectory(prefix="bench-pair-") as directory:
+        workdir = Path(directory)
+        objects = []
+        commands = []
+        for package in (first, second):
+            folder = workdir / package.prefix
+            folder.mkdir()
+            for name, text in package.files.items():
+                (folder / name).write_text(text)
+            source_flags = package.manifest.get("source_flags", {})
+            for name in package.manifest["sources"]:
+                objects.append(str(folder / f"{name}.o"))
+                commands.append([compiler(), *STRICT_FLAGS, *source_flags.get(name, flags), "-c",
+                                 str(folder / name), "-o", objects[-1]])
+        (workdir / "bench_pair.c").write_text(source)
+        objects.append(str(workdir / "bench_pair.o"))
+        commands.append([compiler(), *STRICT_FLAGS, *flags, f"-I{workdir / first.prefix}",
+                         f"-I{workdir / second.prefix}", "-c", str(workdir / "bench_pair.c"),
+                         "-o", objects[-1]])
+        processes = [subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                      text=True) for command in commands]
+        for command, process in zip(commands, processes):
+            stderr = process.communicate()[1]
+            if process.returncode != 0:
+                raise HarnessError(f"building the paired harness failed: {' '.join(command)}"
+                                   f"\n{stderr}")
+        program = workdir / "bench_pair"
+        link = subprocess.run([compiler(), "-o", str(program), *objects, "-lm"],
+                              capture_output=True, text=True)
+        if link.returncode != 0:
+            raise HarnessError(f"linking the paired harness failed: {link.stderr}")
+        result = subprocess.run([str(program), str(n_steps), str(rounds), repr(float(dt))],
+                                input=" ".join(map(repr, np.asarray(x0, float).tolist())),
+                                capture_output=True, text=True)
+    try:
+        report = json.loads(result.stdout)
+    except json.JSONDecodeError:
+        raise HarnessError(f"paired harness failed: {result.stderr}") from None
+    if report["status"] != 0:
+        raise HarnessError(f"paired harness: status {report['status']} while timing")
+    return PairedTimings(tuple(report["a"]), tuple(report["b"]),
+                         report["iterations_a"] / n_steps, report["iterations_b"] / n_steps)

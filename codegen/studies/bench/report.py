@@ -24,6 +24,7 @@ from .headlines import Headline
 from .knobs import knob_table
 from .runs import RunRow
 from .scaling import ScalingRow
+from .studies import study_tables
 
 
 def _time(seconds: float | None) -> str:
@@ -187,7 +188,8 @@ HOW_MEASURED = """\
 
 
 def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
-             figures: dict[str, Path], machine, wall_seconds: float, knobs=()) -> str:
+             figures: dict[str, Path], machine, wall_seconds: float, knobs=(),
+             studies=None) -> str:
     lines = ["# Benchmarks: speed against accuracy", "",
              f"Written by `{config.command}` in {wall_seconds / 60:.1f} min of wall time on "
              f"{time.strftime('%Y-%m-%d')}. Every number and figure comes from that run; nothing "
@@ -232,6 +234,9 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
         lines += ["## Speed knobs", "", KNOBS_TEXT.format(scene=HEADLINE_SCENE, dt=HEADLINE_DT,
                                                           tolerances=tolerances),
                   "", knob_table(knobs), ""]
+    if studies is not None:
+        lines += ["## Studies: run-time parameters and sweeps", "",
+                  " ".join(STUDIES_TEXT.split("\n")), "", study_tables(studies), ""]
     return "\n".join(lines).rstrip() + "\n"
 
 
@@ -243,7 +248,22 @@ size of the generated model dominate. The package defaults are warm start, Newto
 Jacobian evaluated and factorised once a step, reused within it) for "es" and "midpoint" and
 simplified Newton (reused across steps) for "vi", tolerances {tolerances}, the solver
 source at -O3 and a generated model larger than 1 MB at -O1. "step / (F, dF/dz)" is the step's
-time in units of one residual-and-Jacobian evaluation.
-Not measured: constants baked into the code against run-time parameters; every scene number is
-baked into the generated code (no parameter vector exists yet to compare against)."""
+time in units of one residual-and-Jacobian evaluation. Run-time parameters against constants
+compiled in are measured in the next section."""
+
+STUDIES_TEXT = """\
+What a study costs. First the per-step price of run-time parameters: the solver of the headline
+scene with its numbers as parameters against the one with them compiled in, both linked into one
+timing program and run block by block in alternating order, so that a slow spell of the machine
+falls on both. Two sets of parameters: every number the scene sets (the non-zero ones), and every
+number with the zeros too, which brings in code the scene without parameters does not have
+(damping, COMs off the link axis). Then a sweep of the headline scene (stiffness of its first
+spring x mass of its second link, trajectories every 10 steps), each run of it a fresh `chaingen
+sweep` process as a user starts it: the local engine (one thread per core) with a cold build
+cache, so that the wall time includes generating and building its one solver, then with the
+build cached, and the Dask engine on a LocalCluster of one worker process per core, started
+within the command; and the same with runs ten times as long. "equal" compares runs.parquet with
+the local engine's, every column but cpu_seconds, bit for bit. Last, the way without parameters:
+one scene file per run and `chaingen simulate` on each, a fresh process and a fresh build each
+time, timed on a subset of the files and scaled to all runs."""
 
