@@ -29,6 +29,18 @@ class HarnessError(RuntimeError):
     """The harness did not build, or a step failed while timing."""
 
 
+def _report(result: subprocess.CompletedProcess, what: str) -> dict:
+    """The JSON report a timing program printed, or HarnessError naming `what` and why."""
+    try:
+        report = json.loads(result.stdout)
+    except json.JSONDecodeError:
+        raise HarnessError(f"{what} failed: {result.stderr}") from None
+    if report["status"] != 0:
+        raise HarnessError(f"{what}: status {report['status']} while timing "
+                           f"(step {report.get('failed_step', '?')})")
+    return report
+
+
 @dataclass(frozen=True)
 class LoopTimings:
     """CPU time of one step and of its building blocks, in nanoseconds (medians of repeats)."""
@@ -96,13 +108,7 @@ class Harness:
         arguments += [f"{key}={value!r}" for key, value in (options or {}).items()]
         result = subprocess.run(arguments, input=" ".join(map(repr, x0.tolist())),
                                 capture_output=True, text=True)
-        try:
-            report = json.loads(result.stdout)
-        except json.JSONDecodeError:
-            raise HarnessError(f"{self.package.prefix}: harness failed: {result.stderr}") from None
-        if report["status"] != 0:
-            raise HarnessError(f"{self.package.prefix}: status {report['status']} while timing "
-                               f"(step {report.get('failed_step', '?')})")
+        report = _report(result, f"{self.package.prefix}: harness")
         return LoopTimings(step_ns=report["step_ns"],
                            residual_jacobian_ns=report["residual_jacobian_ns"],
                            residual_ns=report["residual_ns"], lu_ns=report["lu_ns"],
@@ -187,11 +193,6 @@ def time_pair(first: GeneratedPackage, second: GeneratedPackage, x0, dt: float, 
         result = subprocess.run([str(program), str(n_steps), str(rounds), repr(float(dt))],
                                 input=" ".join(map(repr, np.asarray(x0, float).tolist())),
                                 capture_output=True, text=True)
-    try:
-        report = json.loads(result.stdout)
-    except json.JSONDecodeError:
-        raise HarnessError(f"paired harness failed: {result.stderr}") from None
-    if report["status"] != 0:
-        raise HarnessError(f"paired harness: status {report['status']} while timing")
+    report = _report(result, "paired harness")
     return PairedTimings(tuple(report["a"]), tuple(report["b"]),
                          report["iterations_a"] / n_steps, report["iterations_b"] / n_steps)
