@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from .runtime import contract
-from .scene import METHODS
+from .scene import METHODS, ORDERS
 
 
 def positive_int(text: str) -> int:
@@ -36,6 +36,9 @@ def add_scheme_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quadrature", type=positive_int, metavar="K",
                         help="Gauss-Legendre points for the spring terms of 'es' "
                              "(default: the scene's)")
+    parser.add_argument("--order", type=int, choices=ORDERS,
+                        help="order of the step: 2 (the scheme's), 4 or 6 (a symmetric "
+                             "composition of its steps; es: 4 at most) (default: the scene's)")
 
 
 def paths(text: str) -> tuple[str, ...]:

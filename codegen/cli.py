@@ -159,7 +159,7 @@ def command_generate(args) -> int:
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                            source=str(args.scene))
+                            order=args.order, source=str(args.scene))
     # The generation stage (SymPy, CasADi) is imported once the input is known to be good.
     from .generate.package import (
         check_package_target,
@@ -171,7 +171,8 @@ def command_generate(args) -> int:
     target = args.output or Path(package_prefix(scene, settings.method))
     check_package_target(target)
     package = generate_package(scene, settings.method, settings.quadrature,
-                               sensitivities=args.sensitivities, parameters=args.parameters)
+                               sensitivities=args.sensitivities, parameters=args.parameters,
+                               order=settings.order)
     directory = write_package(package, target)
     print(f"wrote {directory}/: {', '.join(package.files)}")
     return 0
@@ -186,8 +187,9 @@ def command_check(args) -> int:
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature, dt=args.dt,
-                            source=str(args.scene))
-    scheme = build_scheme(scene, settings.method, settings.quadrature, args.parameters)
+                            order=args.order, source=str(args.scene))
+    scheme = build_scheme(scene, settings.method, settings.quadrature, args.parameters,
+                          settings.order)
     solver = Solver.from_files(render_package(scheme, sensitivities=True).files)
     report = check_solver(scheme, solver, samples=args.samples, seed=args.seed, dt=settings.dt)
     print(report.table())
@@ -201,11 +203,11 @@ def command_order(args) -> int:
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                            t_end=args.t_end, source=str(args.scene))
+                            t_end=args.t_end, order=args.order, source=str(args.scene))
     if args.plot is not None:
         check_output_file(args.plot, "--plot", [args.scene])
     study = order_study(scene, settings.method, settings.quadrature, t_end=settings.t_end,
-                        options=newton_overrides(args) or None)
+                        options=newton_overrides(args) or None, order=settings.order)
     print(format_table(study))
     if args.plot is not None:
         print(f"plot: {plot_order(study, args.plot)}")
@@ -231,7 +233,7 @@ def command_simulate(args) -> int:
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                            dt=args.dt, t_end=args.t_end, every=args.every,
+                            dt=args.dt, t_end=args.t_end, every=args.every, order=args.order,
                             source=str(args.scene))
     if args.out is not None:
         check_output_file(args.out, "--out", [args.scene])
@@ -323,7 +325,8 @@ def command_animate(args) -> int:
         from .views.animate import check_output
         check_output(args.output)
         settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                                dt=args.dt, t_end=args.t_end, source=str(args.scene))
+                                dt=args.dt, t_end=args.t_end, order=args.order,
+                                source=str(args.scene))
         try:
             result = simulate_scene(scene, settings, options=newton_overrides(args))
         except NewtonError as error:
@@ -344,6 +347,8 @@ def summary(result, settings, out: Path | None) -> str:
     label = f"method {result.method}"
     if result.quadrature is not None:
         label += f", quadrature {result.quadrature}"
+    if result.order != 2:
+        label += f", order {result.order}"
     per_step = result.wall_time / max(result.n_steps, 1)
     lines = [
         f"{result.scene}: {label}, dt {settings.dt:g} s, t_end {result.n_steps * settings.dt:g} s",

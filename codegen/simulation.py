@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
-from .scene import METHODS, QUADRATURE_RANGE, Scene
+from .scene import METHODS, ORDERS, QUADRATURE_RANGE, Scene
 
 #: A run of more steps is refused: at about 1 us a step it would take days.
 MAX_STEPS = 10 ** 12
@@ -28,6 +28,7 @@ class RunSettings:
     dt: float
     t_end: float
     every: int = 1
+    order: int = 2
 
     @property
     def n_steps(self) -> int:
@@ -35,7 +36,7 @@ class RunSettings:
 
 
 def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=None,
-                 every=None, source: str = "") -> RunSettings:
+                 every=None, order=None, source: str = "") -> RunSettings:
     """Merge command-line overrides into the scene's defaults, validating each override.
 
     `source` (the scene file) prefixes errors about values that came from the scene.
@@ -47,7 +48,8 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
         quadrature=quadrature if quadrature is not None else defaults.quadrature,
         dt=dt if dt is not None else defaults.dt,
         t_end=t_end if t_end is not None else defaults.t_end,
-        every=every if every is not None else 1)
+        every=every if every is not None else 1,
+        order=order if order is not None else defaults.order)
     if settings.method not in METHODS:
         where = "--method" if method is not None else f"{scene_source}simulation.method"
         raise SettingsError(
@@ -74,21 +76,25 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
                             f"{settings.quadrature}")
     if settings.every < 1:
         raise SettingsError(f"--every: must be >= 1, got {settings.every}")
+    if settings.order not in ORDERS:
+        raise SettingsError(f"--order: must be one of {', '.join(map(str, ORDERS))}, got "
+                            f"{settings.order}")
     return settings
 
 
 def build_solver(scene: Scene, method: str, quadrature: int, *,
-                 sensitivities: bool = True, parameters=()) -> Solver:
+                 sensitivities: bool = True, parameters=(), order: int = 2) -> Solver:
     """Generate and build (or load from the cache) a scene's solver; on a terminal a progress
     bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while.
     parameters: key paths of the scene's numbers the solver takes at run time (every call
-    then takes their values, the scene's own by default)."""
+    then takes their values, the scene's own by default). order: of the step, 2 (the
+    scheme's own), 4 or 6 (a symmetric composition of its steps)."""
     from .generate.package import GENERATE_STAGES, generate_package
 
     with Progress(f"generate {scene.name} ({method})", total=GENERATE_STAGES + 1,
                   unit="stages") as progress:
         package = generate_package(scene, method, quadrature, sensitivities=sensitivities,
-                                   parameters=parameters, progress=progress)
+                                   parameters=parameters, order=order, progress=progress)
         progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
         return Solver.from_files(package.files)
 
@@ -100,7 +106,7 @@ def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None
     Newton options, or a dict of fields that replace the package's defaults."""
     # A forward run needs no step sensitivities: leaving them out builds faster.
     solver = solver or build_solver(scene, settings.method, settings.quadrature,
-                                    sensitivities=False)
+                                    sensitivities=False, order=settings.order)
     with Progress(f"simulate {scene.name}", total=settings.n_steps, unit="steps") as progress:
         return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=settings.dt,
                                n_steps=settings.n_steps, every=settings.every, options=options,

@@ -24,6 +24,7 @@ class SimulationResult:
     full_newton_fallbacks: int = 0   # steps whose kept Jacobian failed and full Newton solved
     split_steps: int = 0             # steps taken as halves after Newton failed on them whole
     parameters: dict = field(default_factory=dict)   # run-time parameters: path -> value
+    order: int = 2              # of the step: 2, or 4 and 6 by composition
 
     def column(self, name: str) -> np.ndarray:
         return self.samples[:, self.columns.index(name)]

@@ -362,7 +362,8 @@ class Solver:
             max_newton_iterations=int(stats.max_newton_iterations),
             full_newton_fallbacks=int(stats.full_newton_fallbacks),
             split_steps=int(stats.split_steps),
-            parameters=dict(zip(self.parameters, map(float, p_values))))
+            parameters=dict(zip(self.parameters, map(float, p_values))),
+            order=int(self.manifest.get("order", 2)))
         if status:
             failed = stats.steps + 1
             raise NewtonError(

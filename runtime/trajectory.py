@@ -23,8 +23,8 @@ def metadata_path(path) -> Path:
 
 def run_metadata(result: SimulationResult) -> dict:
     return {"scene": result.scene, "method": result.method, "quadrature": result.quadrature,
-            "dt": result.dt, "every": result.every, "n_steps": result.n_steps,
-            "columns": list(result.columns)}
+            "order": result.order, "dt": result.dt, "every": result.every,
+            "n_steps": result.n_steps, "columns": list(result.columns)}
 
 
 def write_trajectory(result: SimulationResult, path, *, metadata: bool = True) -> Path:

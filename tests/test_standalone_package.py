@@ -237,6 +237,55 @@ def test_every_scheme_example_is_clean_under_valgrind(tmp_path, scene, method):
                         "0.5"]))
 
 
+@pytest.mark.parametrize("method, order", [("es", 4), ("vi", 6), ("midpoint", 6)])
+def test_composed_examples_are_clean_under_valgrind_and_the_sanitizers(tmp_path, method, order):
+    """A composed step (docs/model.md 14), actuated with damping: with the strict flags, the
+    example program (its stages) and, where the package has them, a call of the chained step
+    sensitivities run clean under memcheck and ASan/UBSan."""
+    require_tools("gcc", "valgrind")
+    from chaingen.generate.package import generate_package, write_package
+
+    from helpers import load
+
+    package = write_package(generate_package(load("four_link_actuated"), method, 3,
+                                             order=order, sensitivities=method != "es"),
+                            tmp_path / "package")
+    manifest = json.loads((package / "chaingen.json").read_text())
+    prefix, sources = manifest["prefix"], manifest["sources"]
+    programs = {"example.c": ["0.5"]}
+    if manifest["sensitivities"]:
+        (package / "sensitivities.c").write_text(f"""#include "{prefix}.h"
+int main(void)
+{{
+    static {prefix}_workspace ws;
+    double phi[4] = {{0.3, -0.2, 0.1, 0.4}}, phidot[4] = {{0.5, 0.0, -0.3, 0.2}};
+    double u[{prefix.upper()}_NU] = {{0.0}}, x[{prefix.upper()}_NX], x1[{prefix.upper()}_NX];
+    double ds_ds[64], ds_du[8 * {prefix.upper()}_NU];
+    int iterations, status;
+    {prefix}_workspace_init(&ws);
+    status = {prefix}_initial_state(phi, phidot, x, &ws);
+    if (status == 0) {{
+        status = {prefix}_step_sensitivities(x, u, 0.01, x1, ds_ds, ds_du, NULL, &ws,
+                                              &iterations);
+    }}
+    return status;
+}}
+""")
+        programs["sensitivities.c"] = []
+    for program, arguments in programs.items():
+        for name, flags, runner in (("memcheck", ["-g", "-O1"],
+                                     ["valgrind", "--error-exitcode=99", "--track-origins=yes"]),
+                                    ("sanitized", SANITIZE, [])):
+            binary = tmp_path / f"{program}.{name}"
+            check(["gcc", *flags, *STRICT, f"-I{package}", *(package / s for s in sources),
+                   package / program, "-lm", "-o", binary])
+            result = run([*runner, binary, *arguments])
+            if runner:
+                valgrind_clean(result)
+            else:
+                assert result.returncode == 0, output(result)
+
+
 def test_example_is_clean_under_address_and_undefined_sanitizers(tmp_path):
     require_tools("gcc")
     example = compile_example(tmp_path, [*SANITIZE, *STRICT], "example")

@@ -43,6 +43,13 @@ INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
         f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
         "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
         "int *iterations, int depth")),
+    EntryPoint("compose", "static int", _parameters(
+        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
+        "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
+        "int *iterations")),
+    EntryPoint("stage_sensitivities", "static int",
+               contract.ENTRY_POINTS_BY_NAME["step_sensitivities"].parameters,
+               when="sensitivities"),
     EntryPoint("write_sample", "static int", _parameters(
         f"const double *x, {P_ARGUMENT}, double t, const compensated_sum *totals [flows], "
         "double *row, {prefix}_workspace *workspace")),

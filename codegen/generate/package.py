@@ -19,7 +19,7 @@ import casadi
 import jinja2
 import sympy
 
-from ..errors import PackageWriteError
+from ..errors import PackageWriteError, SettingsError
 from ..runtime import contract
 from ..runtime.contract import Features
 from ..runtime.files import write_directory
@@ -74,7 +74,7 @@ def package_prefix(scene: Scene, method: str) -> str:
 
 
 def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool = True,
-               parameters=()) -> str:
+               parameters=(), order: int = 2) -> str:
     """sha256 of everything the generated code depends on, and nothing else.
 
     The initial state and the simulation defaults do not enter the code; the tool versions and
@@ -86,7 +86,7 @@ def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool =
     payload = {
         "scene": code_relevant, "method": method,
         "quadrature": quadrature_used(scene, method, quadrature),
-        "sensitivities": sensitivities, "parameters": list(parameters),
+        "sensitivities": sensitivities, "parameters": list(parameters), "order": order,
         "chaingen": VERSION, "sympy": sympy.__version__, "casadi": casadi.__version__,
     }
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
@@ -112,6 +112,9 @@ def scheme_label(scheme: DiscreteScheme) -> str:
     label = f'method "{scheme.method}"'
     if scheme.quadrature is not None:
         label += f", {scheme.quadrature}-point Gauss-Legendre quadrature of the spring terms"
+    if scheme.order != 2:
+        label += (f", order {scheme.order} by a symmetric composition of "
+                  f"{len(scheme.composition)} steps")
     return label
 
 
@@ -135,9 +138,14 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     chaingen.progress.Progress told of each stage.
     """
     scene = scheme.scene
+    if sensitivities and len(scheme.composition) > 1 and not scheme.state_from_joint_space:
+        raise SettingsError(
+            f"--order {scheme.order}: the step sensitivities of a composed {scheme.method} step "
+            "are not available (its state is more than the joint-space state, so the stages "
+            "do not chain in joint space); generate with --no-sensitivities")
     prefix = package_prefix(scene, scheme.method)
     digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities,
-                        scheme.parameter_paths)
+                        scheme.parameter_paths, scheme.order)
     if progress is not None:
         progress.update(1, "CasADi functions and derivatives")
     functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
@@ -185,6 +193,9 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "sample_columns": columns,
         "step_inputs": ["z", "x0"] + (["u"] if nu else []) + (["p"] if n_p else []) + ["dt"],
         "np": n_p,
+        "order": scheme.order,
+        "stages": [c_literal(fraction) for fraction in scheme.composition]
+        if len(scheme.composition) > 1 else [],
         "nq": functions.parameters.size1_out(0) if functions.parameters is not None else 0,
         "parameters": list(zip(scheme.parameter_paths, scheme.parameter_units,
                                           map(c_literal, scheme.parameter_values))),
@@ -218,6 +229,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     manifest = {
         "chaingen_version": VERSION, "input_hash": digest, "prefix": prefix,
         "scene": scene.name, "method": scheme.method, "quadrature": scheme.quadrature,
+        "order": scheme.order, "composition": list(scheme.composition),
         "n_joints": n, "nx": context["nx"], "nz": context["nz"], "nsample": context["nsample"],
         "actuated_joints": list(scene.actuated_joints), "nu": nu,
         "parameters": [{"path": path, "unit": unit, "value": value} for path, unit, value
@@ -239,13 +251,14 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
 
 
 def generate_package(scene: Scene, method: str, quadrature: int, *,
-                     sensitivities: bool = True, parameters=(),
+                     sensitivities: bool = True, parameters=(), order: int = 2,
                      progress=None) -> GeneratedPackage:
     """Scene -> scheme -> C package, all in memory. parameters: key paths of the scene's
-    numbers the solver takes at run time. progress: see render_package."""
+    numbers the solver takes at run time; order: 2 (the scheme's step), 4 or 6 (composed).
+    progress: see render_package."""
     if progress is not None:
         progress.update(0, "deriving the model and the scheme (SymPy)")
-    package = render_package(build_scheme(scene, method, quadrature, parameters),
+    package = render_package(build_scheme(scene, method, quadrature, parameters, order),
                              sensitivities=sensitivities, progress=progress)
     if progress is not None:
         progress.update(GENERATE_STAGES)

@@ -1,6 +1,6 @@
 """Stage 1 of the pipeline: scenes, the validated numbers of one chain.
 
-- values: the frozen Scene, Link, Spring and Simulation values, the method names and K range;
+- values: the frozen Scene, Link, Spring and Simulation values, the methods, K range, orders;
 - reader: reading and validating scene files (docs/scene-format.md);
 - kinematics: numpy kinematics and energies, independent of the symbolic model (validation and
   test reference);
@@ -10,6 +10,7 @@ from .reader import load_scene, parse_scene
 from .reference import REFERENCE_SCENES, STANDARD_SCENES, load_reference_scene
 from .values import (
                      METHODS,
+                     ORDERS,
                      QUADRATURE_RANGE,
                      Link,
                      Scene,
@@ -19,6 +20,6 @@ from .values import (
                      quadrature_used,
 )
 
-__all__ = ["METHODS", "QUADRATURE_RANGE", "REFERENCE_SCENES", "STANDARD_SCENES", "Link",
+__all__ = ["METHODS", "ORDERS", "QUADRATURE_RANGE", "REFERENCE_SCENES", "STANDARD_SCENES", "Link",
            "Scene", "Simulation", "Spring", "c_identifier", "load_reference_scene", "load_scene",
            "parse_scene", "quadrature_used"]

@@ -29,7 +29,8 @@ def scene_document(scene: Scene) -> dict:
                            "velocities": list(scene.initial_velocities)}
     simulation = scene.simulation
     document["simulation"] = {"method": simulation.method, "quadrature": simulation.quadrature,
-                              "dt": simulation.dt, "t_end": simulation.t_end}
+                              "order": simulation.order, "dt": simulation.dt,
+                              "t_end": simulation.t_end}
     return document
 
 

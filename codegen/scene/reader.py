@@ -17,7 +17,7 @@ from typing import Any, NoReturn
 
 from ..errors import SceneError
 from . import kinematics
-from .values import METHODS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
+from .values import METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
 
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 """A scene name: a letter, then letters, digits, '_' or '-' (usable in C after `c_identifier`)."""
@@ -31,7 +31,7 @@ _LINK_REQUIRED = ("mass", "inertia", "length", "com")
 _SPRING_KEYS = ("joints", "stiffness", "rest_length", "offsets")
 _SPRING_REQUIRED = ("joints", "stiffness", "rest_length")
 _INITIAL_KEYS = ("angles", "velocities")
-_SIMULATION_KEYS = ("method", "quadrature", "dt", "t_end")
+_SIMULATION_KEYS = ("method", "quadrature", "order", "dt", "t_end")
 
 _MISSING = object()
 _SHOW_LIMIT = 120
@@ -451,6 +451,11 @@ class SceneReader:
                 if not _is_integer(item) or not low <= item <= high:
                     self.fail(where, f"must be an integer from {low} to {high} "
                                      "(Gauss-Legendre points)", item)
+                fields[key] = item
+            elif key == "order":
+                if not _is_integer(item) or item not in ORDERS:
+                    self.fail(where, "must be one of " + ", ".join(map(str, ORDERS))
+                              + " (the order of the step)", item)
                 fields[key] = item
             elif key == "dt":
                 fields[key] = self.positive(where, item, "step in s")

@@ -11,6 +11,9 @@ from dataclasses import dataclass
 METHODS = ("es", "vi", "midpoint")
 #: Gauss-Legendre points of the spring terms (simulation.quadrature, --quadrature).
 QUADRATURE_RANGE = (1, 20)
+#: Orders of the step (simulation.order, --order): the scheme itself (2), or a symmetric
+#: composition of it (chaingen.symbolic.composition).
+ORDERS = (2, 4, 6)
 
 
 def quadrature_used(scene: Scene, method: str, quadrature: int) -> int | None:
@@ -67,6 +70,7 @@ class Simulation:
     quadrature: int = 3
     dt: float = 0.01
     t_end: float = 10.0
+    order: int = ORDERS[0]
 
 
 @dataclass(frozen=True)

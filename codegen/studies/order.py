@@ -102,6 +102,7 @@ class OrderStudy:
     energy_floor: float           # J: energy errors below it were not fitted
     trajectory_floor: float       # rad: trajectory errors below it were not fitted
     reference_wall_time: float
+    order: int = 2                # of the step (4 and 6: composed)
 
     @property
     def dts(self) -> tuple[float, ...]:
@@ -219,13 +220,14 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
                 solver: Solver | None = None, sample_interval: float = SAMPLE_INTERVAL,
                 energy_floor: float = ENERGY_FLOOR, trajectory_floor: float = TRAJECTORY_FLOOR,
                 slope_tolerance: float = SLOPE_TOLERANCE,
-                options: NewtonOptions | dict | None = None) -> OrderStudy:
+                options: NewtonOptions | dict | None = None, order: int = 2) -> OrderStudy:
     """Run the time-step study of `scene` (a Scene or a scene file) with one scheme.
 
     The solver is built once (without step sensitivities) unless given; a given solver must be
     the scene's, of `method` (and `quadrature` where the scheme uses one). dt_ref defaults to
     min(dts) / 10. energy_floor is relative to the energy scale of the reference run;
     trajectory_floor is in rad. options: Newton settings of every run, the reference's too.
+    order: of the step (2, or 4 and 6 composed), of the built solver and of a given one.
     Raises OrderStudyError for step sizes that do not fit the sample grid and when the
     reference run fails; a failing dt is recorded in its row.
     """
@@ -255,9 +257,12 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
 
     if solver is None:
         from ..simulation import build_solver
-        solver = build_solver(scene, method, quadrature, sensitivities=False)
+        solver = build_solver(scene, method, quadrature, sensitivities=False, order=order)
     else:
         manifest = solver.manifest
+        if manifest.get("order", 2) != order:
+            raise OrderStudyError(f"the given solver is of order {manifest.get('order', 2)}, "
+                                  f"not {order}")
         if manifest.get("method") != method or manifest.get("quadrature") != quadrature_in_use:
             raise OrderStudyError(
                 f"the given solver is method {manifest.get('method')!r}, quadrature "
@@ -332,7 +337,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
         dt_ref=dt_ref, sample_interval=float(sample_interval), rows=tuple(rows),
         energy_fit=energy_fit, trajectory_fit=trajectory_fit, energy_scale=scale,
         energy_floor=energy_floor * scale, trajectory_floor=trajectory_floor,
-        reference_wall_time=reference.wall_time)
+        reference_wall_time=reference.wall_time, order=order)
 
 
 # --------------------------------------------------------------------------------------------
@@ -343,6 +348,8 @@ def study_label(study: OrderStudy) -> str:
     label = f"method {study.method}"
     if study.quadrature is not None:
         label += f", quadrature {study.quadrature}"
+    if study.order != 2:
+        label += f", order {study.order}"
     return label
 
 

@@ -45,6 +45,7 @@ class TrajectoryRun:
     method: str | None
     quadrature: int | None
     dt: float | None
+    order: int = 2        # of the step (metadata; 2 where it has none)
 
     def column(self, name: str) -> np.ndarray:
         return self.rows[:, self.columns.index(name)]
@@ -86,6 +87,8 @@ class TrajectoryRun:
         parts = [self.method or self.path.stem]
         if self.quadrature is not None:
             parts[0] += f" K={self.quadrature}"
+        if self.order != 2:
+            parts[0] += f" order {self.order}"
         if self.dt is not None:
             parts.append(f"dt = {self.dt:g} s")
         return ", ".join(parts)
@@ -121,11 +124,13 @@ def load_run(path) -> TrajectoryRun:
         steps = np.diff(rows[:, 0])
         dt = float(np.median(steps)) if np.allclose(steps, steps[0], rtol=1e-9) else None
     quadrature = meta.get("quadrature")
+    order = meta.get("order")
     return TrajectoryRun(path=path, columns=tuple(columns), rows=rows, n=n,
                          scene=meta.get("scene"),
                          method=meta.get("method"),
                          quadrature=int(quadrature) if quadrature is not None else None,
-                         dt=float(dt) if dt is not None else None)
+                         dt=float(dt) if dt is not None else None,
+                         order=order if isinstance(order, int) else 2)
 
 
 def run_from_result(result, source) -> TrajectoryRun:
@@ -134,7 +139,7 @@ def run_from_result(result, source) -> TrajectoryRun:
     return TrajectoryRun(path=Path(source), columns=tuple(result.columns),
                          rows=np.asarray(result.samples), n=n, scene=result.scene,
                          method=result.method, quadrature=result.quadrature,
-                         dt=result.dt)
+                         dt=result.dt, order=result.order)
 
 
 def plot_result(result, out: Path) -> Path:

@@ -13,6 +13,7 @@ from sympy import ImmutableMatrix
 from ...errors import SceneError, SettingsError
 from ...scene import METHODS, Scene
 from ...scene.parameters import compiled_paths, number_path, with_symbols
+from ..composition import composition
 from . import es, midpoint, vi
 from .base import DiscreteScheme, FlowDescription, Layout, LinearSolve, segment_tolerances
 
@@ -22,11 +23,15 @@ if tuple(BUILDERS) != METHODS:
 
 
 def build_scheme(scene: Scene, method: str, quadrature: int,
-                 parameters=()) -> DiscreteScheme:
+                 parameters=(), order: int = 2) -> DiscreteScheme:
     """The discrete scheme `method` for `scene` (quadrature: Gauss points for spring terms),
     with the numbers at the key paths `parameters` as run-time parameters p, in that order
     ("all": every number of the scene a solver can take, chaingen.scene.parameters.
-    compiled_paths)."""
+    compiled_paths), its step composed to `order` (chaingen.symbolic.composition)."""
+    try:
+        stages = composition(order)
+    except ValueError as error:
+        raise SettingsError(f"--order: {error}") from None
     try:
         builder = BUILDERS[method]
     except KeyError:
@@ -51,14 +56,15 @@ def build_scheme(scene: Scene, method: str, quadrature: int,
     # momenta p1, p2, ...).
     symbols = {number.path: sp.Dummy(f"parameter{index}", real=True)
                for index, number in enumerate(numbers)}
-    scheme = builder(with_symbols(scene, symbols), quadrature)
+    scheme = builder(with_symbols(scene, symbols), quadrature, order)
     return dataclasses.replace(
         scheme, scene=scene, segment_tolerances=segment_tolerances(scene),
         parameters=ImmutableMatrix(list(symbols.values()))
         if symbols else ImmutableMatrix.zeros(0, 1),
         parameter_paths=tuple(number.path for number in numbers),
         parameter_units=tuple(number.unit for number in numbers),
-        parameter_values=tuple(number.value(scene) for number in numbers))
+        parameter_values=tuple(number.value(scene) for number in numbers),
+        order=order, composition=stages)
 
 
 __all__ = ["DiscreteScheme", "FlowDescription", "Layout", "LinearSolve", "build_scheme"]

@@ -110,6 +110,15 @@ class DiscreteScheme:
     parameter_paths: tuple[str, ...] = ()
     parameter_units: tuple[str, ...] = ()
     parameter_values: tuple[float, ...] = ()
+    # The order of the step and its stages' step fractions (chaingen.symbolic.composition):
+    # order 2 is the scheme's own step, a single stage.
+    order: int = 2
+    composition: tuple[float, ...] = (1.0,)
+    # Whether the joint-space state s = (phi, omega) determines the scheme's state x along a
+    # run (x = initial_state(outputs(x))): then the step sensitivities of a composed step
+    # are the chain rule of its stages' in joint space. es's x carries a normal velocity
+    # component s does not see.
+    state_from_joint_space: bool = True
 
     @property
     def step_inputs(self) -> list[sp.Symbol]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import sympy as sp
 from sympy import ImmutableMatrix
 
+from ...errors import SettingsError
 from ...runtime.contract import JACOBIAN_PER_STEP
 from ...scene import Scene, quadrature_used
 from ..com_model import (
@@ -33,6 +34,7 @@ from .base import (
     DiscreteScheme,
     FlowDescription,
     Layout,
+    LinearSolve,
     common_fields,
     has_energy_flows,
     input_symbols,
@@ -117,7 +119,40 @@ def joint_force(model, torques) -> ImmutableMatrix:
     return ImmutableMatrix(force)
 
 
-def build(scene: Scene, quadrature: int) -> DiscreteScheme:
+#: The highest order a composition of es steps reaches (docs/model.md, section 14).
+MAX_ORDER = 4
+
+
+def tangent_velocity_solve(model) -> tuple[LinearSolve, ImmutableMatrix]:
+    """The nodal velocity v_k of es satisfies the velocity constraint C(q) v = 0 only to
+    O(dt^2) (the scheme imposes it at the mid-point of each step); a composition of steps
+    cannot cancel that part. Its M-orthogonal projection onto C(q) v = 0,
+
+        [M  C^T] [v_t   ]   [M v]
+        [C   0 ] [lambda] = [ 0 ],
+
+    does: the joint rates of the composed step of order 4 taken from v_t are of order 4
+    (from v, of order 2). Returns the solve and v_t's symbols."""
+    n = model.n
+    tangent = ImmutableMatrix([sp.Dummy(f"vt{i}", real=True) for i in range(2 * n)])
+    multipliers = ImmutableMatrix([sp.Dummy(f"lambda{i}", real=True) for i in range(n)])
+    jacobian = model.constraint_jacobian
+    matrix = ImmutableMatrix.vstack(
+        ImmutableMatrix.hstack(model.mass_matrix, jacobian.T),
+        ImmutableMatrix.hstack(jacobian, ImmutableMatrix.zeros(n, n)))
+    rhs = ImmutableMatrix.vstack(model.mass_matrix * model.v, ImmutableMatrix.zeros(n, 1))
+    return (LinearSolve(symbols=ImmutableMatrix.vstack(tangent, multipliers), matrix=matrix,
+                        rhs=rhs), tangent)
+
+
+def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
+    """The es step; for order > 2 (a composition of steps) the joint rates come from the
+    velocity projected onto C(q) v = 0 (tangent_velocity_solve)."""
+    if order > MAX_ORDER:
+        raise SettingsError(
+            f"--order {order}: es reaches order {MAX_ORDER} at most (its nodal velocities "
+            "meet C(q) v = 0 only to O(dt^2), which limits a composition of its steps; "
+            "docs/model.md, section 14): use --order 4, or vi or midpoint for order 6")
     model = com_model(scene)
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
@@ -162,6 +197,10 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
     directions = (ImmutableMatrix([1, 0]),) + model.directions
     angles = [sp.atan2(cross2(a, b), dot2(a, b)) for a, b in zip(directions[:-1], directions[1:])]
     velocities = relative_rates(model)
+    output_solve = None
+    if order > 2:
+        output_solve, tangent = tangent_velocity_solve(model)
+        velocities = [rate.xreplace(dict(zip(model.v, tangent))) for rate in velocities]
 
     phi = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
     phidot = ImmutableMatrix(sp.symbols(f"phidot1:{n + 1}", real=True))
@@ -180,6 +219,7 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
         predictor=ImmutableMatrix.zeros(3 * n, 1),
         joint_angles=ImmutableMatrix(angles),
         joint_velocities=ImmutableMatrix(velocities),
+        output_solve=output_solve,
         energy=model.energy,
         constraint_residuals=model.constraints,
         initial_angles=phi, initial_velocities=phidot, initial_state=initial_state,
@@ -199,5 +239,6 @@ def build(scene: Scene, quadrature: int) -> DiscreteScheme:
         # Newton-chord: from the warm start the chord update is already at round-off, so a step
         # costs one Jacobian, one factorisation and two residuals, with the energy balance of
         # full Newton (docs/benchmarks.md, speed knobs).
-        jacobian_reuse=JACOBIAN_PER_STEP, **common_fields(scene, phi),
+        jacobian_reuse=JACOBIAN_PER_STEP, state_from_joint_space=False,
+        **common_fields(scene, phi),
     )

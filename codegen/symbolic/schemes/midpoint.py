@@ -43,7 +43,9 @@ def coriolis(model, angles) -> ImmutableMatrix:
                            - ImmutableMatrix([model.kinetic_energy]).jacobian(angles).T)
 
 
-def build(scene: Scene, quadrature: int) -> DiscreteScheme:
+def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
+    """order: of the composed step; the state of every stage is the solution's, so the
+    outputs are the same at every order."""
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
     phi0 = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))

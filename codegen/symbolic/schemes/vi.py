@@ -56,7 +56,9 @@ def unit(angle) -> ImmutableMatrix:
     return ImmutableMatrix([sp.cos(angle), sp.sin(angle)])
 
 
-def build(scene: Scene, quadrature: int) -> DiscreteScheme:
+def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
+    """order: of the composed step; the state of every stage is the solution's, so the
+    outputs are the same at every order."""
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
     cs = sp.symbols(f"c1:{n + 1}", real=True)

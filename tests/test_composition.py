@@ -1,0 +1,164 @@
+"""Steps of order 4 and 6 by symmetric composition (docs/model.md, section 14): the measured
+orders in angles and rates, what each stage keeps (es: energy and constraints, the energy
+balance), the step sensitivities through the stages, and what is refused."""
+from __future__ import annotations
+
+import math
+from functools import cache
+
+import numpy as np
+import pytest
+
+from chaingen.errors import SceneError, SettingsError
+from chaingen.generate.package import generate_package
+from chaingen.scene import ORDERS, parse_scene
+from chaingen.symbolic.composition import COMPOSITIONS
+from chaingen.symbolic.schemes import build_scheme
+
+from helpers import load, scene_path
+
+#: Newton to round-off, so that the measured errors are the steps' own.
+TIGHT = {"reuse_jacobian": 0, "residual_tol": 1e-14, "update_rtol": 1e-14,
+         "update_atol": 1e-14, "max_iterations": 50}
+T_END = 1.0
+#: Two steps where every composed order is above the reference's error floor (1e-14 rad).
+DTS = (0.1, 0.05)
+CASES = [("es", 4), ("vi", 4), ("vi", 6), ("midpoint", 4), ("midpoint", 6)]
+
+
+@cache
+def solver(name: str, method: str, order: int, quadrature: int = 3, sensitivities=False):
+    from chaingen.simulation import build_solver
+    return build_solver(load(name), method, quadrature, order=order,
+                        sensitivities=sensitivities)
+
+
+@cache
+def reference(name: str):
+    from chaingen.reference.scipy_peer import reference_solution
+    return reference_solution(load(name), T_END)
+
+
+def wrapped(angle):
+    return (np.asarray(angle) + math.pi) % (2 * math.pi) - math.pi
+
+
+# -- the compositions themselves (no compiler) ------------------------------------------------
+
+@pytest.mark.parametrize("order", ORDERS)
+def test_compositions_are_symmetric_and_consistent(order):
+    """Fractions summing to 1, palindromic; order 4 and 6 also meet sum g^3 = 0 (and g^5)."""
+    fractions = np.array(COMPOSITIONS[order])
+    assert math.isclose(fractions.sum(), 1.0, abs_tol=1e-15)
+    np.testing.assert_array_equal(fractions, fractions[::-1])
+    for power in range(3, order, 2):
+        assert abs((fractions ** power).sum()) < 1e-15, power
+
+
+def test_a_scene_names_its_order_and_a_bad_one_is_refused():
+    text = scene_path("three_link_mono").read_text()
+    scene = parse_scene(text.replace("[simulation]", "[simulation]\norder = 4"), "s.toml", "s")
+    assert scene.simulation.order == 4
+    with pytest.raises(SceneError, match=r"simulation.order: must be one of 2, 4, 6"):
+        parse_scene(text.replace("[simulation]", "[simulation]\norder = 3"), "s.toml", "s")
+
+
+def test_es_refuses_order_6_and_composed_sensitivities():
+    scene = load("three_link_mono")
+    with pytest.raises(SettingsError, match=r"--order 6: es reaches order 4 at most"):
+        build_scheme(scene, "es", 3, order=6)
+    with pytest.raises(SettingsError, match="generate with --no-sensitivities"):
+        generate_package(scene, "es", 3, order=4, sensitivities=True)
+
+
+def test_order_2_generates_no_composition_and_4_does():
+    scene = load("three_link_mono")
+    plain = generate_package(scene, "midpoint", 3, sensitivities=False)
+    composed = generate_package(scene, "midpoint", 3, order=4, sensitivities=False)
+    assert "STAGES" not in plain.files[f"{plain.prefix}.c"]
+    assert "#define NSTAGE 5" in composed.files[f"{composed.prefix}.c"]
+    assert composed.manifest["order"] == 4
+    assert composed.manifest["input_hash"] != plain.manifest["input_hash"]
+
+
+# -- measured -------------------------------------------------------------------------------
+
+@pytest.mark.compile
+@pytest.mark.parametrize("name", ["three_link_mono", "three_link_multi"])
+@pytest.mark.parametrize("method, order", CASES)
+def test_composed_steps_reach_their_order_in_angles_and_rates(name, method, order):
+    """Error at t = 1 s against DOP853 at its tightest tolerances, for dt and dt/2: the
+    observed order in the angles and in the rates within 0.2 of 4 and 0.3 of 6."""
+    phi_ref, omega_ref = reference(name)
+    scene = load(name)
+    built = solver(name, method, order)
+    angle_errors, rate_errors = [], []
+    for dt in DTS:
+        run = built.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
+                             n_steps=round(T_END / dt), every=round(T_END / dt), options=TIGHT)
+        angle_errors.append(np.abs(wrapped(run.phi[-1] - phi_ref)).max())
+        rate_errors.append(np.abs(run.omega[-1] - omega_ref).max())
+    tolerance = 0.2 if order == 4 else 0.3
+    for errors in (angle_errors, rate_errors):
+        assert abs(math.log2(errors[0] / errors[1]) - order) <= tolerance, (errors, order)
+
+
+@pytest.mark.compile
+def test_composed_es_keeps_energy_and_constraints():
+    """es of order 4 (K = 5) over 10 s at dt = 0.05 s: energy error <= 1e-12 J, constraint
+    error <= 1e-13, though one stage in five steps backwards."""
+    scene = load("three_link_mono")
+    run = solver("three_link_mono", "es", 4, quadrature=5).simulate(
+        scene.initial_angles, scene.initial_velocities, dt=0.05, n_steps=200, every=1)
+    assert np.abs(run.energy_error).max() <= 1e-12
+    assert run.constraint_error.max() <= 1e-13
+
+
+@pytest.mark.compile
+def test_composed_es_keeps_the_energy_balance_with_torques_and_damping():
+    """four_link_actuated (damping, actuation): per step H_1 - H_0 = work - dissipated, the
+    flows summed over the stages."""
+    scene = load("four_link_actuated")
+    built = solver("four_link_actuated", "es", 4, quadrature=5)
+    rng = np.random.default_rng(16)
+    torques = rng.uniform(-1.0, 1.0, (400, len(scene.actuated_joints)))
+    run = built.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01, n_steps=400,
+                         every=1, torques=torques)
+    balance = np.diff(run.energy) - np.diff(run.column("input_work")) \
+        + np.diff(run.column("dissipated"))
+    assert np.abs(balance).max() <= 1e-12
+    assert np.abs(run.column("dissipated")[-1]) > 1e-3     # the damping did something
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("name, method, order", [
+    ("three_link_multi", "vi", 4), ("three_link_multi", "vi", 6),
+    ("four_link_actuated", "midpoint", 4), ("four_link_actuated", "midpoint", 6)])
+def test_composed_sensitivities_match_central_differences(name, method, order):
+    """d s1/d s0 and d s1/d u of the composed step, by the chain rule through the stages,
+    against central differences of the composed step (to 1e-6)."""
+    scene = load(name)
+    built = solver(name, method, order, sensitivities=True)
+    n, nu = scene.n, len(scene.actuated_joints)
+    phi = np.asarray(scene.initial_angles) + 0.1
+    omega = np.asarray(scene.initial_velocities) + 0.2
+    u = 0.3 * np.ones(nu) if nu else None
+    dt, h = 0.02, 1e-6
+
+    def s1(phi, omega, u=u):
+        x1 = built.step(built.initial_state(phi, omega), dt, u, options=TIGHT).x1
+        angles, rates, _, _ = built.outputs(x1)
+        return np.concatenate([angles, rates])
+
+    sensitivities = built.step_sensitivities(built.initial_state(phi, omega), dt, u,
+                                             options=TIGHT)
+    for j in range(2 * n):
+        e = np.zeros(2 * n)
+        e[j] = h
+        numeric = (s1(phi + e[:n], omega + e[n:]) - s1(phi - e[:n], omega - e[n:])) / (2 * h)
+        assert np.abs(sensitivities.ds_ds[:, j] - numeric).max() <= 1e-6, j
+    for j in range(nu):
+        e = np.zeros(nu)
+        e[j] = h
+        numeric = (s1(phi, omega, u + e) - s1(phi, omega, u - e)) / (2 * h)
+        assert np.abs(sensitivities.ds_du[:, j] - numeric).max() <= 1e-6, j
