@@ -92,6 +92,8 @@ BAD_SPECS = {
     "method": ({"method": "rk4"}, "method", "must be one of"),
     "quadrature": ({"quadrature": 0}, "quadrature", "integer"),
     "mode": ({"mode": "grid"}, "mode", "must be one of"),
+    "order": ({"order": 3}, "order", "must be one of"),
+    "order beyond the method's": ({"method": "es", "order": 6}, "order", "order 4 at most"),
     "out of range": ({"axes": {"links[1].mass": {"from": -1.0, "to": 1.0, "num": 3}}},
                      "links[1].mass", "run 0"),
     "out of range in a later run": ({"axes": {"springs[0].rest_length": [0.5, -0.1]}},

@@ -29,6 +29,23 @@ COMPOSITIONS: dict[int, tuple[float, ...]] = {
 if tuple(COMPOSITIONS) != ORDERS:
     raise ImportError(f"compositions {tuple(COMPOSITIONS)} do not match the orders {ORDERS}")
 
+#: Methods whose composed step stays below the highest order, and the order they reach: the
+#: nodal velocities of es meet C(q) v = 0 only to O(dt^2) (docs/model.md, section 14).
+MAX_ORDER = {"es": 4}
+
+
+def order_error(method: str, order: int) -> str | None:
+    """Why `method` cannot take `order` (a sentence), or None when it can."""
+    if order not in COMPOSITIONS:
+        return f"must be one of {', '.join(map(str, ORDERS))}, got {order!r}"
+    highest = MAX_ORDER.get(method, ORDERS[-1])
+    if order > highest:
+        return (f"{method} reaches order {highest} at most (its nodal velocities meet "
+                "C(q) v = 0 only to O(dt^2), which limits a composition of its steps; "
+                f"docs/model.md, section 14): use order {highest}, or vi or midpoint for order "
+                f"{order}")
+    return None
+
 
 def composition(order: int) -> tuple[float, ...]:
     """The step fractions of the composition of `order` (ValueError for another order)."""

@@ -96,7 +96,7 @@ def _run(spec: SweepSpec, store: SweepStore, engine: str, session, workers) -> S
                   unit="stages") as progress:
         package = generate_package(spec.scene, spec.method, spec.quadrature,
                                    sensitivities=False, parameters=spec.parameters,
-                                   progress=progress)
+                                   order=spec.order, progress=progress)
         progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
         manifest = package.manifest
         library = build_shared_library(manifest["prefix"], package.files, manifest["sources"],

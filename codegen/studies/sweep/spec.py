@@ -28,12 +28,13 @@ import numpy as np
 from ...errors import ChaingenError, SceneError
 from ...scene import METHODS, QUADRATURE_RANGE, Scene, load_scene
 from ...scene.parameters import NumberPath, number_path, with_values
+from ...symbolic.composition import order_error
 
 MODES = ("product", "zip", "sample")
 SAMPLERS = ("sobol", "latin-hypercube")
 SPACINGS = ("linear", "log")
-TOP_KEYS = ("scene", "method", "quadrature", "mode", "samples", "sampler", "seed", "t_end",
-            "every", "axes")
+TOP_KEYS = ("scene", "method", "quadrature", "order", "mode", "samples", "sampler", "seed",
+            "t_end", "every", "axes")
 RANGE_KEYS = ("from", "to", "num", "spacing")
 #: A sweep of more runs than this is refused as a mistake (a product of long axes).
 MAX_RUNS = 10_000_000
@@ -77,6 +78,7 @@ class SweepSpec:
     sampler: str
     document: dict = field(repr=False)
     scene_text: str = field(repr=False, default="")
+    order: int = 2                # of the step (docs/model.md, section 14)
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -137,6 +139,10 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
     low, high = QUADRATURE_RANGE
     if not (_integer(quadrature) and low <= quadrature <= high):
         raise fail("quadrature", f"must be an integer from {low} to {high}, got {quadrature!r}")
+    order = document.get("order", scene.simulation.order)
+    refused = order_error(method, order) if _integer(order) else "must be an integer"
+    if refused:
+        raise fail("order", refused)
     mode = document.get("mode", "product")
     if mode not in MODES:
         raise fail("mode", f"must be one of {', '.join(MODES)}, got {mode!r}")
@@ -175,7 +181,8 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
     spec = SweepSpec(source=source, scene_path=scene_path, scene=scene, method=method,
                      quadrature=quadrature, mode=mode, axes=axes, runs=tuple(runs),
                      t_end=float(t_end), every=every, seed=seed, sampler=sampler,
-                     document=document, scene_text=scene_path.read_text(encoding="utf-8"))
+                     document=document, scene_text=scene_path.read_text(encoding="utf-8"),
+                     order=order)
     _check_values(spec)
     return spec
 

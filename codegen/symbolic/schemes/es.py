@@ -29,6 +29,7 @@ from ..com_model import (
     linear_coefficients,
     number,
 )
+from ..composition import order_error
 from ..quadrature import gauss_legendre_nodes
 from .base import (
     DiscreteScheme,
@@ -119,10 +120,6 @@ def joint_force(model, torques) -> ImmutableMatrix:
     return ImmutableMatrix(force)
 
 
-#: The highest order a composition of es steps reaches (docs/model.md, section 14).
-MAX_ORDER = 4
-
-
 def tangent_velocity_solve(model) -> tuple[LinearSolve, ImmutableMatrix]:
     """The nodal velocity v_k of es satisfies the velocity constraint C(q) v = 0 only to
     O(dt^2) (the scheme imposes it at the mid-point of each step); a composition of steps
@@ -148,11 +145,9 @@ def tangent_velocity_solve(model) -> tuple[LinearSolve, ImmutableMatrix]:
 def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     """The es step; for order > 2 (a composition of steps) the joint rates come from the
     velocity projected onto C(q) v = 0 (tangent_velocity_solve)."""
-    if order > MAX_ORDER:
-        raise SettingsError(
-            f"--order {order}: es reaches order {MAX_ORDER} at most (its nodal velocities "
-            "meet C(q) v = 0 only to O(dt^2), which limits a composition of its steps; "
-            "docs/model.md, section 14): use --order 4, or vi or midpoint for order 6")
+    refused = order_error("es", order)
+    if refused:
+        raise SettingsError(f"--order {order}: {refused}")
     model = com_model(scene)
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
