@@ -11,7 +11,8 @@ from dataclasses import dataclass
 from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
-from .scene import METHODS, ORDERS, QUADRATURE_RANGE, Scene
+from .scene import METHODS, QUADRATURE_RANGE, Scene
+from .symbolic.composition import order_error
 
 #: A run of more steps is refused: at about 1 us a step it would take days.
 MAX_STEPS = 10 ** 12
@@ -76,9 +77,9 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
                             f"{settings.quadrature}")
     if settings.every < 1:
         raise SettingsError(f"--every: must be >= 1, got {settings.every}")
-    if settings.order not in ORDERS:
-        raise SettingsError(f"--order: must be one of {', '.join(map(str, ORDERS))}, got "
-                            f"{settings.order}")
+    refused = order_error(settings.method, settings.order)
+    if refused:
+        raise SettingsError(f"--order: {refused}")
     return settings
 
 
