@@ -64,6 +64,9 @@ def add_newton_options(parser: argparse.ArgumentParser) -> None:
         elif field.python_type is int:
             group.add_argument(flag, type=positive_int, metavar="N",
                                help=field.comment or None)
+        elif field.name in contract.ADAPTIVE_TOLERANCES:
+            group.add_argument(flag, type=adaptive_tolerance, metavar="X",
+                               help=field.comment or None)
         else:
             group.add_argument(flag, type=tolerance, metavar="X", help=field.comment or None)
 
@@ -71,6 +74,15 @@ def add_newton_options(parser: argparse.ArgumentParser) -> None:
 #: reuse_jacobian on the command line: the contract's mode names, e.g. per-step.
 JACOBIAN_CHOICES = {mode.name.removeprefix("JACOBIAN_").lower().replace("_", "-"): mode.value
                     for mode in contract.JACOBIAN_MODES}
+
+
+def adaptive_tolerance(text: str) -> float:
+    value = number(text)
+    if not (value == 0 or contract.MIN_ADAPTIVE_TOLERANCE <= value < math.inf):
+        raise argparse.ArgumentTypeError(
+            f"must be 0 (fixed steps) or from {contract.MIN_ADAPTIVE_TOLERANCE:g} up, and finite, "
+            f"got {text!r}")
+    return value
 
 
 def tolerance(text: str) -> float:

@@ -17,7 +17,7 @@ from .arguments import (
     number,
     positive_int,
 )
-from .errors import ChaingenError, NewtonError, UnsupportedSceneError
+from .errors import ChaingenError, NewtonError, SettingsError, UnsupportedSceneError
 from .runtime.files import check_output_file
 from .scene import load_scene
 from .version import VERSION
@@ -206,8 +206,12 @@ def command_order(args) -> int:
                             t_end=args.t_end, order=args.order, source=str(args.scene))
     if args.plot is not None:
         check_output_file(args.plot, "--plot", [args.scene])
+    overrides = newton_overrides(args)
+    if overrides.get("rtol") or overrides.get("atol"):
+        raise SettingsError("--rtol/--atol: chaingen order fits the error of fixed steps; "
+                            "leave out the adaptive tolerances")
     study = order_study(scene, settings.method, settings.quadrature, t_end=settings.t_end,
-                        options=newton_overrides(args) or None, order=settings.order)
+                        options=overrides or None, order=settings.order)
     print(format_table(study))
     if args.plot is not None:
         print(f"plot: {plot_order(study, args.plot)}")
@@ -234,7 +238,7 @@ def command_simulate(args) -> int:
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                             dt=args.dt, t_end=args.t_end, every=args.every, order=args.order,
-                            source=str(args.scene))
+                            rtol=args.rtol, atol=args.atol, source=str(args.scene))
     if args.out is not None:
         check_output_file(args.out, "--out", [args.scene])
         check_output_file(metadata_path(args.out), "--out", [args.scene])
@@ -350,11 +354,13 @@ def summary(result, settings, out: Path | None) -> str:
     if result.order != 2:
         label += f", order {result.order}"
     per_step = result.wall_time / max(result.n_steps, 1)
+    # Adaptive steps cover each interval dt with steps of their own (counted below).
+    step = "interval" if result.adaptive else "step"
     lines = [
         f"{result.scene}: {label}, dt {settings.dt:g} s, t_end {result.n_steps * settings.dt:g} s",
-        f"  steps                  {result.n_steps} ({len(result.samples)} samples, "
+        f"  {step + 's':<22} {result.n_steps} ({len(result.samples)} samples, "
         f"every {result.every})",
-        f"  wall time (C loop)     {result.wall_time:.4g} s ({per_step * 1e6:.3g} us/step)",
+        f"  wall time (C loop)     {result.wall_time:.4g} s ({per_step * 1e6:.3g} us/{step})",
         f"  t_realtime             {result.t_realtime:.3g}",
         f"  max |energy error|     {np.abs(result.energy_error).max():.3e} J",
     ]
@@ -373,6 +379,10 @@ def summary(result, settings, out: Path | None) -> str:
     if result.full_newton_fallbacks or result.split_steps:
         lines.append(f"  Newton fallbacks       {result.full_newton_fallbacks} steps by full "
                      f"Newton, {result.split_steps} steps split into halves")
+    if result.adaptive:
+        lines.append(f"  adaptive steps         {result.accepted_steps} accepted, "
+                     f"{result.rejected_steps} rejected, dt from {result.smallest_dt:.3g} to "
+                     f"{result.largest_dt:.3g} s (rtol {settings.rtol:g}, atol {settings.atol:g})")
     if out is not None:
         lines.append(f"  trajectory             {out}")
     return "\n".join(lines)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
+from .runtime.contract import ADAPTIVE_TOLERANCES, MIN_ADAPTIVE_TOLERANCE
 from .scene import METHODS, QUADRATURE_RANGE, Scene
 from .symbolic.composition import order_error
 
@@ -30,6 +31,12 @@ class RunSettings:
     t_end: float
     every: int = 1
     order: int = 2
+    rtol: float = 0.0    # adaptive steps (either > 0): local error tolerances
+    atol: float = 0.0
+
+    @property
+    def adaptive(self) -> bool:
+        return self.rtol > 0 or self.atol > 0
 
     @property
     def n_steps(self) -> int:
@@ -37,7 +44,8 @@ class RunSettings:
 
 
 def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=None,
-                 every=None, order=None, source: str = "") -> RunSettings:
+                 every=None, order=None, rtol=None, atol=None,
+                 source: str = "") -> RunSettings:
     """Merge command-line overrides into the scene's defaults, validating each override.
 
     `source` (the scene file) prefixes errors about values that came from the scene.
@@ -50,7 +58,9 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
         dt=dt if dt is not None else defaults.dt,
         t_end=t_end if t_end is not None else defaults.t_end,
         every=every if every is not None else 1,
-        order=order if order is not None else defaults.order)
+        order=order if order is not None else defaults.order,
+        rtol=rtol if rtol is not None else defaults.rtol,
+        atol=atol if atol is not None else defaults.atol)
     if settings.method not in METHODS:
         where = "--method" if method is not None else f"{scene_source}simulation.method"
         raise SettingsError(
@@ -77,6 +87,14 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
                             f"{settings.quadrature}")
     if settings.every < 1:
         raise SettingsError(f"--every: must be >= 1, got {settings.every}")
+    given = {"rtol": rtol, "atol": atol}
+    for name in ADAPTIVE_TOLERANCES:
+        value = getattr(settings, name)
+        if not (value == 0 or MIN_ADAPTIVE_TOLERANCE <= value < math.inf):
+            where = (f"--{name}" if given[name] is not None
+                     else f"{scene_source}simulation.{name}")
+            raise SettingsError(f"{where}: must be 0 (fixed steps) or from "
+                                f"{MIN_ADAPTIVE_TOLERANCE:g} up, and finite, got {value}")
     refused = order_error(settings.method, settings.order)
     if refused:
         raise SettingsError(f"--order: {refused}")
@@ -104,7 +122,11 @@ def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None
                    options: NewtonOptions | dict | None = None) -> SimulationResult:
     """Simulate `scene` from its initial state; raises NewtonError if a step fails. On a
     terminal a progress bar follows the run (the samples do not depend on it). options:
-    Newton options, or a dict of fields that replace the package's defaults."""
+    Newton options, or a dict of fields that replace the package's defaults; the settings'
+    rtol and atol (adaptive steps) apply unless `options` sets them."""
+    if not isinstance(options, NewtonOptions):
+        options = {**{name: getattr(settings, name) for name in ("rtol", "atol")
+                      if getattr(settings, name)}, **(options or {})}
     # A forward run needs no step sensitivities: leaving them out builds faster.
     solver = solver or build_solver(scene, settings.method, settings.quadrature,
                                     sensitivities=False, order=settings.order)

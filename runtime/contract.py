@@ -77,8 +77,8 @@ STATUSES = (
            "the Newton Jacobian is singular (no usable pivot)"),
     Status("NONFINITE", 3, "NaN or Inf in the residual or the iterate",
            "NaN or Inf in the residual or the Newton iterate"),
-    Status("BAD_ARGUMENT", 4, "a null pointer, dt <= 0, n_steps < 0, every < 1, interval < 1 or "
-                              "an unknown reuse_jacobian", "bad argument"),
+    Status("BAD_ARGUMENT", 4, "a null pointer, dt <= 0, n_steps < 0, every < 1, interval < 1, "
+                              "an unknown reuse_jacobian or a bad rtol or atol", "bad argument"),
     Status("EVALUATION_FAILED", 5, "a generated function reported an error",
            "a generated function reported an evaluation error"),
     Status("SEGMENT_COLLAPSED", 6,
@@ -90,6 +90,9 @@ STATUSES = (
            "direction is undefined", when="segments"),
     Status("INTERRUPTED", 7, "simulate_observed: the observer or control->stop asked to stop",
            "interrupted"),
+    Status("STEP_TOO_SMALL", 8, "adaptive steps: the error test or Newton failed at a step "
+                                "below 1e-12 dt", "the adaptive step fell below 1e-12 of the "
+                                "sample interval dt without passing the error test and Newton"),
 )
 STATUS_CODES = {status.name: status.code for status in STATUSES}
 
@@ -149,8 +152,17 @@ NEWTON_OPTIONS = (
     OptionField("residual_tol", "double", 1e-8, "units of F"),
     OptionField("warm_start", "int", 1, "continue from the previous solutions", switch=True),
     OptionField("reuse_jacobian", "int", JACOBIAN_EVERY_ITERATE, "one of the JACOBIAN_* modes"),
+    OptionField("rtol", "double", 0.0, "adaptive steps: relative local error, 0 or >= 1e-14; 0 "
+                                       "with atol 0: fixed steps of dt"),
+    OptionField("atol", "double", 0.0, "adaptive steps: absolute local error (rad, rad/s), 0 "
+                                       "or >= 1e-14"),
 )
 NEWTON_OPTION_DEFAULTS = {field.name: field.default for field in NEWTON_OPTIONS}
+#: The adaptive steps' tolerances rtol and atol are 0 (off) or at least this: the error
+#: estimate of a step is round-off below it, and a tolerance there would be met only by
+#: chance, at steps ever shorter.
+MIN_ADAPTIVE_TOLERANCE = 1e-14
+ADAPTIVE_TOLERANCES = ("rtol", "atol")
 
 #: Solutions of chained steps kept for the warm start: extrapolation of degree
 #: WARM_START_HISTORY - 1 (quadratic).
@@ -187,6 +199,11 @@ STATS_FIELDS = (
                                                  "full Newton solved"),
     StructField("split_steps", "long", "steps that Newton failed on whole and that were "
                                        "taken as two halves (recursively)"),
+    StructField("accepted_steps", "long", "steps of the scheme taken: steps with fixed steps; "
+                                          "adaptive: the accepted ones"),
+    StructField("rejected_steps", "long", "adaptive: steps refused by the error test or Newton"),
+    StructField("smallest_dt", "double", "the shortest accepted step (s)"),
+    StructField("largest_dt", "double", "the longest accepted step (s)"),
 )
 
 #: What a caller shares with a running simulate_observed, from another thread or a signal

@@ -25,6 +25,13 @@ class SimulationResult:
     split_steps: int = 0             # steps taken as halves after Newton failed on them whole
     parameters: dict = field(default_factory=dict)   # run-time parameters: path -> value
     order: int = 2              # of the step: 2, or 4 and 6 by composition
+    # Adaptive steps (rtol or atol > 0): the steps taken and refused, the shortest and longest
+    # taken (with fixed steps: n_steps, 0, dt, dt).
+    accepted_steps: int = 0
+    rejected_steps: int = 0
+    smallest_dt: float = 0.0
+    largest_dt: float = 0.0
+    adaptive: bool = False
 
     def column(self, name: str) -> np.ndarray:
         return self.samples[:, self.columns.index(name)]

@@ -363,7 +363,10 @@ class Solver:
             full_newton_fallbacks=int(stats.full_newton_fallbacks),
             split_steps=int(stats.split_steps),
             parameters=dict(zip(self.parameters, map(float, p_values))),
-            order=int(self.manifest.get("order", 2)))
+            order=int(self.manifest.get("order", 2)),
+            accepted_steps=int(stats.accepted_steps), rejected_steps=int(stats.rejected_steps),
+            smallest_dt=float(stats.smallest_dt), largest_dt=float(stats.largest_dt),
+            adaptive=bool(c_options.rtol > 0 or c_options.atol > 0))
         if status:
             failed = stats.steps + 1
             raise NewtonError(

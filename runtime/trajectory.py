@@ -22,9 +22,14 @@ def metadata_path(path) -> Path:
 
 
 def run_metadata(result: SimulationResult) -> dict:
-    return {"scene": result.scene, "method": result.method, "quadrature": result.quadrature,
-            "order": result.order, "dt": result.dt, "every": result.every,
-            "n_steps": result.n_steps, "columns": list(result.columns)}
+    metadata = {"scene": result.scene, "method": result.method, "quadrature": result.quadrature,
+                "order": result.order, "dt": result.dt, "every": result.every,
+                "n_steps": result.n_steps, "columns": list(result.columns)}
+    if result.adaptive:
+        metadata["adaptive_steps"] = {
+            "accepted": result.accepted_steps, "rejected": result.rejected_steps,
+            "smallest_dt": result.smallest_dt, "largest_dt": result.largest_dt}
+    return metadata
 
 
 def write_trajectory(result: SimulationResult, path, *, metadata: bool = True) -> Path:

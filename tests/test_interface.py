@@ -107,7 +107,8 @@ def test_a_contract_that_differs_from_the_header_is_noticed(package, change):
                                 dataclasses.replace(contract.NEWTON_OPTIONS[-1], c_type="long"))
     elif change == "renumber a status":
         facts.STATUSES = (*contract.STATUSES[:-1],
-                          dataclasses.replace(contract.STATUSES[-1], code=8))
+                          dataclasses.replace(contract.STATUSES[-1],
+                                              code=contract.STATUSES[-1].code + 1))
     elif change == "add a parameter":
         step = contract.ENTRY_POINTS_BY_NAME["step"]
         extra = dataclasses.replace(step, parameters=(*step.parameters,

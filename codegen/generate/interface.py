@@ -46,7 +46,13 @@ INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
     EntryPoint("compose", "static int", _parameters(
         f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
         "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
-        "int *iterations")),
+        "int *iterations, int depth")),
+    EntryPoint("joint_state", "static int", _parameters(
+        f"const double *x, {P_ARGUMENT}, double *s, {{prefix}}_workspace *workspace")),
+    EntryPoint("adaptive_interval", "static int", _parameters(
+        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
+        "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
+        "int *iterations, {prefix}_stats *counters")),
     EntryPoint("stage_sensitivities", "static int",
                contract.ENTRY_POINTS_BY_NAME["step_sensitivities"].parameters,
                when="sensitivities"),

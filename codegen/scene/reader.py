@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from ..errors import SceneError
+from ..runtime.contract import ADAPTIVE_TOLERANCES, MIN_ADAPTIVE_TOLERANCE
 from . import kinematics
 from .values import METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
 
@@ -31,7 +32,7 @@ _LINK_REQUIRED = ("mass", "inertia", "length", "com")
 _SPRING_KEYS = ("joints", "stiffness", "rest_length", "offsets")
 _SPRING_REQUIRED = ("joints", "stiffness", "rest_length")
 _INITIAL_KEYS = ("angles", "velocities")
-_SIMULATION_KEYS = ("method", "quadrature", "order", "dt", "t_end")
+_SIMULATION_KEYS = ("method", "quadrature", "order", "dt", "t_end", "rtol", "atol")
 
 _MISSING = object()
 _SHOW_LIMIT = 120
@@ -461,6 +462,13 @@ class SceneReader:
                 fields[key] = self.positive(where, item, "step in s")
             elif key == "t_end":
                 fields[key] = self.positive(where, item, "duration in s")
+            elif key in ADAPTIVE_TOLERANCES:
+                if (isinstance(item, bool) or not isinstance(item, (int, float))
+                        or not (item == 0 or MIN_ADAPTIVE_TOLERANCE <= item < math.inf)):
+                    self.fail(where, "must be 0 (fixed steps) or a number from "
+                                     f"{MIN_ADAPTIVE_TOLERANCE:g} up (local error tolerance of "
+                                     "adaptive steps)", item)
+                fields[key] = float(item)
             else:
                 self.unknown_key("simulation", key, item, _SIMULATION_KEYS)
         return Simulation(**fields)

@@ -71,6 +71,8 @@ class Simulation:
     dt: float = 0.01
     t_end: float = 10.0
     order: int = ORDERS[0]
+    rtol: float = 0.0     # adaptive steps' local error tolerances; both 0: fixed steps of dt
+    atol: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -40,6 +40,8 @@ void three_link_multi_es_default_options(three_link_multi_es_options *options)
     options->residual_tol = 1e-8;
     options->warm_start = 1;
     options->reuse_jacobian = 2;
+    options->rtol = 0.0;
+    options->atol = 0.0;
 }
 
 /* -DTHREE_LINK_MULTI_ES_BUILD_HASH="..." from chaingen's build; empty otherwise. */
@@ -501,6 +503,159 @@ int three_link_multi_es_step_sensitivities(const double *x0, double dt, double *
     return THREE_LINK_MULTI_ES_OK;
 }
 
+/* Adaptive steps (options->rtol > 0 or options->atol > 0). Each sample interval of length dt is
+ * covered by steps of the package's order (2) whose lengths a PI controller chooses, landing on
+ * the interval's end. The local error of a step of length h from x is estimated by step doubling:
+ * one step of h and two of h/2 from x, in the joint-space state s = (phi, omega),
+ *     e = (s_two_halves - s_one_step) / (2^ORDER - 1),
+ * and the step passes when max_i |e_i| / (atol + rtol max(|s_i(x)|, |s_i(two halves)|)) <= 1.
+ * The two halves are kept (no extrapolation, which would lose the scheme's structure): "es"
+ * conserves energy on any sequence of step lengths, so its energy stays at round-off while the
+ * step adapts. A step that Newton fails (its ladder without splits), or that collapses a spring
+ * segment, is refused and retried at NEWTON_FACTOR of its length, as is one whose error test
+ * fails (at the controller's length); below 1e-12 dt the run stops with the last failure's status,
+ * or STEP_TOO_SMALL when the error test refused it. */
+#define ORDER 2
+/* The rates of "es" at order 2 are off the velocity constraint C(q) v = 0 by O(dt^2) in every step,
+ * without accumulating: step doubling would see that, not the local error. The test takes the
+ * angles alone (their local error is O(dt^3)); at order 4 the rates come from the projected
+ * velocity and are tested too. */
+#define ERROR_ENTRIES N_JOINTS
+#define SAFETY 0.9
+#define MIN_FACTOR 0.2
+#define MAX_FACTOR 5.0
+#define NEWTON_FACTOR 0.25
+#define MIN_STEP_FRACTION 1e-12
+/* rtol and atol are 0 or at least this (below it the error estimate is round-off). */
+#define MIN_TOLERANCE 1e-14
+/* PI control (Gustafsson; the exponents of Hairer and Wanner's DOPRI codes):
+ * h_new = h SAFETY err^-(0.7 / (ORDER + 1)) err_previous^(0.4 / (ORDER + 1)). */
+#define ALPHA (0.7 / (ORDER + 1))
+#define BETA (0.4 / (ORDER + 1))
+#define TWO_PI 6.283185307179586
+
+/* s = (phi, omega) of the state x, s[2 * N_JOINTS]. */
+static int joint_state(const double *x, double *s, three_link_multi_es_workspace *workspace)
+{
+    return three_link_multi_es_outputs(x, s, s + N_JOINTS, NULL, NULL, workspace);
+}
+
+/* From x0 over the interval dt to x1 by adaptive steps (see above); the controller's proposal
+ * carries over from interval to interval in the workspace. */
+static int adaptive_interval(const double *x0, double dt, double *x1,
+                             const three_link_multi_es_options *options,
+                             three_link_multi_es_workspace *workspace, int *iterations,
+                             three_link_multi_es_stats *counters)
+{
+    double start[2 * N_JOINTS], whole[2 * N_JOINTS], ends[2 * N_JOINTS];
+    double *from = workspace->adaptive_state[0];
+    double *one = workspace->adaptive_state[1];
+    double *middle = workspace->adaptive_state[2];
+    double *two = workspace->adaptive_state[3];
+    double elapsed = 0.0;
+    int status, failure = THREE_LINK_MULTI_ES_STEP_TOO_SMALL, refused = 0, i;
+    memcpy(from, x0, sizeof(double) * NX);
+    status = joint_state(from, start, workspace);
+    if (!(workspace->proposed_dt > 0.0)) {
+        workspace->proposed_dt = dt;
+        workspace->previous_error = 1.0;
+    }
+    while (status == THREE_LINK_MULTI_ES_OK && elapsed < dt) {
+        double remaining = dt - elapsed, h = workspace->proposed_dt, error = 0.0, factor;
+        int landing = 0;
+        if (h >= remaining * (1.0 - 1e-12)) {
+            h = remaining;
+            landing = 1;
+        } else if (h > 0.5 * remaining) {
+            h = 0.5 * remaining;   /* two even steps rather than one and a sliver */
+        }
+        if (h < MIN_STEP_FRACTION * dt) {
+            status = failure;
+            break;
+        }
+        status = advance(from, h, one, options, workspace, iterations, MAX_SPLIT);
+        if (status == THREE_LINK_MULTI_ES_OK) {
+            status = advance(from, 0.5 * h, middle, options, workspace, iterations, MAX_SPLIT);
+        }
+        if (status == THREE_LINK_MULTI_ES_OK) {
+            status = advance(middle, 0.5 * h, two, options, workspace, iterations, MAX_SPLIT);
+        }
+        if (status == THREE_LINK_MULTI_ES_OK) {
+            status = joint_state(one, whole, workspace);
+        }
+        if (status == THREE_LINK_MULTI_ES_OK) {
+            status = joint_state(two, ends, workspace);
+        }
+        if (status == THREE_LINK_MULTI_ES_OK) {
+            for (i = 0; i < ERROR_ENTRIES; ++i) {
+                double difference = ends[i] - whole[i];
+                double scale = options->atol + options->rtol * fmax(fabs(start[i]), fabs(ends[i]));
+                double ratio;
+                if (i < N_JOINTS) {
+                    difference = remainder(difference, TWO_PI);   /* angles are wrapped */
+                }
+                ratio = fabs(difference) / ((double)((1 << ORDER) - 1) * scale);
+                if (!(ratio <= error)) {
+                    error = ratio;   /* NaN propagates */
+                }
+            }
+            if (!isfinite(error)) {
+                status = THREE_LINK_MULTI_ES_NONFINITE;
+            }
+        }
+        if (status == THREE_LINK_MULTI_ES_NOT_CONVERGED || status == THREE_LINK_MULTI_ES_SINGULAR_JACOBIAN
+            || status == THREE_LINK_MULTI_ES_NONFINITE || status == THREE_LINK_MULTI_ES_SEGMENT_COLLAPSED) {
+            /* Newton or the step failed: refuse it and try a much shorter one. */
+            failure = status;
+            status = THREE_LINK_MULTI_ES_OK;
+            ++counters->rejected_steps;
+            workspace->proposed_dt = NEWTON_FACTOR * h;
+            workspace->previous_error = 1.0;
+            refused = 1;
+            continue;
+        }
+        if (status != THREE_LINK_MULTI_ES_OK) {
+            break;
+        }
+        if (error <= 1.0) {
+            double proposal;
+            memcpy(from, two, sizeof(double) * NX);
+            memcpy(start, ends, sizeof start);
+            elapsed = landing ? dt : elapsed + h;
+            counters->accepted_steps += 2;   /* two steps of h/2 */
+            if (counters->smallest_dt == 0.0 || 0.5 * h < counters->smallest_dt) {
+                counters->smallest_dt = 0.5 * h;
+            }
+            if (0.5 * h > counters->largest_dt) {
+                counters->largest_dt = 0.5 * h;
+            }
+            factor = SAFETY * pow(fmax(error, 1e-10), -ALPHA) * pow(workspace->previous_error, BETA);
+            factor = fmin(MAX_FACTOR, fmax(MIN_FACTOR, factor));
+            if (refused) {
+                factor = fmin(factor, 1.0);   /* no growth right after a refusal */
+            }
+            proposal = h * factor;
+            /* A step shortened to land keeps the controller's longer proposal. */
+            if (!landing || proposal > workspace->proposed_dt) {
+                workspace->proposed_dt = proposal;
+            }
+            workspace->previous_error = fmax(error, 1e-4);
+            failure = THREE_LINK_MULTI_ES_STEP_TOO_SMALL;
+            refused = 0;
+        } else {
+            ++counters->rejected_steps;
+            factor = fmax(MIN_FACTOR, SAFETY * pow(error, -1.0 / (ORDER + 1)));
+            workspace->proposed_dt = h * fmin(factor, 0.9);
+            failure = THREE_LINK_MULTI_ES_STEP_TOO_SMALL;
+            refused = 1;
+        }
+    }
+    if (status == THREE_LINK_MULTI_ES_OK) {
+        memcpy(x1, from, sizeof(double) * NX);
+    }
+    return status;
+}
+
 long three_link_multi_es_sample_count(long n_steps, long every)
 {
     if (n_steps < 0 || every < 1) {
@@ -536,7 +691,7 @@ int three_link_multi_es_simulate_observed(const double *x0, double t0, double dt
     three_link_multi_es_stats counters;
     double *current, *next;
     long k;
-    int status;
+    int status, adaptive;
     if (!x0 || !workspace || !samples
         || n_steps < 0 || every < 1 || !(dt > 0.0)
         || !isfinite(dt) || !isfinite(t0) || interval < 1) {
@@ -546,7 +701,16 @@ int three_link_multi_es_simulate_observed(const double *x0, double t0, double dt
         three_link_multi_es_default_options(&defaults);
         options = &defaults;
     }
+    if (!(options->rtol == 0.0 || (options->rtol >= MIN_TOLERANCE && isfinite(options->rtol)))
+        || !(options->atol == 0.0 || (options->atol >= MIN_TOLERANCE && isfinite(options->atol)))) {
+        return THREE_LINK_MULTI_ES_BAD_ARGUMENT;
+    }
+    adaptive = options->rtol > 0.0 || options->atol > 0.0;
     memset(&counters, 0, sizeof counters);
+    if (!adaptive && n_steps > 0) {
+        counters.smallest_dt = dt;
+        counters.largest_dt = dt;
+    }
     three_link_multi_es_workspace_init(workspace);   /* a new trajectory: no history carried in */
     current = workspace->state[0];
     next = workspace->state[1];
@@ -559,7 +723,12 @@ int three_link_multi_es_simulate_observed(const double *x0, double t0, double dt
         int iterations = 0;
         workspace->step_fallbacks = 0;
         workspace->step_splits = 0;
-        status = advance(current, dt, next, options, workspace, &iterations, 0);
+        if (adaptive) {
+            status = adaptive_interval(current, dt, next, options, workspace, &iterations, &counters);
+        } else {
+            status = advance(current, dt, next, options, workspace, &iterations, 0);
+            counters.accepted_steps = k;
+        }
         counters.full_newton_fallbacks += workspace->step_fallbacks;
         counters.split_steps += workspace->step_splits > 0;
         if (status != THREE_LINK_MULTI_ES_OK) {

@@ -70,7 +70,8 @@ extern "C" {
                                                  * factorisation */
 #define THREE_LINK_MULTI_VI_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define THREE_LINK_MULTI_VI_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0, every <
-                                                 * 1, interval < 1 or an unknown reuse_jacobian */
+                                                 * 1, interval < 1, an unknown reuse_jacobian or
+                                                 * a bad rtol or atol */
 #define THREE_LINK_MULTI_VI_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                                  * geometry's size of zero length, or passed
@@ -79,6 +80,8 @@ extern "C" {
                                                  * (docs/model.md, section 2) */
 #define THREE_LINK_MULTI_VI_INTERRUPTED 7       /* simulate_observed: the observer or
                                                  * control->stop asked to stop */
+#define THREE_LINK_MULTI_VI_STEP_TOO_SMALL 8    /* adaptive steps: the error test or Newton
+                                                 * failed at a step below 1e-12 dt */
 
 /* Values of the option reuse_jacobian. */
 #define THREE_LINK_MULTI_VI_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
@@ -130,6 +133,8 @@ typedef struct {
     double residual_tol;    /* default 1e-8; units of F */
     int warm_start;         /* default 1; continue from the previous solutions */
     int reuse_jacobian;     /* default 1; one of the JACOBIAN_* modes */
+    double rtol;            /* default 0.0; adaptive steps: relative local error, 0 or >= 1e-14; 0 with atol 0: fixed steps of dt */
+    double atol;            /* default 0.0; adaptive steps: absolute local error (rad, rad/s), 0 or >= 1e-14 */
 } three_link_multi_vi_options;
 
 /* Counters of one simulate call. */
@@ -140,6 +145,10 @@ typedef struct {
     int failed_iterations;  /* iterations spent in the failing step, 0 if none failed */
     long full_newton_fallbacks; /* steps whose kept Jacobian failed and that full Newton solved */
     long split_steps;       /* steps that Newton failed on whole and that were taken as two halves (recursively) */
+    long accepted_steps;    /* steps of the scheme taken: steps with fixed steps; adaptive: the accepted ones */
+    long rejected_steps;    /* adaptive: steps refused by the error test or Newton */
+    double smallest_dt;     /* the shortest accepted step (s) */
+    double largest_dt;      /* the longest accepted step (s) */
 } three_link_multi_vi_stats;
 
 /* Shared with a running simulate_observed (control may be NULL): another thread or a signal
@@ -175,6 +184,11 @@ typedef struct {
     double split_state[4][THREE_LINK_MULTI_VI_NX];  /* mid-points of split steps */
     long step_fallbacks;               /* full-Newton fallbacks of the last step() */
     long step_splits;                  /* halvings of the last step() */
+    /* Adaptive steps: the states of one attempt (start, one step, the two halves' middle and
+     * end), the controller's next step and the previous error estimate. */
+    double adaptive_state[4][THREE_LINK_MULTI_VI_NX];
+    double proposed_dt;
+    double previous_error;
     double sensitivity_rhs[THREE_LINK_MULTI_VI_NZ * 6];
     double s1_z[6 * THREE_LINK_MULTI_VI_NZ];
 } three_link_multi_vi_workspace;
@@ -243,7 +257,16 @@ long three_link_multi_vi_sample_count(long n_steps, long every);
 /* Run n_steps steps from x0 at time t0. Writes a sample row (layout above) at step 0 and at every
  * `every`-th step into samples[sample_count(n_steps, every) * NSAMPLE], the final state into
  * x_final[NX] (may be NULL) and counters into stats (may be NULL). On a failed step it stops and
- * returns the step's status; stats->steps tells how many steps (and so which rows) are valid. */
+ * returns the step's status; stats->steps tells how many steps (and so which rows) are valid.
+ *
+ * With options->rtol > 0 or options->atol > 0 the steps adapt: each interval of length dt (a
+ * "step" above: the inputs' and the samples' grid) is covered by steps whose lengths an error
+ * controller chooses, landing on the interval's end. The local error is estimated by step
+ * doubling in s = (phi, omega) and held to atol + rtol |s_i| in every entry; a step Newton fails
+ * is refused and retried shorter instead of stopping the run. stats->accepted_steps,
+ * rejected_steps, smallest_dt and largest_dt count them. "es" conserves energy on any sequence
+ * of step lengths, so its energy error stays at round-off while the step adapts; "vi" and
+ * "midpoint" are symplectic for a fixed step only. step() always takes one step of dt. */
 THREE_LINK_MULTI_VI_API
 int three_link_multi_vi_simulate(const double *x0, double t0, double dt, long n_steps, long every,
                                  const three_link_multi_vi_options *options,
