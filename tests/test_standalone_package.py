@@ -416,3 +416,67 @@ def test_example_accepts_good_arguments(plain_example, arguments):
     result = run([plain_example, *arguments])
     error, worst, limit = example_results(result)
     assert 1 <= worst <= limit, output(result)
+
+
+@pytest.mark.parametrize("method, order", [("es", 2), ("es", 4), ("vi", 2), ("midpoint", 4)])
+def test_adaptive_runs_are_clean_under_valgrind_and_the_sanitizers(tmp_path, method, order):
+    """simulate with adaptive steps (rtol, atol) on an actuated, damped scene: with the strict
+    flags the run completes, refuses at least one step (a first try at the whole interval), and
+    is clean under memcheck and ASan/UBSan."""
+    require_tools("gcc", "valgrind")
+    from chaingen.generate.package import generate_package, write_package
+
+    from helpers import load
+
+    package = write_package(generate_package(load("four_link_actuated"), method, 3,
+                                             order=order, sensitivities=False),
+                            tmp_path / "package")
+    manifest = json.loads((package / "chaingen.json").read_text())
+    prefix, sources = manifest["prefix"], manifest["sources"]
+    P = prefix.upper()
+    (package / "adaptive.c").write_text(f"""#include <stdio.h>
+#include "{prefix}.h"
+#define STEPS 20
+int main(void)
+{{
+    static {prefix}_workspace ws;
+    static double samples[(STEPS + 1) * {P}_NSAMPLE];
+    double phi[4] = {{0.3, -0.2, 0.1, 0.4}}, phidot[4] = {{0.5, 0.0, -0.3, 0.2}};
+    double u[STEPS * {P}_NU] = {{0.0}}, x[{P}_NX];
+    {prefix}_options options;
+    {prefix}_stats stats;
+    int status;
+    {prefix}_default_options(&options);
+    options.rtol = 1e-8;
+    options.atol = 1e-8;
+    {prefix}_workspace_init(&ws);
+    status = {prefix}_initial_state(phi, phidot, x, &ws);
+    if (status == {P}_OK) {{
+        status = {prefix}_simulate(x, 0.0, 0.1, STEPS, 1, u, &options, &ws, samples, NULL,
+                                   &stats);
+    }}
+    printf("%d %ld %ld %ld %g %g\\n", status, stats.steps, stats.accepted_steps,
+           stats.rejected_steps, stats.smallest_dt, stats.largest_dt);
+    options.rtol = 1e-20;   /* below the floor: refused */
+    if (status == {P}_OK && {prefix}_simulate(x, 0.0, 0.1, STEPS, 1, u, &options, &ws, samples,
+                                              NULL, &stats) != {P}_BAD_ARGUMENT) {{
+        return 98;
+    }}
+    return status;
+}}
+""")
+    for name, flags, runner in (("memcheck", ["-g", "-O1"],
+                                 ["valgrind", "--error-exitcode=99", "--track-origins=yes"]),
+                                ("sanitized", SANITIZE, [])):
+        binary = tmp_path / f"adaptive.{name}"
+        check(["gcc", *flags, *STRICT, f"-I{package}", *(package / s for s in sources),
+               package / "adaptive.c", "-lm", "-o", binary])
+        result = run([*runner, binary])
+        if runner:
+            valgrind_clean(result)
+        else:
+            assert result.returncode == 0, output(result)
+        status, steps, accepted, rejected, smallest, largest = result.stdout.split()
+        assert (int(status), int(steps)) == (0, 20)
+        assert int(accepted) >= 40 and int(rejected) >= 1
+        assert 0 < float(smallest) <= float(largest) <= 0.05
