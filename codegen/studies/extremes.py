@@ -67,13 +67,19 @@ def run(scene: Scene, method: str, *, dt: float, t_end: float, every: int = 1,
         return "stops", f"{error}"
     energy = np.abs(result.energy_error).max()
     scale = max(abs(result.energy[0]), 1.0)
+    # Adaptive steps count Newton iterations and time per sample interval, not per step.
+    step = "interval" if result.adaptive else "step"
     details = (f"max abs energy error {energy:.2e} J ({energy / scale:.1e} relative), "
                f"constraint {result.constraint_error.max():.1e}, Newton mean "
-               f"{result.mean_newton_iterations:.2f} / max {result.max_newton_iterations}, "
-               f"{result.wall_time / max(steps, 1) * 1e6:.2f} us/step")
+               f"{result.mean_newton_iterations:.2f} / max {result.max_newton_iterations} "
+               f"a {step}, {result.wall_time / max(steps, 1) * 1e6:.2f} us/{step}")
     if result.full_newton_fallbacks or result.split_steps:
         details += (f"; fallbacks: {result.full_newton_fallbacks} steps by full Newton, "
                     f"{result.split_steps} split")
+    if result.adaptive:
+        details += (f"; adaptive steps: {result.accepted_steps} accepted, "
+                    f"{result.rejected_steps} rejected, dt from {result.smallest_dt:.2g} to "
+                    f"{result.largest_dt:.2g} s")
     return "works", details
 
 
@@ -100,6 +106,24 @@ def edge_stiff_springs(quick: bool) -> list[Outcome]:
                 rows.append(Outcome("stiff springs", method,
                                     f"k = {stiffness:.0e} N/m, dt = {dt} s", result, details))
     return rows
+
+
+def edge_adaptive_steps(quick: bool) -> list[Outcome]:
+    """Where fixed steps of 0.01 s stop or struggle, es with adaptive steps (rtol = atol =
+    1e-8, the sample interval 0.01 s): the spring of k = 1e6 (fixed steps collapse a segment
+    in the first step), and the 1:1000:1 chain with the default options and with full Newton
+    (which needed a split step at fixed steps)."""
+    adaptive = {"rtol": 1e-8, "atol": 1e-8}
+    masses = [1.0, 1e3, 1.0]
+    ratio = chain(3, masses=masses, inertias=list(masses))
+    cases = [("k = 1e+06 N/m", chain(3, stiffness=1e6), {}, 0.5 if quick else 5.0),
+             ("links 1:1000:1", ratio, {}, 10.0 if quick else 50.0),
+             ("links 1:1000:1, full Newton", ratio, {"reuse_jacobian": 0},
+              10.0 if quick else 50.0)]
+    return [Outcome("adaptive steps", "es", f"{label}, rtol = atol = 1e-8, samples every "
+                    f"0.01 s, {t_end:g} s", *run(scene, "es", dt=0.01, t_end=t_end,
+                                                 options={**adaptive, **options}))
+            for label, scene, options, t_end in cases]
 
 
 def edge_mass_ratios(quick: bool) -> list[Outcome]:
@@ -274,7 +298,8 @@ def edge_newton_failure(quick: bool) -> list[Outcome]:
     return rows
 
 
-EDGES = (edge_large_steps, edge_stiff_springs, edge_mass_ratios, edge_hard_newton,
+EDGES = (edge_large_steps, edge_stiff_springs, edge_adaptive_steps, edge_mass_ratios,
+         edge_hard_newton,
          edge_zero_inertia,
          edge_chain_length, edge_largest_n, edge_long_run, edge_com_at_joint,
          edge_collapsing_spring, edge_newton_failure)
