@@ -6,6 +6,7 @@ benchmark marker runs the quick benchmark itself (about a minute).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import subprocess
@@ -22,7 +23,12 @@ from chaingen.scene.kinematics import spring_geometry
 from chaingen.studies.bench import bench_config
 from chaingen.studies.bench.config import VARIANTS
 from chaingen.studies.bench.harness import Harness
-from chaingen.studies.bench.headlines import equal_error_headline, headlines, interpolate_cost
+from chaingen.studies.bench.headlines import (
+    compiled_peer_headlines,
+    equal_error_headline,
+    headlines,
+    interpolate_cost,
+)
 from chaingen.studies.bench.report import machine_description, markdown
 from chaingen.studies.bench.runs import RunRow
 from chaingen.studies.bench.scaling import ScalingRow
@@ -30,7 +36,7 @@ from chaingen.studies.bench.scenes import scaling_scene
 
 from helpers import ROOT, load
 
-HEADLINE_KEYS = ("a", "b", "c", "d", "e")
+HEADLINE_KEYS = ("a", "b", "c", "d", "e", "f", "g", "h")
 
 
 # -- options ---------------------------------------------------------------------------------
@@ -156,6 +162,67 @@ def test_headline_c_bounds_when_every_es_run_is_more_accurate():
     assert headline.passed is None and "not measured" in headline.measured
 
 
+# -- headlines f-h: against the compiled peers -------------------------------------------------
+
+def _held_row(family: str, method: str, cost: float, trajectory: float,
+              energy: float) -> RunRow:
+    variant = VARIANTS[0].label if family == "chaingen" else "-"
+    return RunRow(scene="s", family=family, method=method, variant=variant, setting="x",
+                  t_end=50.0, run_seconds=cost, early_trajectory_error=trajectory,
+                  energy_error=energy)
+
+
+HELD_ROWS = [
+    _held_row("chaingen", "es K=3", 1e-3, 1e-5, 1e-11),
+    _held_row("chaingen", "es K=3", 2e-3, 1e-7, 1e-12),
+    _held_row("chaingen", "es K=3", 4e-3, 1e-9, 1e-13),
+    _held_row("MuJoCo", "MuJoCo RK4", 1e-2, 1e-7, 1e-11),
+    _held_row("compiled", "numbalsoda-DOP853", 3e-3, 5e-7, 5e-11),
+    _held_row("compiled", "numbalsoda-DOP853", 5e-3, 1e-9, 1e-12),
+    _held_row("compiled", "CVODES-BDF", 1e-3, 1e-4, 1e-6),          # never accurate enough
+]
+
+
+def test_headlines_f_g_take_the_cheapest_runs_holding_both_errors():
+    f_mujoco, f_compiled, g, h6, h8 = compiled_peer_headlines(HELD_ROWS)
+    assert [h.key for h in (f_mujoco, f_compiled, g, h6, h8)] == ["f", "f", "g", "h", "h"]
+    assert f_mujoco.measured.startswith("0.2 (2.00 ms") and f_mujoco.passed is True
+    assert f_compiled.measured.startswith("0.667 (2.00 ms") and f_compiled.passed is True
+    assert "numbalsoda-DOP853" in f_compiled.measured
+    assert g.measured.startswith("0.8 (4.00 ms") and g.passed is True
+    slow = [row if row.family != "chaingen" else dataclasses.replace(
+        row, run_seconds=row.run_seconds * 10) for row in HELD_ROWS]
+    assert compiled_peer_headlines(slow)[1].passed is False          # 20 ms / 3 ms
+
+
+def test_headline_h_interpolates_each_line():
+    h6 = compiled_peer_headlines(HELD_ROWS)[3]
+    # ours: between 1e-5 and 1e-7 rad, 1e-6 is half-way in log: sqrt(1 ms * 2 ms)
+    assert h6.measured.startswith(f"ours: es K=3 {math.sqrt(2):.3g} ms")
+    # the peers' runs are all more accurate: their cheapest bounds the ratio from above
+    assert f"MuJoCo RK4 <= {1e-2 / math.sqrt(2e-6):.3g}" in h6.measured
+    assert f"numbalsoda-DOP853 <= {3e-3 / math.sqrt(2e-6):.3g}" in h6.measured
+    assert "not reaching 1e-06 rad: CVODES-BDF" in h6.measured
+    assert h6.target == "none" and h6.mark == "measured"
+
+
+def test_headlines_f_to_h_without_runs_say_so():
+    for found in (compiled_peer_headlines([]),
+                  compiled_peer_headlines([row for row in HELD_ROWS
+                                           if row.family == "chaingen"]),
+                  compiled_peer_headlines([row for row in HELD_ROWS
+                                           if row.family != "chaingen"])):
+        assert all(h.passed is None and "not" in h.measured for h in found), found
+        assert all(h.mark == "not measured" for h in found)
+    peers_only = compiled_peer_headlines([row for row in HELD_ROWS
+                                          if row.family != "chaingen"])[3]
+    assert "the peers at it: MuJoCo RK4 <= 10 ms, numbalsoda-DOP853 <= 3 ms" in peers_only.measured
+    only_inaccurate = [HELD_ROWS[0], HELD_ROWS[-1]]
+    f_mujoco, f_compiled, *_ = compiled_peer_headlines(only_inaccurate)
+    assert "MuJoCo RK4's runs not in this run" in f_mujoco.measured
+    assert "no run of ours holds both" in f_compiled.measured
+
+
 # -- the harness counts what the runtime counts ----------------------------------------------
 
 @pytest.mark.compile
@@ -187,7 +254,8 @@ def check_document(path: Path) -> None:
     assert re.search(r"\| (pass|FAIL|not measured) \|", headline)
     machine = text.split("## Machine", 1)[1].split("\n## ", 1)[0]
     for item in ("- CPU:", "- cores:", "- memory:", "- OS:", "- C compiler:", "- our flags:",
-                 "- MuJoCo:", "- SciPy:", "- Python:", "numpy, sympy, casadi"):
+                 "- MuJoCo:", "- SciPy:", "- compiled peers:", "- Python:",
+                 "numpy, sympy, casadi"):
         assert item in machine, item
     assert "Written by `chaingen bench" in text
     figures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)

@@ -8,8 +8,9 @@ Four parts, all measured side by side on one machine in one process (the scaling
 child processes, so that a size that takes too long can be stopped):
 
 1. Reference scenes (scenes/three_link_*.toml, the scene's own run: 50 s from its initial
-   state). Every scheme at a dt series, MuJoCo (Euler, implicitfast, RK4) at its own dt series
-   and SciPy's solve_ivp (DOP853, Radau) at a tolerance series. For each run: CPU time per step
+   state). Every scheme at a dt series, MuJoCo (Euler, implicitfast, RK4) at its own dt series,
+   SciPy's solve_ivp (DOP853, Radau) and the compiled peers (numbalsoda LSODA and DOP853,
+   CVODES BDF and Adams) at a tolerance series. For each run: CPU time per step
    and of the whole run, t_realtime, max |H - H_0|, max constraint error, the trajectory error
    at t_end against a tight DOP853 reference (codegen.scipy_peer.reference_solution), and for
    ours the Newton iterations per step and the step's cost in residual-and-Jacobian

@@ -61,13 +61,17 @@ MUJOCO_INTEGRATORS = ("Euler", "implicitfast", "RK4")
 MUJOCO_DTS = (0.01, 0.005, 0.0025, 0.001, 5e-4, 2.5e-4, 1e-4)
 SCIPY_TOLERANCES = (("DOP853", tuple(10.0 ** -k for k in range(4, 13))),
                     ("Radau", tuple(10.0 ** -k for k in range(4, 11))))
+#: The compiled peers (chaingen.reference.compiled_peers.METHODS, named here so that the
+#: config imports none of them) at DOP853's tolerances; their runs take milliseconds.
+COMPILED_TOLERANCES = tuple((method, SCIPY_TOLERANCES[0][1]) for method in (
+    "numbalsoda-LSODA", "numbalsoda-DOP853", "CVODES-BDF", "CVODES-Adams"))
 SCALING_NS = (2, 3, 5, 10, 20)
 #: (method, quadrature) of the scaling series.
 SCALING_METHODS = (("es", 3), ("vi", 3), ("midpoint", 3))
 #: dt of the scaling series' per-step time, and the smaller ones tried if a scheme fails at it.
 SCALING_DTS = (0.01, 0.005, 0.0025)
 MUJOCO_TIMED_STEPS = 20_000
-#: A SciPy run shorter than this (CPU s) is repeated and its median taken.
+#: A SciPy or compiled peer's run shorter than this (CPU s) is repeated and its median taken.
 SCIPY_REPEAT_BELOW = 1.0
 
 #: Targets of issue 6.
@@ -80,6 +84,14 @@ TARGET_BUILD_SECONDS = 20.0    # d: generate + build at n = 20
 TARGET_SCALING_RATIO = 5.0     # d: es step / MuJoCo RK4 step at n = 20
 TARGET_STEP_OVER_EVALUATION = 2.5   # e: es K=3 step / one residual-and-Jacobian evaluation
 HEADLINE_DT = 0.01
+#: f, g: (trajectory error at EARLY_T [rad], energy error [J]) that a run must hold both of;
+#: the cheapest such run of ours against the cheapest of a peer's.
+HELD_ERRORS = ((1e-6, 1e-10), (1e-8, 1e-10))
+#: f, g: our best CPU / the peer's CPU at the held errors (ours at least as fast).
+TARGET_OURS_OVER_PEER = 1.0
+#: h: trajectory errors at EARLY_T [rad] at which every peer's CPU is compared with our best
+#: (no target).
+TRAJECTORY_LEVELS = (1e-6, 1e-8)
 #: The early time of the second trajectory error: over the standard run's 50 s the reference
 #: scenes amplify differences (1e-12 rad at t = 0 becomes 1e-5 to 1e-4 at 50 s), so only an
 #: error taken this early measures a method's accuracy (the reference is good to 1e-14 there).
@@ -101,6 +113,7 @@ class BenchConfig:
     mujoco_integrators: tuple[str, ...]
     mujoco_dts: tuple[float, ...]
     scipy_tolerances: tuple[tuple[str, tuple[float, ...]], ...]
+    compiled_tolerances: tuple[tuple[str, tuple[float, ...]], ...]
     scaling_ns: tuple[int, ...]
     scaling_methods: tuple[tuple[str, int], ...]
     timeout: float
@@ -202,6 +215,8 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
         mujoco_dts=(0.01, 0.001) if quick else MUJOCO_DTS,
         scipy_tolerances=((("DOP853", (1e-6, 1e-10)), ("Radau", (1e-6,))) if quick
                           else SCIPY_TOLERANCES),
+        compiled_tolerances=(tuple((method, (1e-6, 1e-10)) for method, _ in COMPILED_TOLERANCES)
+                             if quick else COMPILED_TOLERANCES),
         scaling_ns=ns, scaling_methods=SCALING_METHODS, timeout=float(timeout),
         repeats=3 if quick else 7, scipy_repeats=1 if quick else 3,
         scaling_steps=200 if quick else 1000,

@@ -5,10 +5,12 @@ from pathlib import Path
 
 from ...views.figure import matplotlib_figure, save_png
 from .config import EARLY_T, HEADLINE_N, TARGET_BUILD_SECONDS, TARGET_EQUAL_ERROR, VARIANTS
-from .runs import RunRow
+from .runs import COMPILED_FAMILY, RunRow
 from .scaling import ScalingRow
 
 MARKERS = "osD^vP*Xhp<>"
+#: Colours of the compiled peers, apart from the ten of ours and the other peers (C0..C9).
+COMPILED_COLOURS = ("black", "dimgrey", "saddlebrown", "darkcyan")
 
 
 def _save(figure, path: Path) -> Path:
@@ -17,11 +19,15 @@ def _save(figure, path: Path) -> Path:
 
 
 def _line_style(family: str, method_index: int, variant: str) -> dict:
-    """Colour and marker per method; ours solid, MuJoCo dashed, SciPy dotted; a Newton variant
-    other than the defaults dash-dotted with hollow markers."""
+    """Colour and marker per method; ours solid, MuJoCo dashed, SciPy dotted, the compiled
+    peers dash-dot-dotted in colours of their own; a Newton variant other than the defaults
+    dash-dotted with hollow markers."""
     style = {"color": f"C{method_index % 10}", "marker": MARKERS[method_index % len(MARKERS)],
-             "linestyle": {"chaingen": "-", "MuJoCo": "--", "SciPy": ":"}[family],
+             "linestyle": {"chaingen": "-", "MuJoCo": "--", "SciPy": ":",
+                           COMPILED_FAMILY: (0, (3, 1, 1, 1, 1, 1))}[family],
              "linewidth": 1.2, "markersize": 5}
+    if family == COMPILED_FAMILY:
+        style["color"] = COMPILED_COLOURS[method_index % len(COMPILED_COLOURS)]
     if variant not in ("-", VARIANTS[0].label):
         style.update(linestyle="-.", markerfacecolor="none")
     return style
@@ -57,7 +63,7 @@ def plot_work_precision(name: str, rows: list[RunRow], path: Path) -> Path:
                        textcoords="offset points", fontsize=7, color="grey")
     panels[1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
     figure.suptitle(f"{name}: work-precision, t_end = {rows[0].t_end:g} s (ours: solid, "
-                    "MuJoCo: dashed, SciPy: dotted)")
+                    "MuJoCo: dashed, SciPy: dotted, compiled peers: dash-dot-dot)")
     figure.tight_layout()
     return _save(figure, path)
 

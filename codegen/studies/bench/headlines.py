@@ -6,22 +6,26 @@ from dataclasses import dataclass
 
 from ...scene import load_reference_scene
 from .config import (
+    EARLY_T,
     HEADLINE_DT,
     HEADLINE_N,
     HEADLINE_SCENE,
+    HELD_ERRORS,
     TARGET_BUILD_SECONDS,
     TARGET_ENERGY_ES,
     TARGET_EQUAL_ERROR,
+    TARGET_OURS_OVER_PEER,
     TARGET_RATIO_ES,
     TARGET_RATIO_VI,
     TARGET_SCALING_RATIO,
     TARGET_SCIPY_OVER_ES,
     TARGET_STEP_OVER_EVALUATION,
+    TRAJECTORY_LEVELS,
     VARIANTS,
     BenchConfig,
     Variant,
 )
-from .runs import RunRow, method_label
+from .runs import COMPILED_FAMILY, RunRow, method_label
 from .scaling import ScalingRow
 
 
@@ -48,8 +52,15 @@ def interpolate_cost(points, target: float) -> float | None:
     return None
 
 
+#: The target of a headline that compares without one.
+NO_TARGET = "none"
+
+
 @dataclass(frozen=True)
 class Headline:
+    """One row of the headline table. passed: the target met or not, None if not measured;
+    for a headline without a target (target NO_TARGET) True once measured."""
+
     key: str
     claim: str
     variant: str
@@ -59,6 +70,8 @@ class Headline:
 
     @property
     def mark(self) -> str:
+        if self.target == NO_TARGET and self.passed is not None:
+            return "measured"
         return {True: "pass", False: "FAIL", None: "not measured"}[self.passed]
 
 
@@ -135,9 +148,134 @@ def equal_error_headline(rows, variant: Variant, es_method: str) -> Headline:
                     f"J) do not reach {TARGET_EQUAL_ERROR:.0e}: not measured", target_text, None)
 
 
+def _setting(row: RunRow) -> str:
+    variant = "" if row.variant in ("-", VARIANTS[0].label) else f", {row.variant}"
+    return f"{row.method} {row.setting}{variant}"
+
+
+def _holding(rows, trajectory: float, energy: float) -> RunRow | None:
+    """The cheapest run (run CPU) of `rows` whose trajectory error at the early time is at
+    most `trajectory` and whose energy error at most `energy`; None if there is none."""
+    held = [row for row in rows if not row.failure and row.run_seconds
+            and row.early_trajectory_error is not None and row.energy_error is not None
+            and row.early_trajectory_error <= trajectory and row.energy_error <= energy]
+    return min(held, key=lambda row: row.run_seconds, default=None)
+
+
+def _closest(rows) -> str:
+    measured = [row for row in rows if not row.failure and row.run_seconds]
+    trajectories = [row.early_trajectory_error for row in measured
+                    if row.early_trajectory_error is not None]
+    energies = [row.energy_error for row in measured if row.energy_error is not None]
+    if not trajectories or not energies:
+        return "no errors measured"
+    return f"its best: {min(trajectories):.1e} rad, {min(energies):.1e} J, not in one run"
+
+
+def held_error_headline(key: str, rows, peer: str, trajectory: float,
+                        energy: float) -> Headline:
+    """Our best CPU / the peer's, each the cheapest measured run that holds both the
+    trajectory error at the early time and the energy error (no interpolation: two errors
+    have no common work-precision line). peer: a method label ("MuJoCo RK4"), or
+    COMPILED_FAMILY for the cheapest run of any compiled peer."""
+    early = min(EARLY_T, rows[0].t_end) if rows else EARLY_T
+    name = "the best compiled peer" if peer == COMPILED_FAMILY else peer
+    claim = (f"our best CPU / {name}'s, cheapest runs holding {trajectory:.0e} rad at "
+             f"t = {early:g} s and {energy:.0e} J, standard run")
+    target_text = f"<= {TARGET_OURS_OVER_PEER:g}"
+    ours_rows = [row for row in rows if row.family == "chaingen"]
+    peer_rows = [row for row in rows
+                 if (row.family if peer == COMPILED_FAMILY else row.method) == peer]
+    if not ours_rows or not peer_rows:
+        missing = ("our runs" if not ours_rows else "no compiled peer's runs"
+                   if peer == COMPILED_FAMILY else f"{name}'s runs")
+        return Headline(key, claim, "-", f"{missing} not in this run", target_text, None)
+    ours, theirs = _holding(ours_rows, trajectory, energy), _holding(peer_rows, trajectory,
+                                                                       energy)
+    if ours is None or theirs is None:
+        who, which = ("ours", ours_rows) if ours is None else (name, peer_rows)
+        return Headline(key, claim, "-" if ours is None else ours.variant,
+                        f"no run of {who} holds both ({_closest(which)}): not measured",
+                        target_text, None)
+    ratio = ours.run_seconds / theirs.run_seconds
+    return Headline(key, claim, ours.variant,
+                    f"{ratio:.3g} ({ours.run_seconds * 1e3:.2f} ms, {_setting(ours)} / "
+                    f"{theirs.run_seconds * 1e3:.2f} ms, {_setting(theirs)})", target_text,
+                    ratio <= TARGET_OURS_OVER_PEER)
+
+
+def _cost_at(rows, level: float) -> tuple[float, str] | None:
+    """(CPU, bound) at trajectory error `level` along one line's runs: interpolated
+    (interpolate_cost; bound ""), or, when every run is more accurate, its cheapest run's
+    cost, which bounds the cost at `level` from above (bound "<="); None if not reached."""
+    points = [(row.run_seconds, row.early_trajectory_error) for row in rows
+              if not row.failure and row.run_seconds and row.early_trajectory_error]
+    cost = interpolate_cost(points, level)
+    if cost is not None:
+        return cost, ""
+    if points and max(error for _, error in points) < level:
+        return min(points)[0], "<="
+    return None
+
+
+def trajectory_error_headline(rows, level: float) -> Headline:
+    """h: every peer's CPU / our best CPU at trajectory error `level` at the early time, each
+    line (method and Newton variant) interpolated as in headline c; no target."""
+    early = min(EARLY_T, rows[0].t_end) if rows else EARLY_T
+    claim = (f"every peer's CPU / our best CPU at trajectory error {level:.0e} rad at "
+             f"t = {early:g} s, standard run (interpolated)")
+    lines: dict[tuple[str, str], list[RunRow]] = {}
+    for row in rows:
+        lines.setdefault((row.method, row.variant), []).append(row)
+    ours = [(cost, key) for key, line in lines.items() if line[0].family == "chaingen"
+            for cost in [_cost_at(line, level)] if cost is not None]
+    peers = [key for key, line in lines.items() if line[0].family != "chaingen"]
+    if not peers:
+        return Headline("h", claim, "-", "no peer in this run: not measured", NO_TARGET, None)
+    costs = {key: _cost_at(lines[key], level) for key in peers}
+    if not ours:
+        errors = [row.early_trajectory_error for row in rows if row.family == "chaingen"
+                  and not row.failure and row.early_trajectory_error]
+        best = f" (our best: {min(errors):.1e} rad)" if errors else ""
+        reached = ", ".join(f"{key[0]} {cost[1] + ' ' if cost[1] else ''}"
+                            f"{cost[0] * 1e3:.3g} ms"
+                            for key, cost in costs.items() if cost is not None)
+        return Headline("h", claim, "-", f"no run of ours reaches it{best}: not measured"
+                        + (f"; the peers at it: {reached}" if reached else ""), NO_TARGET, None)
+    (our_cost, our_bound), (method, variant) = min(ours)
+    parts, missed = [], []
+    for key in peers:
+        cost = costs[key]
+        if cost is None:
+            missed.append(key[0])
+            continue
+        # An upper bound on the peer's cost bounds the ratio from above, one on ours from
+        # below; with both, the ratio is only an estimate.
+        bound = {("", ""): "", ("<=", ""): "<= ", ("", "<="): ">= "}.get((cost[1], our_bound),
+                                                                          "~ ")
+        parts.append((cost[0] / our_cost, f"{key[0]} {bound}{cost[0] / our_cost:.3g}"))
+    text = (f"ours: {method}{'' if variant in ('-', VARIANTS[0].label) else f', {variant}'} "
+            f"{our_bound + ' ' if our_bound else ''}{our_cost * 1e3:.3g} ms; "
+            + ", ".join(part for _, part in sorted(parts)))
+    if missed:
+        text += f"; not reaching {level:.0e} rad: {', '.join(missed)}"
+    return Headline("h", claim, variant, text, NO_TARGET, True)
+
+
+def compiled_peer_headlines(rows) -> list[Headline]:
+    """f (HELD_ERRORS[0]: against MuJoCo RK4 and the best compiled peer), g (HELD_ERRORS[1]:
+    against the best compiled peer), h (TRAJECTORY_LEVELS: every peer)."""
+    (trajectory_f, energy_f), (trajectory_g, energy_g) = HELD_ERRORS
+    return [held_error_headline("f", rows, "MuJoCo RK4", trajectory_f, energy_f),
+            held_error_headline("f", rows, COMPILED_FAMILY, trajectory_f, energy_f),
+            held_error_headline("g", rows, COMPILED_FAMILY, trajectory_g, energy_g),
+            *[trajectory_error_headline(rows, level) for level in TRAJECTORY_LEVELS]]
+
+
 def headlines(reference: dict[str, list[RunRow]], scaling: list[ScalingRow] | None,
               config: BenchConfig) -> list[Headline]:
-    """Rows a-e of the issue, one per Newton variant, from this run's measurements."""
+    """Rows a-e of the issue, one per Newton variant, and f-h against the compiled peers
+    (over every configuration of ours), from this run's measurements."""
     rows = reference.get(HEADLINE_SCENE, [])
     scene = load_reference_scene(HEADLINE_SCENE)
     es = method_label(scene, "es", 3)
@@ -172,6 +310,7 @@ def headlines(reference: dict[str, list[RunRow]], scaling: list[ScalingRow] | No
                 variant.label, f"{ratio:.2f} ({_us(es_row.step_seconds)} / "
                 f"{_us(es_row.step_seconds / ratio)})",
                 f"<= {TARGET_STEP_OVER_EVALUATION:g}", ratio <= TARGET_STEP_OVER_EVALUATION))
+    found += compiled_peer_headlines(rows)
     return sorted(found, key=lambda headline: headline.key)   # stable: variants stay in order
 
 

@@ -148,6 +148,11 @@ def machine_description() -> list[tuple[str, str]]:
         ("SciPy", f"{version('scipy')} (right-hand side and Jacobian: CasADi C compiled by "
                   "chaingen.reference.scipy_peer with the runtime's default flags; integrator in "
                   "Python)"),
+        ("compiled peers", f"numbalsoda {version('numbalsoda')} with numba "
+                           f"{version('numba')} (LSODA, DOP853; right-hand side: the SciPy "
+                           "peer's compiled C, called from a numba cfunc), CVODES of CasADi "
+                           f"{version('casadi')} (the ODE and its Jacobian as CasADi C, built "
+                           "with the runtime's default flags)"),
         ("Python", platform.python_version()),
         ("numpy, sympy, casadi, matplotlib",
          f"{version('numpy')}, {version('sympy')}, {version('casadi')}, "
@@ -165,9 +170,13 @@ HOW_MEASURED = """\
   program calling the generated step over the whole run (`chaingen.studies.bench.harness`),
   MuJoCo from one `mj_step(model, data, nstep=N)` call (at most {mujoco_steps} steps a repeat:
   its cost per step does not depend on the state), SciPy from `solve_ivp` alone (right-hand side and
-  Jacobian compiled; its steps and their error control run in Python). Run CPU = per step x
-  steps for ours and MuJoCo; t_realtime = run CPU / simulated time.
-- Max energy error: max |H - H_0| over every step of the run (SciPy: over its accepted steps).
+  Jacobian compiled; its steps and their error control run in Python), the compiled peers from
+  their one integrator call (`chaingen.reference.compiled_peers`: numbalsoda's LSODA and DOP853
+  on the same compiled right-hand side, CVODES BDF with Newton and Adams with functional
+  iteration through CasADi; the whole loop compiled, numba's compilation done before). Run
+  CPU = per step x steps for ours and MuJoCo; t_realtime = run CPU / simulated time.
+- Max energy error: max |H - H_0| over every step of the run (SciPy: over its accepted steps;
+  the compiled peers: over their output every 0.01 s, which they interpolate in the timed call).
   Trajectory error: max_i |phi_i(t) - phi_ref,i(t)|, each difference wrapped to [-pi, pi),
   against SciPy DOP853 at rtol = atol = 2.2e-14 (`chaingen.reference.scipy_peer`), at t_end and at
   t = {early_t:g} s (the plots use the latter; SciPy's run to it is a second, untimed one).
@@ -196,8 +205,10 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
              "is edited by hand." + (" **Quick mode**: a smoke test with short runs and few "
                                      "series, not the benchmark." if config.quick else ""),
              "", "## Headline", "",
-             "The issue's targets, measured side by side in this run (a-c, e on "
-             f"{HEADLINE_SCENE}, standard run; d on the scaling series).", "",
+             "The issue's targets, measured side by side in this run (a-c, e-h on "
+             f"{HEADLINE_SCENE}, standard run; d on the scaling series). f and g compare the "
+             "cheapest measured runs that hold both errors (not interpolated), h interpolates "
+             "each method's CPU at a trajectory error as c does at an energy error.", "",
              headline_table(found), "", "## Machine", ""]
     lines += [f"- {key}: {value}" for key, value in machine]
     lines += ["", "## How it is measured", "",

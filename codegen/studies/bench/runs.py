@@ -12,6 +12,10 @@ How each side is timed (CPU time, process clock, the compiled loop only):
 - SciPy: ScipyRun.cpu_time of simulate_scipy (solve_ivp alone; the right-hand side and
   Jacobian are compiled C), per step = cpu_time / accepted steps; energy error over the
   accepted steps.
+- compiled peers (numbalsoda LSODA and DOP853 on the same compiled right-hand side, CVODES
+  BDF and Adams through CasADi): ScipyRun.cpu_time of simulate_compiled (the one integrator
+  call; numba's compilation warmed up before), median of up to `repeats` runs; per step where
+  the library counts steps (CVODES); energy error over samples every 0.01 s.
 """
 from __future__ import annotations
 
@@ -38,13 +42,16 @@ from .config import (
 )
 from .harness import Harness, HarnessError
 
+#: The family of the compiled peers (numbalsoda, CVODES) in rows, tables and figures.
+COMPILED_FAMILY = "compiled"
+
 
 @dataclass(frozen=True)
 class RunRow:
     """One run on a reference scene: a scheme or peer at one dt or tolerance."""
 
     scene: str
-    family: str                      # "chaingen", "MuJoCo", "SciPy"
+    family: str                      # "chaingen", "MuJoCo", "SciPy", COMPILED_FAMILY
     method: str                      # "es K=3", "vi", "MuJoCo RK4", "SciPy DOP853", ...
     variant: str                     # Newton variant of ours, "-" for peers
     setting: str                     # "dt = 0.01 s", "rtol = atol = 1e-08"
@@ -235,43 +242,85 @@ def mujoco_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
 
 
 
+def _tolerance_rows(scene: Scene, name: str, t_end: float, reference_angles, progress, *,
+                    simulate, family: str, label: str, method: str, tolerances,
+                    repeats: int) -> list[RunRow]:
+    """Rows of one peer that integrates to a tolerance (simulate_scipy's signature and record):
+    run CPU the median of up to `repeats` runs shorter than SCIPY_REPEAT_BELOW, the early
+    trajectory error from a second, untimed run to EARLY_T. A record without a step count
+    (n_steps 0) gives a row without steps and per-step time."""
+    rows = []
+    for tolerance in tolerances:
+        base = dict(scene=name, family=family, method=label, variant="-",
+                    setting=f"rtol = atol = {tolerance:.0e}", t_end=t_end, tolerance=tolerance)
+        try:
+            run = simulate(scene, method, tolerance, tolerance, t_end)
+            cpu = [run.cpu_time]
+            while len(cpu) < repeats and run.cpu_time < SCIPY_REPEAT_BELOW:
+                cpu.append(simulate(scene, method, tolerance, tolerance, t_end).cpu_time)
+        except ScipyPeerError as error:
+            rows.append(RunRow(**base, failure=str(error)))
+            progress(f"{name} {label} tol={tolerance:.0e}: failed: {error}")
+            continue
+        run_seconds = float(np.median(cpu))
+        early = None
+        if reference_angles[1] is not None:
+            try:   # untimed: the same integrator and tolerance up to the early time
+                early = angle_error(simulate(scene, method, tolerance, tolerance,
+                                             min(EARLY_T, t_end)).final_angles,
+                                    reference_angles[1])
+            except ScipyPeerError:
+                early = None
+        n_steps = run.n_steps or None
+        rows.append(RunRow(
+            **base, n_steps=n_steps,
+            step_seconds=run_seconds / n_steps if n_steps else None,
+            run_seconds=run_seconds, energy_error=run.max_energy_error,
+            trajectory_error=(angle_error(run.final_angles, reference_angles[0])
+                              if reference_angles[0] is not None else None),
+            early_trajectory_error=early))
+        progress(f"{name} {label} tol={tolerance:.0e}: {run_seconds * 1e3:.1f} ms, "
+                 f"{run.n_steps or 'uncounted'} steps, energy {run.max_energy_error:.1e}")
+    return rows
+
+
 def scipy_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
                reference_angles, progress) -> list[RunRow]:
     from ...reference.scipy_peer import simulate_scipy
 
     rows = []
     for method, tolerances in config.scipy_tolerances:
-        for tolerance in tolerances:
-            base = dict(scene=name, family="SciPy", method=f"SciPy {method}", variant="-",
-                        setting=f"rtol = atol = {tolerance:.0e}", t_end=t_end,
-                        tolerance=tolerance)
-            try:
-                run = simulate_scipy(scene, method, tolerance, tolerance, t_end)
-                cpu = [run.cpu_time]
-                while len(cpu) < config.scipy_repeats and run.cpu_time < SCIPY_REPEAT_BELOW:
-                    cpu.append(simulate_scipy(scene, method, tolerance, tolerance,
-                                              t_end).cpu_time)
-            except ScipyPeerError as error:
-                rows.append(RunRow(**base, failure=str(error)))
-                progress(f"{name} SciPy {method} tol={tolerance:.0e}: failed: {error}")
-                continue
-            run_seconds = float(np.median(cpu))
-            early = None
-            if reference_angles[1] is not None:
-                try:   # untimed: the same integrator and tolerance up to the early time
-                    early = angle_error(simulate_scipy(scene, method, tolerance, tolerance,
-                                                       min(EARLY_T, t_end)).final_angles,
-                                        reference_angles[1])
-                except ScipyPeerError:
-                    early = None
-            rows.append(RunRow(
-                **base, n_steps=run.n_steps, step_seconds=run_seconds / max(run.n_steps, 1),
-                run_seconds=run_seconds, energy_error=run.max_energy_error,
-                trajectory_error=(angle_error(run.final_angles, reference_angles[0])
-                                  if reference_angles[0] is not None else None),
-                early_trajectory_error=early))
-            progress(f"{name} SciPy {method} tol={tolerance:.0e}: {run_seconds * 1e3:.1f} ms, "
-                     f"{run.n_steps} steps, energy {run.max_energy_error:.1e}")
+        rows += _tolerance_rows(scene, name, t_end, reference_angles, progress,
+                                simulate=simulate_scipy, family="SciPy",
+                                label=f"SciPy {method}", method=method, tolerances=tolerances,
+                                repeats=config.scipy_repeats)
+    return rows
+
+
+def compiled_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
+                  reference_angles, progress) -> list[RunRow]:
+    """The compiled peers (chaingen.reference.compiled_peers), family COMPILED_FAMILY, each
+    run repeated like ours (config.repeats) since they take milliseconds. Without numbalsoda
+    its methods get one row each that says so instead of runs."""
+    from ...reference.compiled_peers import (
+        NUMBALSODA_METHODS,
+        PEERS_EXTRA,
+        numbalsoda_available,
+        simulate_compiled,
+    )
+
+    rows = []
+    for method, tolerances in config.compiled_tolerances:
+        if method in NUMBALSODA_METHODS and not numbalsoda_available():
+            note = f"not run: numbalsoda is not installed (pip install -e '.[{PEERS_EXTRA}]')"
+            rows.append(RunRow(scene=name, family=COMPILED_FAMILY, method=method, variant="-",
+                               setting="-", t_end=t_end, failure=note))
+            progress(f"{name} {method}: {note}")
+            continue
+        rows += _tolerance_rows(scene, name, t_end, reference_angles, progress,
+                                simulate=simulate_compiled, family=COMPILED_FAMILY,
+                                label=method, method=method, tolerances=tolerances,
+                                repeats=config.repeats)
     return rows
 
 
@@ -298,6 +347,7 @@ def reference_study(config: BenchConfig, progress, emit) -> dict[str, list[RunRo
         rows = scheme_rows(scene, name, config, t_end, reference, progress)
         rows += mujoco_rows(scene, name, config, t_end, reference, progress)
         rows += scipy_rows(scene, name, config, t_end, reference, progress)
+        rows += compiled_rows(scene, name, config, t_end, reference, progress)
         study[name] = rows
         emit(name, t_end, rows)
     return study
