@@ -24,6 +24,7 @@ from chaingen.studies.bench import bench_config
 from chaingen.studies.bench.config import VARIANTS
 from chaingen.studies.bench.harness import Harness
 from chaingen.studies.bench.headlines import (
+    adaptive_headlines,
     compiled_peer_headlines,
     equal_error_headline,
     headlines,
@@ -221,6 +222,32 @@ def test_headlines_f_to_h_without_runs_say_so():
     f_mujoco, f_compiled, *_ = compiled_peer_headlines(only_inaccurate)
     assert "MuJoCo RK4's runs not in this run" in f_mujoco.measured
     assert "no run of ours holds both" in f_compiled.measured
+
+
+# -- headline i: adaptive es against fixed steps of the same CPU ------------------------------
+
+def _adaptive_rows(adaptive_cost: float, adaptive_error: float, energy: float = 1e-13):
+    fixed = [_held_row("chaingen", "es K=5", cost, error, 1e-13)
+             for cost, error in ((1e-2, 1e-5), (4e-2, 1e-6), (1.6e-1, 1e-7))]
+    adaptive = dataclasses.replace(
+        _held_row("chaingen", "es K=5 adaptive", adaptive_cost, adaptive_error, energy),
+        setting="rtol = atol = 1e-08, samples every 0.05 s")
+    order4 = dataclasses.replace(adaptive, method="es K=5 order 4 adaptive",
+                                 early_trajectory_error=1e-12)
+    return fixed + [order4, adaptive]
+
+
+def test_headline_i_interpolates_the_fixed_steps_at_the_adaptive_cpu():
+    # fixed: error 1e-6 rad at 0.04 s; adaptive: 4e-6 rad there -> ratio 4
+    ratio, energy = adaptive_headlines(_adaptive_rows(4e-2, 4e-6))
+    assert ratio.key == energy.key == "i"
+    assert ratio.measured.startswith("4 (4.00e-06 rad in 40 ms / 1.00e-06 rad") and ratio.passed
+    assert energy.passed and energy.measured == "1.00e-13 J"
+    worse, too_much = adaptive_headlines(_adaptive_rows(4e-2, 4e-5, energy=1e-11))
+    assert worse.passed is False and too_much.passed is False
+    outside, _ = adaptive_headlines(_adaptive_rows(1.0, 1e-8))
+    assert outside.passed is None and "outside the fixed runs' CPU" in outside.measured
+    assert all(h.passed is None for h in adaptive_headlines([]))
 
 
 # -- the harness counts what the runtime counts ----------------------------------------------

@@ -34,11 +34,11 @@ from ...progress import Progress
 from ...runtime.files import write_text
 from ...scene import METHODS, load_reference_scene
 from . import knobs
+from .accuracy import reference_study
 from .config import HEADLINE_DT, HEADLINE_SCENE, BenchConfig, bench_config
 from .figures import plot_scaling, plot_work_precision
 from .headlines import headlines
 from .report import headline_table, machine_description, markdown, reference_table, scaling_table
-from .runs import reference_study
 from .scaling import scaling_study
 from .scenes import scaling_scene
 from .studies import study_part, study_tables

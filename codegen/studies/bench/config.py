@@ -65,6 +65,15 @@ SCIPY_TOLERANCES = (("DOP853", tuple(10.0 ** -k for k in range(4, 13))),
 #: config imports none of them) at DOP853's tolerances; their runs take milliseconds.
 COMPILED_TOLERANCES = tuple((method, SCIPY_TOLERANCES[0][1]) for method in (
     "numbalsoda-LSODA", "numbalsoda-DOP853", "CVODES-BDF", "CVODES-Adams"))
+#: Composed steps (method, order, K): es at K = 5, where the quadrature's energy error is below
+#: 1e-12 J on the reference scenes at these steps; vi and midpoint at orders 4 and 6.
+HIGHER_ORDERS = (("es", 4, 5), ("vi", 4, 3), ("vi", 6, 3), ("midpoint", 4, 3),
+                 ("midpoint", 6, 3))
+HIGHER_ORDER_DTS = (0.1, 0.05, 0.04, 0.02, 0.01)
+#: Adaptive steps (method, order, K, tolerances rtol = atol), samples every ADAPTIVE_SAMPLE s
+#: (a step is at most half of it).
+ADAPTIVE_RUNS = (("es", 2, 5, (1e-6, 1e-8, 1e-10)), ("es", 4, 5, (1e-6, 1e-8, 1e-10)))
+ADAPTIVE_SAMPLE = 0.05
 SCALING_NS = (2, 3, 5, 10, 20)
 #: (method, quadrature) of the scaling series.
 SCALING_METHODS = (("es", 3), ("vi", 3), ("midpoint", 3))
@@ -89,6 +98,13 @@ HEADLINE_DT = 0.01
 HELD_ERRORS = ((1e-6, 1e-10), (1e-8, 1e-10))
 #: f, g: our best CPU / the peer's CPU at the held errors (ours at least as fast).
 TARGET_OURS_OVER_PEER = 1.0
+#: i: adaptive es (K = ADAPTIVE_K, order 2) at rtol = atol = ADAPTIVE_RTOL on ADAPTIVE_SCENE:
+#: its trajectory error at EARLY_T over that of fixed steps of the same CPU, and its energy error.
+ADAPTIVE_SCENE = "three_link_multi"
+ADAPTIVE_K = 5
+ADAPTIVE_RTOL = 1e-8
+TARGET_ADAPTIVE_OVER_FIXED = 10.0
+TARGET_ADAPTIVE_ENERGY = 1e-12
 #: h: trajectory errors at EARLY_T [rad] at which every peer's CPU is compared with our best
 #: (no target).
 TRAJECTORY_LEVELS = (1e-6, 1e-8)
@@ -114,6 +130,9 @@ class BenchConfig:
     mujoco_dts: tuple[float, ...]
     scipy_tolerances: tuple[tuple[str, tuple[float, ...]], ...]
     compiled_tolerances: tuple[tuple[str, tuple[float, ...]], ...]
+    higher_orders: tuple[tuple[str, int, int], ...]
+    higher_order_dts: tuple[float, ...]
+    adaptive_runs: tuple[tuple[str, int, int, tuple[float, ...]], ...]
     scaling_ns: tuple[int, ...]
     scaling_methods: tuple[tuple[str, int], ...]
     timeout: float
@@ -217,6 +236,9 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
                           else SCIPY_TOLERANCES),
         compiled_tolerances=(tuple((method, (1e-6, 1e-10)) for method, _ in COMPILED_TOLERANCES)
                              if quick else COMPILED_TOLERANCES),
+        higher_orders=(("es", 4, 5), ("vi", 6, 3)) if quick else HIGHER_ORDERS,
+        higher_order_dts=(0.1, 0.05) if quick else HIGHER_ORDER_DTS,
+        adaptive_runs=(("es", 2, 5, (1e-6,)),) if quick else ADAPTIVE_RUNS,
         scaling_ns=ns, scaling_methods=SCALING_METHODS, timeout=float(timeout),
         repeats=3 if quick else 7, scipy_repeats=1 if quick else 3,
         scaling_steps=200 if quick else 1000,

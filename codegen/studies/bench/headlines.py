@@ -6,11 +6,16 @@ from dataclasses import dataclass
 
 from ...scene import load_reference_scene
 from .config import (
+    ADAPTIVE_K,
+    ADAPTIVE_RTOL,
+    ADAPTIVE_SCENE,
     EARLY_T,
     HEADLINE_DT,
     HEADLINE_N,
     HEADLINE_SCENE,
     HELD_ERRORS,
+    TARGET_ADAPTIVE_ENERGY,
+    TARGET_ADAPTIVE_OVER_FIXED,
     TARGET_BUILD_SECONDS,
     TARGET_ENERGY_ES,
     TARGET_EQUAL_ERROR,
@@ -262,6 +267,50 @@ def trajectory_error_headline(rows, level: float) -> Headline:
     return Headline("h", claim, variant, text, NO_TARGET, True)
 
 
+def error_at_cost(points, cost: float) -> float | None:
+    """The error at CPU `cost` by log-log interpolation along (cost, error) points: the
+    inverse of interpolate_cost, which brackets its second entry (never extrapolated)."""
+    return interpolate_cost([(error, c) for c, error in points], cost)
+
+
+def adaptive_headlines(rows) -> list[Headline]:
+    """i: adaptive es at rtol ADAPTIVE_RTOL on ADAPTIVE_SCENE: its trajectory error at the
+    early time / that of fixed steps of the same es (order 2, same K, default options) at the
+    same CPU (interpolated along their dts), and its energy error over the run."""
+    early = min(EARLY_T, rows[0].t_end) if rows else EARLY_T
+    adaptive = next((row for row in rows if row.method.endswith(" adaptive")
+                     and row.method.split()[:2] == ["es", f"K={ADAPTIVE_K}"]
+                     and " order " not in row.method
+                     and row.setting.startswith(f"rtol = atol = {ADAPTIVE_RTOL:g},")), None)
+    fixed_label = f"es K={ADAPTIVE_K}"
+    claim = (f"{fixed_label} adaptive, rtol = {ADAPTIVE_RTOL:g}: trajectory error at t = "
+             f"{early:g} s / that of fixed steps of the same CPU, {ADAPTIVE_SCENE}")
+    energy_claim = (f"{fixed_label} adaptive, rtol = {ADAPTIVE_RTOL:g}: max energy error, "
+                    f"{ADAPTIVE_SCENE}, standard run")
+    targets = (f"<= {TARGET_ADAPTIVE_OVER_FIXED:g}", f"<= {TARGET_ADAPTIVE_ENERGY:.0e} J")
+    if adaptive is None or adaptive.failure:
+        measured = adaptive.failure if adaptive else "not in this run"
+        return [Headline("i", claim, "default options", measured, targets[0], None),
+                Headline("i", energy_claim, "default options", measured, targets[1], None)]
+    energy = Headline("i", energy_claim, "default options", f"{adaptive.energy_error:.2e} J",
+                      targets[1], adaptive.energy_error <= TARGET_ADAPTIVE_ENERGY)
+    points = [(row.run_seconds, row.early_trajectory_error) for row in rows
+              if row.method == fixed_label and row.variant == VARIANTS[0].label
+              and not row.failure and row.early_trajectory_error]
+    fixed = error_at_cost(points, adaptive.run_seconds)
+    if fixed is None:
+        costs = sorted(cost for cost, _ in points)
+        span = f"{costs[0] * 1e3:.3g} .. {costs[-1] * 1e3:.3g} ms" if costs else "none"
+        return [Headline("i", claim, "default options",
+                         f"the adaptive run's {adaptive.run_seconds * 1e3:.3g} ms is outside the "
+                         f"fixed runs' CPU ({span}): not measured", targets[0], None), energy]
+    ratio = adaptive.early_trajectory_error / fixed
+    return [Headline("i", claim, "default options",
+                     f"{ratio:.3g} ({adaptive.early_trajectory_error:.2e} rad in "
+                     f"{adaptive.run_seconds * 1e3:.3g} ms / {fixed:.2e} rad interpolated at the "
+                     "same CPU)", targets[0], ratio <= TARGET_ADAPTIVE_OVER_FIXED), energy]
+
+
 def compiled_peer_headlines(rows) -> list[Headline]:
     """f (HELD_ERRORS[0]: against MuJoCo RK4 and the best compiled peer), g (HELD_ERRORS[1]:
     against the best compiled peer), h (TRAJECTORY_LEVELS: every peer)."""
@@ -295,8 +344,10 @@ def headlines(reference: dict[str, list[RunRow]], scaling: list[ScalingRow] | No
                                   es_row.energy_error <= TARGET_ENERGY_ES))
         found.append(_step_ratio_headline(
             "b", f"vi step / MuJoCo RK4 step, {where}", rows, "vi", variant, TARGET_RATIO_VI))
+        # c compares the fixed steps of order 2 (the composed and adaptive lines are in f-i).
         es_labels = [label for label in dict.fromkeys(row.method for row in rows)
-                     if label.split()[0] == "es"] or [es]
+                     if label.split()[0] == "es" and " order " not in label
+                     and not label.endswith(" adaptive")] or [es]
         found += [equal_error_headline(rows, variant, label) for label in es_labels]
         found += scaling_headlines(scaling, variant)
         if es_row is None or es_row.failure:
@@ -311,6 +362,7 @@ def headlines(reference: dict[str, list[RunRow]], scaling: list[ScalingRow] | No
                 f"{_us(es_row.step_seconds / ratio)})",
                 f"<= {TARGET_STEP_OVER_EVALUATION:g}", ratio <= TARGET_STEP_OVER_EVALUATION))
     found += compiled_peer_headlines(rows)
+    found += adaptive_headlines(reference.get(ADAPTIVE_SCENE, []))
     return sorted(found, key=lambda headline: headline.key)   # stable: variants stay in order
 
 

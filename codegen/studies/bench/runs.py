@@ -27,7 +27,7 @@ import numpy as np
 from ...errors import NewtonError, ScipyPeerError
 from ...generate.package import generate_package
 from ...runtime import Solver
-from ...scene import Scene, load_reference_scene, quadrature_used
+from ...scene import Scene, quadrature_used
 from .config import (
     BRACKET_DTS,
     EARLY_T,
@@ -333,22 +333,3 @@ def reference_angles_at_end(scene: Scene, t_end: float, progress):
         progress(f"{scene.name}: no trajectory reference: {error}")
         return None
     return angles
-
-
-def reference_study(config: BenchConfig, progress, emit) -> dict[str, list[RunRow]]:
-    """Part 1: every scheme and peer on each reference scene; emit(name, t_end, rows) after
-    each scene."""
-    study = {}
-    for name in config.scenes:
-        scene = load_reference_scene(name)
-        t_end = config.t_end or scene.simulation.t_end
-        reference = (reference_angles_at_end(scene, t_end, progress),
-                     reference_angles_at_end(scene, min(EARLY_T, t_end), progress))
-        rows = scheme_rows(scene, name, config, t_end, reference, progress)
-        rows += mujoco_rows(scene, name, config, t_end, reference, progress)
-        rows += scipy_rows(scene, name, config, t_end, reference, progress)
-        rows += compiled_rows(scene, name, config, t_end, reference, progress)
-        study[name] = rows
-        emit(name, t_end, rows)
-    return study
-
