@@ -63,12 +63,22 @@ def test_a_scene_names_its_order_and_a_bad_one_is_refused():
         parse_scene(text.replace("[simulation]", "[simulation]\norder = 3"), "s.toml", "s")
 
 
-def test_es_refuses_order_6_and_composed_sensitivities():
+def test_es_refuses_order_6():
     scene = load("three_link_mono")
     with pytest.raises(SettingsError, match=r"--order 6: es reaches order 4 at most"):
         build_scheme(scene, "es", 3, order=6)
-    with pytest.raises(SettingsError, match="generate with --no-sensitivities"):
-        generate_package(scene, "es", 3, order=4, sensitivities=True)
+
+
+def test_composed_es_chains_its_sensitivities_in_the_whole_state():
+    """es's state is more than s = (phi, omega): its stages chain dx1/dx0, and joint_maps
+    takes the product to joint space; vi chains in s and has no joint_maps."""
+    scene = load("four_link_actuated")
+    es = generate_package(scene, "es", 3, order=4, sensitivities=True)
+    vi = generate_package(scene, "vi", 3, order=4, sensitivities=True)
+    assert "_model_joint_maps" in es.files[f"{es.prefix}.c"]
+    assert "#define NCHAIN NX" in es.files[f"{es.prefix}.c"]
+    assert "_model_joint_maps" not in vi.files[f"{vi.prefix}.c"]
+    assert "NCHAIN" not in vi.files[f"{vi.prefix}.c"]
 
 
 def test_order_2_generates_no_composition_and_4_does():
@@ -133,7 +143,8 @@ def test_composed_es_keeps_the_energy_balance_with_torques_and_damping():
 @pytest.mark.compile
 @pytest.mark.parametrize("name, method, order", [
     ("three_link_multi", "vi", 4), ("three_link_multi", "vi", 6),
-    ("four_link_actuated", "midpoint", 4), ("four_link_actuated", "midpoint", 6)])
+    ("four_link_actuated", "midpoint", 4), ("four_link_actuated", "midpoint", 6),
+    ("three_link_multi", "es", 4), ("four_link_actuated", "es", 4)])
 def test_composed_sensitivities_match_central_differences(name, method, order):
     """d s1/d s0 and d s1/d u of the composed step, by the chain rule through the stages,
     against central differences of the composed step (to 1e-6)."""

@@ -8,7 +8,8 @@ import pytest
 
 from chaingen.studies.extremes import EDGES, Outcome, markdown
 
-EDGE_NAMES = ("large step", "stiff springs", "mass and inertia ratio", "hard Newton steps",
+EDGE_NAMES = ("large step", "stiff springs", "adaptive steps", "mass and inertia ratio",
+              "hard Newton steps",
               "zero inertia",
               "chain length", "largest n in two minutes", "long run",
               "COM at the proximal joint", "spring segment reaching zero length",

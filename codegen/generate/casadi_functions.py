@@ -138,6 +138,11 @@ class SchemeFunctions:
     # (None when the package is generated without them.)
     sensitivity_rhs: ca.Function | None  # -> R = [dF/dx0 dx0/ds0, dF/du]  (nz x (2n + nu))
     sensitivity_map: ca.Function | None  # -> (ds1/dz, ds1/dx0 dx0/ds0, ds1/du) at fixed z
+    # A composed step whose state x the joint-space state does not determine (es) chains its
+    # stages in x instead: then sensitivity_rhs -> [dF/dx0, dF/du, dF/dp], sensitivity_map ->
+    # (dx1/dz, dx1/dx0, dx1/du, dx1/dp), and joint_maps (x0, x1) -> (dx0/ds0, dx0/dp at
+    # s0 = S(x0), ds1/dx1, ds1/dp at x1) maps the chained Jacobians to joint space.
+    joint_maps: ca.Function | None
     holding_torques: ca.Function | None  # (phi) -> dV/dphi, actuated scenes only
     segment_margins: ca.Function | None  # (x0, x1) -> (s_j(x1) / tol_j, cos of each segment's
                                          # turn over the step), scenes with springs only
@@ -147,7 +152,8 @@ class SchemeFunctions:
     def all(self) -> tuple[ca.Function, ...]:
         functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
                      self.outputs, self.initial_state, self.sensitivity_rhs,
-                     self.sensitivity_map, self.holding_torques, self.segment_margins,
+                     self.sensitivity_map, self.joint_maps, self.holding_torques,
+                     self.segment_margins,
                      self.parameters)
         return tuple(function for function in functions if function is not None)
 
@@ -155,6 +161,13 @@ class SchemeFunctions:
 def _vector(translate: SympyToCasadi, matrix) -> ca.SX:
     entries = [translate(e) for e in matrix]
     return ca.vertcat(*entries) if entries else ca.SX(0, 1)
+
+
+def chains_state(scheme: DiscreteScheme) -> bool:
+    """Whether a composed step's sensitivities chain its stages in the whole state x (es,
+    whose x carries a normal velocity the joint-space state does not see) rather than in
+    joint space (SchemeFunctions.joint_maps)."""
+    return len(scheme.composition) > 1 and not scheme.state_from_joint_space
 
 
 def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
@@ -279,8 +292,41 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
         return (fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
                 fn("sensitivity_map", step_args, step_names, outputs, names))
 
-    sensitivity_rhs = sensitivity_map = None
-    if sensitivities:
+    def state_chain_functions() -> tuple[ca.Function, ca.Function, ca.Function]:
+        """The stage Jacobians in the whole state x (SchemeFunctions.joint_maps): with
+        F(z*, x0, u, p) = 0, dx1/d(x0, u, p) = x1_z dz* + [x1_x0, x1_u, x1_p] and
+        dz* = -J^-1 [F_x0, F_u, F_p]; the composed step's ds1/ds0 = S_x1 D X_s."""
+        rhs = ca.densify(ca.horzcat(ca.jacobian(residual, x0), ca.jacobian(residual, u),
+                                    ca.jacobian(residual, p)))
+        outputs = [ca.densify(ca.jacobian(x1, z)), ca.densify(ca.jacobian(x1, x0))]
+        names = ["x1_z", "x1_x0"]
+        if nu:
+            outputs.append(ca.densify(ca.jacobian(x1, u)))
+            names.append("x1_u")
+        if n_p:
+            outputs.append(ca.densify(ca.jacobian(x1, p)))
+            names.append("x1_p")
+        joint_state = ca.vertcat(phi, phidot)
+        state_maps = ca.Function("X", [phi, phidot, p],
+                                 [ca.jacobian(initial_state, joint_state),
+                                  ca.jacobian(initial_state, p)])
+        s_of_x0 = ca.vertcat(*joint_space(x0)[:2])
+        x_s, x_p = state_maps(s_of_x0[:n], s_of_x0[n:], p)
+        s1 = ca.vertcat(*joint_space(x)[:2])
+        maps = [ca.densify(x_s), ca.densify(ca.jacobian(s1, x))]
+        map_names = ["x0_s0", "s1_x1"]
+        if n_p:
+            maps += [ca.densify(x_p), ca.densify(ca.jacobian(s1, p))]
+            map_names += ["x0_p", "s1_p"]
+        return (fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
+                fn("sensitivity_map", step_args, step_names, outputs, names),
+                fn("joint_maps", [x0, x] + with_p[0], ["x0", "x1"] + with_p[1], maps,
+                   map_names))
+
+    sensitivity_rhs = sensitivity_map = joint_maps = None
+    if sensitivities and chains_state(scheme):
+        sensitivity_rhs, sensitivity_map, joint_maps = state_chain_functions()
+    elif sensitivities:
         sensitivity_rhs, sensitivity_map = sensitivity_functions()
     margins = None
     if scheme.segment_vectors.shape[0]:
@@ -312,7 +358,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
                    ["phi", "omega", "energy", "constraint"]),
         initial_state=fn("initial_state", [phi, phidot] + with_p[0],
                          ["phi", "phidot"] + with_p[1], [initial_state], ["x"]),
-        sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map,
+        sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map, joint_maps=joint_maps,
         holding_torques=holding, segment_margins=margins,
     )
     built = _build(specs, prefix, p, options)

@@ -19,14 +19,14 @@ import casadi
 import jinja2
 import sympy
 
-from ..errors import PackageWriteError, SettingsError
+from ..errors import PackageWriteError
 from ..runtime import contract
 from ..runtime.contract import Features
 from ..runtime.files import write_directory
 from ..scene import Scene, quadrature_used
 from ..symbolic.schemes import DiscreteScheme, build_scheme
 from ..version import VERSION
-from .casadi_functions import casadi_c_source, scheme_functions, work_sizes
+from .casadi_functions import casadi_c_source, chains_state, scheme_functions, work_sizes
 from .example import example_context
 from .interface import CInterface, c_literal
 
@@ -138,11 +138,6 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     chaingen.progress.Progress told of each stage.
     """
     scene = scheme.scene
-    if sensitivities and len(scheme.composition) > 1 and not scheme.state_from_joint_space:
-        raise SettingsError(
-            f"--order {scheme.order}: the step sensitivities of a composed {scheme.method} step "
-            "are not available (its state is more than the joint-space state, so the stages "
-            "do not chain in joint space); generate with --no-sensitivities")
     prefix = package_prefix(scene, scheme.method)
     digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities,
                         scheme.parameter_paths, scheme.order)
@@ -175,6 +170,9 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "nu": nu, "actuated_joints": scene.actuated_joints, "flows": features.flows,
         "sensitivities": sensitivities, "segments": len(scheme.segment_tolerances),
         "nsens": 2 * n + nu + n_p,
+        # The state the stages of a composed step chain their Jacobians in: x (es) or s.
+        "chain_state": chains_state(scheme),
+        "nchain": len(scheme.state_layout) if chains_state(scheme) else 2 * n,
         "flows_work": flows.input_work if flows else "",
         "flows_dissipated": flows.dissipated if flows else "",
         "flows_balance": flows.balance if flows else "",

@@ -787,7 +787,7 @@ int four_link_actuated_es_simulate_observed(const double *x0, double t0, double 
     }
     for (k = 1; k <= n_steps && status == FOUR_LINK_ACTUATED_ES_OK; ++k) {
         int iterations = 0;
-        double flows[2];
+        double flows[2] = {0.0, 0.0};   /* written by a completed interval */
         workspace->step_fallbacks = 0;
         workspace->step_splits = 0;
         if (adaptive) {
