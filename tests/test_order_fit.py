@@ -1,10 +1,30 @@
-"""The order fit of the time-step study (chaingen.studies.order.fit_order) on synthetic data."""
+"""The order fit of the time-step study (chaingen.studies.order.fit_order) and its output, on
+synthetic data (no compiler)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from chaingen.studies.order import DEFAULT_DTS, fit_order
+from chaingen.errors import OrderStudyError
+from chaingen.scene import ORDERS
+from chaingen.studies.order import (
+    DEFAULT_DTS,
+    ENERGY_FLOOR,
+    ORDER_DTS,
+    ORDER_NEWTON_OPTIONS,
+    RATE_FLOOR,
+    ROUND_OFF_NEWTON,
+    SAMPLE_INTERVAL,
+    TRAJECTORY_FLOOR,
+    OrderRow,
+    OrderStudy,
+    allowed_orders,
+    fit_order,
+    format_summary,
+    format_table,
+    study_newton_options,
+)
+from chaingen.symbolic.composition import order_error
 
 
 def test_fit_finds_the_power_law_between_floor_and_saturation():
@@ -45,3 +65,94 @@ def test_fit_prefers_the_small_dt_end_on_ties_and_needs_three_points():
 
 # --- the schemes' orders on three_link_mono (springs: the es energy error is not exact) ------
 
+
+
+# --- order options and the output of a study, on synthetic studies ---------------------------
+
+def synthetic_study(method: str, order: int, *, flows: bool = False, quadrature=None,
+                    newton=()) -> OrderStudy:
+    """A study whose errors are exactly C dt^order (energy at round-off for es)."""
+    dts = ORDER_DTS[order]
+    rows = tuple(OrderRow(
+        dt=dt, n_steps=round(10 / dt), energy_error=1e-15 if method == "es" else 0.1 * dt ** order,
+        trajectory_error=0.3 * dt ** order, mean_newton_iterations=3.0,
+        max_newton_iterations=4, wall_time=1e-3, rate_error=0.5 * dt ** order,
+        max_energy_error=2e-15, max_constraint_error=3e-15) for dt in dts)
+    fit = {name: fit_order(dts, [getattr(row, f"{name}_error") for row in rows], floor=floor)
+           for name, floor in (("energy", ENERGY_FLOOR), ("trajectory", TRAJECTORY_FLOOR),
+                               ("rate", RATE_FLOOR))}
+    return OrderStudy(
+        scene="synthetic", method=method, quadrature=quadrature, t_end=10.0,
+        dt_ref=min(dts) / 10, sample_interval=SAMPLE_INTERVAL, rows=rows,
+        energy_fit=fit["energy"], trajectory_fit=fit["trajectory"], rate_fit=fit["rate"],
+        energy_scale=1.0, energy_floor=ENERGY_FLOOR, trajectory_floor=TRAJECTORY_FLOOR,
+        rate_floor=RATE_FLOOR, reference_wall_time=0.1, order=order, energy_flows=flows,
+        newton_settings=newton)
+
+
+@pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
+def test_allowed_orders_are_those_the_composition_takes(method):
+    orders = allowed_orders(method)
+    assert orders == tuple(order for order in ORDERS if order_error(method, order) is None)
+    assert orders == ((2, 4) if method == "es" else (2, 4, 6))
+
+
+def test_every_order_has_step_sizes_on_the_sample_grid_and_newton_settings():
+    assert set(ORDER_DTS) == set(ORDERS) == set(ORDER_NEWTON_OPTIONS)
+    assert ORDER_DTS[2] == DEFAULT_DTS
+    for dts in ORDER_DTS.values():
+        assert len(dts) >= 4 and list(dts) == sorted(dts)
+        for dt in dts:
+            assert abs(SAMPLE_INTERVAL / dt - round(SAMPLE_INTERVAL / dt)) < 1e-9, dt
+    assert study_newton_options(2) == {}
+    assert study_newton_options(4) == ROUND_OFF_NEWTON
+    assert study_newton_options(6, {"max_iterations": 9})["max_iterations"] == 9
+    assert study_newton_options(6, {"max_iterations": 9})["residual_tol"] == 1e-14
+    with pytest.raises(OrderStudyError, match="order 3"):
+        study_newton_options(3)
+
+
+@pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
+def test_the_summary_has_a_row_per_allowed_order(method):
+    quadrature = 7 if method == "es" else None
+    studies = [synthetic_study(method, order, quadrature=quadrature)
+               for order in allowed_orders(method)]
+    lines = format_summary(studies).splitlines()
+    assert lines[0].startswith("synthetic: method " + method)
+    assert lines[1].split()[:8] == ["order", "option", "angle", "order", "rate", "order",
+                                    "energy", "order"]
+    rows = lines[2:]
+    assert len(rows) == len(allowed_orders(method))
+    for order, row in zip(allowed_orders(method), rows):
+        cells = row.split()
+        assert cells[:3] == [str(order), f"{order:.2f}", f"{order:.2f}"]
+        if method == "es":      # energy at round-off: no order, but its largest errors
+            assert cells[3:] == ["--", "2.00e-15", "3.00e-15"]
+        else:
+            assert cells[3:] == [f"{order:.2f}"]
+    assert ("max constraint error [m^2]" in lines[1]) == (method == "es")
+
+
+def test_with_energy_flows_the_energy_error_is_called_the_balance_error():
+    study = synthetic_study("es", 2, flows=True, quadrature=3)
+    table, summary = format_table(study), format_summary([study])
+    assert "balance error [J]" in table and "balance order" in table
+    assert "max balance error [J]" in summary and "balance order" in summary
+    assert "energy" not in table.split("\n", 2)[2] and "energy" not in summary
+    plain = format_table(synthetic_study("vi", 4))
+    assert "energy error [J]" in plain and "balance" not in plain
+
+
+def test_the_header_names_the_step_sizes_and_the_newton_settings():
+    tight = tuple((name, value) for name, value in ROUND_OFF_NEWTON.items()
+                  if name != "reuse_jacobian") + (("reuse_jacobian", 0),)
+    header = format_table(synthetic_study("vi", 6, newton=tight)).splitlines()[1]
+    assert "step sizes of order 6: 0.025, 0.04, 0.05, 0.1 s" in header
+    assert "residual_tol 1e-14" in header and "reuse_jacobian every-iterate" in header
+    plain = format_table(synthetic_study("vi", 2)).splitlines()[1]
+    assert plain.endswith("Newton: the package's defaults")
+
+
+def test_a_summary_of_different_schemes_is_refused():
+    with pytest.raises(ValueError, match="different"):
+        format_summary([synthetic_study("vi", 2), synthetic_study("midpoint", 4)])

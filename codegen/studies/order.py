@@ -4,22 +4,31 @@ For each step size dt the scene is simulated to t_end and compared, at common sa
 (every `sample_interval`, 0.2 s by default), with
 
 - its own initial energy: the average energy error mean_k |H(t_k) - H(0)|;
-- a reference run of the same scheme with a much smaller step (min(dts) / 10 by default): the
-  average trajectory error mean_k max_i |wrap(phi_i(t_k) - phi_ref_i(t_k))|.
+- a reference run of the same scheme and order with a much smaller step (min(dts) / 10 by
+  default): the average trajectory (angle) error mean_k max_i |wrap(phi_i(t_k) - phi_ref_i(t_k))|
+  and the average rate error mean_k max_i |omega_i(t_k) - omega_ref_i(t_k)|.
 
 The order of each error is the slope of log(error) against log(dt) over the part of the curve
-where it is linear (`fit_order`): points at the round-off floor and points where the scheme has
-left its asymptotic regime are left out, and the fit reports which step sizes it used. A dt at
-which Newton's method fails is recorded as failed (with the solver's message), not raised.
+where it is linear (`fit_order`, from chaingen.studies.order_fit): points at the round-off floor
+and points where the scheme has left its asymptotic regime are left out, and the fit reports
+which step sizes it used. A dt at which Newton's method fails is recorded as failed (with the
+solver's message), not raised.
 
 For a scene with joint damping or torques the "energy error" is the energy-balance error
 H - H_0 - (input work) + (dissipated energy) (model.md section 7), which is H - H_0 when there
-are no energy flows.
+are no energy flows; the output then calls it the balance error.
 
-`order_study` runs a study, `format_table` prints it; chaingen.views.order_plot draws it.
+Every order option of the step (2, and 4 and 6 composed, model.md section 14) has its own
+step sizes and Newton settings (ORDER_DTS, ORDER_NEWTON_OPTIONS): at orders 4 and 6 most of the
+thesis's step sizes sit at the round-off floor, and the package's Newton tolerances would be the
+floor of the reference run.
+
+`order_study` runs a study of one order, `order_studies` one per order the method takes;
+`format_table` and `format_summary` print them; chaingen.views.order_plot draws them.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from dataclasses import dataclass
@@ -29,7 +38,13 @@ import numpy as np
 from ..errors import NewtonError, OrderStudyError
 from ..progress import Progress
 from ..runtime import NewtonOptions, SimulationResult, Solver
-from ..scene import METHODS, Scene, load_scene, quadrature_used
+from ..runtime.contract import JACOBIAN_EVERY_ITERATE, JACOBIAN_MODES
+from ..scene import METHODS, ORDERS, Scene, load_scene, quadrature_used
+from ..symbolic.composition import order_error
+from .order_fit import MIN_FIT_POINTS as MIN_FIT_POINTS
+from .order_fit import SLOPE_TOLERANCE as SLOPE_TOLERANCE
+from .order_fit import OrderFit as OrderFit
+from .order_fit import fit_order as fit_order
 
 #: The thesis's step sizes (s), model.md section 8.
 DEFAULT_DTS = (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
@@ -39,12 +54,32 @@ SAMPLE_INTERVAL = 0.2
 #: Accumulated round-off over 10^4..10^5 steps is ~1e-15..1e-14 of the energy scale, so this
 #: leaves a margin of about ten.
 ENERGY_FLOOR = 1e-13
-#: Trajectory errors (rad) below this are round-off.
+#: Trajectory errors (rad) below this are round-off. The reference run's own round-off, from
+#: 10^4..10^5 stages, is ~5e-13 rad (measured against a run at 2 dt_ref, orders 4 and 6).
 TRAJECTORY_FLOOR = 1e-12
-#: Consecutive log-log slopes of a fitted range may differ by at most this much.
-SLOPE_TOLERANCE = 0.5
-#: The fewest points an order is fitted on.
-MIN_FIT_POINTS = 3
+#: Rate errors (rad/s) below this are round-off: the rates of the reference scenes are O(1)
+#: rad/s like the angles, and their reference's round-off is the same ~5e-13.
+RATE_FLOOR = 1e-12
+
+#: The step sizes (s) of each order option, chosen where the error is above the round-off
+#: floor and the scheme in its asymptotic regime (measured on three_link_mono and
+#: three_link_multi, t_end 10 s, with ORDER_NEWTON_OPTIONS). Order 4: angle errors from
+#: ~3e-10 rad at 0.01 s, slope 4.0 up to 0.2 s. Order 6: from ~1e-11 rad at 0.025 s, slope 6.0
+#: up to 0.1 s. Below 0.025 s the round-off of the runs shows (vi: slope 6.3..6.5 from 0.02 to
+#: 0.025 s); from 0.1 to 0.2 s vi on three_link_mono bends to 5.5, and at 0.4 s to 7.3.
+ORDER_DTS = {
+    2: DEFAULT_DTS,
+    4: (0.01, 0.02, 0.025, 0.04, 0.05, 0.1, 0.2),
+    6: (0.025, 0.04, 0.05, 0.1),
+}
+#: Newton iterated to round-off: full Newton, every tolerance at 1e-14.
+ROUND_OFF_NEWTON = {"reuse_jacobian": JACOBIAN_EVERY_ITERATE, "residual_tol": 1e-14,
+                    "update_rtol": 1e-14, "update_atol": 1e-14, "max_iterations": 50}
+#: The Newton settings of each order option, over the package's defaults. At order 2 the
+#: package's suffice. At orders 4 and 6 they do not: with them the vi reference run (dt_ref
+#: 0.001 s at order 4) is 2e-8 rad off the round-off one on three_link_mono, more than the
+#: scheme's error at dt = 0.01 s (3e-10 rad).
+ORDER_NEWTON_OPTIONS = {2: {}, 4: ROUND_OFF_NEWTON, 6: ROUND_OFF_NEWTON}
 
 #: Relative tolerance of "dt divides the sample interval" and "the interval divides t_end".
 _DIVIDES_RTOL = 1e-9
@@ -62,29 +97,13 @@ class OrderRow:
     max_newton_iterations: int | None
     wall_time: float | None                # seconds in the C loop
     failure: str | None = None             # the solver's message when the run failed
+    rate_error: float | None = None        # mean over the sample times of max_i |domega_i| (rad/s)
+    max_energy_error: float | None = None  # max over the sample times of |H - H_0| (J)
+    max_constraint_error: float | None = None   # max over the sample times (model.md 8)
 
     @property
     def failed(self) -> bool:
         return self.failure is not None
-
-
-@dataclass(frozen=True)
-class OrderFit:
-    """A fitted order: error ~ coefficient * dt^order over the step sizes `dts`.
-
-    order is None (and dts empty) when no range of at least MIN_FIT_POINTS points is linear;
-    `reason` then says why.
-    """
-
-    order: float | None
-    coefficient: float | None = None
-    dts: tuple[float, ...] = ()
-    reason: str | None = None
-
-    def predict(self, dt) -> np.ndarray:
-        if self.order is None:
-            raise ValueError("no fitted order")
-        return self.coefficient * np.asarray(dt, dtype=float) ** self.order
 
 
 @dataclass(frozen=True)
@@ -98,11 +117,16 @@ class OrderStudy:
     rows: tuple[OrderRow, ...]    # ascending dt
     energy_fit: OrderFit
     trajectory_fit: OrderFit
+    rate_fit: OrderFit
     energy_scale: float           # J: max of |H|, |T|, |V| along the reference run
     energy_floor: float           # J: energy errors below it were not fitted
     trajectory_floor: float       # rad: trajectory errors below it were not fitted
+    rate_floor: float             # rad/s: rate errors below it were not fitted
     reference_wall_time: float
     order: int = 2                # of the step (4 and 6: composed)
+    energy_flows: bool = False    # damping or torques: the energy error is the balance error
+    #: The Newton settings of the runs that differ from the package's defaults (empty: none).
+    newton_settings: tuple[tuple[str, float], ...] = ()
 
     @property
     def dts(self) -> tuple[float, ...]:
@@ -117,6 +141,10 @@ class OrderStudy:
         return self.trajectory_fit.order
 
     @property
+    def rate_order(self) -> float | None:
+        return self.rate_fit.order
+
+    @property
     def energy_fit_dts(self) -> tuple[float, ...]:
         return self.energy_fit.dts
 
@@ -128,64 +156,39 @@ class OrderStudy:
     def failed_dts(self) -> tuple[float, ...]:
         return tuple(row.dt for row in self.rows if row.failed)
 
+    @property
+    def max_energy_error(self) -> float | None:
+        """The largest |energy (balance) error| at a sample time of any run that did not fail."""
+        return _largest(row.max_energy_error for row in self.rows if not row.failed)
 
-# --------------------------------------------------------------------------------------------
-# Fitting
-# --------------------------------------------------------------------------------------------
+    @property
+    def max_constraint_error(self) -> float | None:
+        """The largest constraint error at a sample time of any run that did not fail."""
+        return _largest(row.max_constraint_error for row in self.rows if not row.failed)
 
-def fit_order(dts, errors, *, floor: float = 0.0, tolerance: float = SLOPE_TOLERANCE,
-              min_points: int = MIN_FIT_POINTS) -> OrderFit:
-    """The slope of log(error) against log(dt) over the linear part of the curve.
+    @property
+    def energy_name(self) -> str:
+        """What the energy error is: "balance" with energy flows (model.md 7), else "energy"."""
+        return "balance" if self.energy_flows else "energy"
 
-    Points whose error is None, not finite, or <= floor (round-off) are left out and split the
-    curve. Among the remaining runs of neighbouring step sizes, the longest range of at least
-    `min_points` points whose consecutive slopes all lie within `tolerance` of each other
-    (max - min <= tolerance) is taken, the one at the small-dt end on ties; the order is the
-    least-squares slope over it.
-    """
-    if min_points < 2:
-        raise ValueError(f"fit_order: min_points must be >= 2, got {min_points}")
-    pairs = sorted(zip((float(dt) for dt in dts), errors), key=lambda pair: pair[0])
-    if len({dt for dt, _ in pairs}) != len(pairs):
-        raise ValueError("fit_order: step sizes must be distinct")
-    usable = [error is not None and math.isfinite(error) and error > floor and error > 0
-              for _, error in pairs]
-    logs = [(math.log(dt), math.log(error)) if ok else None
-            for (dt, error), ok in zip(pairs, usable)]
-    best: tuple[int, int] | None = None       # [start, stop) into pairs
-    start = 0
-    while start < len(pairs):
-        if not usable[start]:
-            start += 1
-            continue
-        stop = start
-        while stop < len(pairs) and usable[stop]:
-            stop += 1
-        slopes = [(logs[k + 1][1] - logs[k][1]) / (logs[k + 1][0] - logs[k][0])
-                  for k in range(start, stop - 1)]
-        for first in range(start, stop):
-            for last in range(first + min_points - 1, stop):
-                window = slopes[first - start:last - start]
-                if max(window) - min(window) > tolerance:
-                    break          # longer windows from `first` only spread further
-                length = last - first + 1
-                if best is None or length > best[1] - best[0]:
-                    best = (first, last + 1)   # strictly longer: ties keep the smaller dts
-        start = stop
-    if best is None:
-        kept = sum(usable)
-        if kept < min_points:
-            reason = (f"only {kept} of {len(pairs)} points usable (the others failed, are not "
-                      f"finite or are at the floor {floor:.2g})")
-        else:
-            reason = (f"no {min_points} neighbouring points with slopes within "
-                      f"{tolerance:g} of each other")
-        return OrderFit(order=None, reason=reason)
-    x = np.array([logs[k][0] for k in range(*best)])
-    y = np.array([logs[k][1] for k in range(*best)])
-    slope, intercept = np.polyfit(x, y, 1)
-    return OrderFit(order=float(slope), coefficient=float(math.exp(intercept)),
-                    dts=tuple(pairs[k][0] for k in range(*best)))
+
+def _largest(values) -> float | None:
+    values = [value for value in values if value is not None]
+    return max(values) if values else None
+
+
+def allowed_orders(method: str) -> tuple[int, ...]:
+    """The order options `method` takes (chaingen.symbolic.composition.order_error)."""
+    return tuple(order for order in ORDERS if order_error(method, order) is None)
+
+
+def study_newton_options(order: int, overrides=None) -> dict:
+    """The Newton settings of a study of `order` (ORDER_NEWTON_OPTIONS), with `overrides` (a
+    dict of option fields, e.g. from the command line) taking precedence."""
+    if order not in ORDER_NEWTON_OPTIONS:
+        raise OrderStudyError(f"order {order!r}: must be one of "
+                              f"{', '.join(map(str, ORDER_NEWTON_OPTIONS))}")
+    return {**ORDER_NEWTON_OPTIONS[order], **(overrides or {})}
 
 
 # --------------------------------------------------------------------------------------------
@@ -216,18 +219,20 @@ def _energy_scale(solver: Solver, reference: SimulationResult) -> float:
 
 
 def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, *,
-                dts=DEFAULT_DTS, t_end: float = 10.0, dt_ref: float | None = None,
+                dts=None, t_end: float = 10.0, dt_ref: float | None = None,
                 solver: Solver | None = None, sample_interval: float = SAMPLE_INTERVAL,
                 energy_floor: float = ENERGY_FLOOR, trajectory_floor: float = TRAJECTORY_FLOOR,
-                slope_tolerance: float = SLOPE_TOLERANCE,
+                rate_floor: float = RATE_FLOOR, slope_tolerance: float = SLOPE_TOLERANCE,
                 options: NewtonOptions | dict | None = None, order: int = 2) -> OrderStudy:
-    """Run the time-step study of `scene` (a Scene or a scene file) with one scheme.
+    """Run the time-step study of `scene` (a Scene or a scene file) with one scheme and order.
 
     The solver is built once (without step sensitivities) unless given; a given solver must be
-    the scene's, of `method` (and `quadrature` where the scheme uses one). dt_ref defaults to
-    min(dts) / 10. energy_floor is relative to the energy scale of the reference run;
-    trajectory_floor is in rad. options: Newton settings of every run, the reference's too.
-    order: of the step (2, or 4 and 6 composed), of the built solver and of a given one.
+    the scene's, of `method` (and `quadrature` where the scheme uses one). dts default to
+    ORDER_DTS[order], dt_ref to min(dts) / 10. energy_floor is relative to the energy scale of
+    the reference run; trajectory_floor is in rad, rate_floor in rad/s. options: Newton settings
+    of every run, the reference's too (a dict is taken over the package's defaults); default
+    ORDER_NEWTON_OPTIONS[order]. order: of the step (2, or 4 and 6 composed), of the built
+    solver and of a given one.
     Raises OrderStudyError for step sizes that do not fit the sample grid and when the
     reference run fails; a failing dt is recorded in its row.
     """
@@ -236,7 +241,14 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
     if method not in METHODS:
         raise OrderStudyError(f"method {method!r} is not available (available: "
                               f"{', '.join(METHODS)})")
+    refused = order_error(method, order)
+    if refused:
+        raise OrderStudyError(f"order {order}: {refused}")
     quadrature_in_use = quadrature_used(scene, method, quadrature)
+    if dts is None:
+        dts = ORDER_DTS[order]
+    if options is None:
+        options = study_newton_options(order)
     dts = tuple(sorted(float(dt) for dt in dts))
     if not dts:
         raise OrderStudyError("dts: no step sizes")
@@ -271,13 +283,18 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
             raise OrderStudyError(f"the given solver is for scene {manifest.get('scene')!r}, "
                                   f"not {scene.name!r}")
 
-    bar = Progress(f"order {scene.name} ({method})", total=len(dts) + 1, unit="runs")
+    resolved = solver.newton_options(options)
+    newton_settings = tuple(
+        (name, value) for name, value in dataclasses.asdict(resolved).items()
+        if value != getattr(solver.default_options, name))
+    bar = Progress(f"order {scene.name} ({method}, order {order})", total=len(dts) + 1,
+                   unit="runs")
 
     def run(dt: float) -> SimulationResult:
         bar.update(bar.done, f"dt = {dt:g} s")
         try:
             return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
-                                   n_steps=round(t_end / dt), every=every[dt], options=options,
+                                   n_steps=round(t_end / dt), every=every[dt], options=resolved,
                                    scene=scene.name)
         finally:
             bar.advance()
@@ -311,79 +328,165 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
                                          assume_unique=True, return_indices=True)
         mine = np.flatnonzero(index >= 0)[mine]
         theirs = np.flatnonzero(reference_index >= 0)[theirs]
-        energy = float(np.mean(np.abs(result.balance_error[mine])))
+        balance = np.abs(result.balance_error[mine])
+        energy = float(np.mean(balance))
         difference = result.phi[mine] - reference.phi[theirs]
         wrapped = (difference + np.pi) % (2 * np.pi) - np.pi
         trajectory = float(np.mean(np.max(np.abs(wrapped), axis=1)))
+        rate = float(np.mean(np.max(np.abs(result.omega[mine] - reference.omega[theirs]),
+                                    axis=1)))
         failure = None
-        if not (math.isfinite(energy) and math.isfinite(trajectory)):
+        if not all(map(math.isfinite, (energy, trajectory, rate))):
             failure = "non-finite state in the samples (the run blew up)"
         rows.append(OrderRow(
             dt=dt, n_steps=result.n_steps, energy_error=energy, trajectory_error=trajectory,
             mean_newton_iterations=result.mean_newton_iterations,
             max_newton_iterations=result.max_newton_iterations, wall_time=result.wall_time,
-            failure=failure))
+            failure=failure, rate_error=rate, max_energy_error=float(np.max(balance)),
+            max_constraint_error=float(np.max(np.abs(result.constraint_error[mine])))))
 
     scale = _energy_scale(solver, reference)
     # A failed dt counts as a gap: a fitted range never spans it.
     energies = [None if row.failed else row.energy_error for row in rows]
     trajectories = [None if row.failed else row.trajectory_error for row in rows]
+    rates = [None if row.failed else row.rate_error for row in rows]
     energy_fit = fit_order(dts, energies, floor=energy_floor * scale, tolerance=slope_tolerance)
     trajectory_fit = fit_order(dts, trajectories, floor=trajectory_floor,
                                tolerance=slope_tolerance)
+    rate_fit = fit_order(dts, rates, floor=rate_floor, tolerance=slope_tolerance)
     bar.close()
     return OrderStudy(
         scene=scene.name, method=method, quadrature=quadrature_in_use, t_end=float(t_end),
         dt_ref=dt_ref, sample_interval=float(sample_interval), rows=tuple(rows),
         energy_fit=energy_fit, trajectory_fit=trajectory_fit, energy_scale=scale,
         energy_floor=energy_floor * scale, trajectory_floor=trajectory_floor,
-        reference_wall_time=reference.wall_time, order=order)
+        reference_wall_time=reference.wall_time, order=order, rate_fit=rate_fit,
+        rate_floor=rate_floor, energy_flows=solver.energy_flows,
+        newton_settings=newton_settings)
+
+
+def order_studies(scene: Scene | str | os.PathLike, method: str, quadrature: int, *,
+                  orders=None, t_end: float = 10.0, solvers=None, overrides=None,
+                  **settings) -> tuple[OrderStudy, ...]:
+    """The study of every order option `method` takes (allowed_orders), ascending, each with
+    its own step sizes and Newton settings (ORDER_DTS, study_newton_options(order, overrides)).
+
+    orders: a subset of them instead. solvers: {order: Solver}, built where missing.
+    overrides: Newton option fields over every order's settings. settings: further keywords of
+    order_study (sample_interval, floors, slope_tolerance) for every order.
+    """
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    available = allowed_orders(method) if method in METHODS else ORDERS
+    orders = available if orders is None else tuple(sorted(set(orders)))
+    for order in orders:
+        refused = order_error(method, order)
+        if refused:
+            raise OrderStudyError(f"order {order}: {refused}")
+    solvers = dict(solvers or {})
+    return tuple(order_study(scene, method, quadrature, t_end=t_end, order=order,
+                             solver=solvers.get(order),
+                             options=study_newton_options(order, overrides), **settings)
+                 for order in orders)
 
 
 # --------------------------------------------------------------------------------------------
 # Output
 # --------------------------------------------------------------------------------------------
 
-def study_label(study: OrderStudy) -> str:
+def scheme_label(study: OrderStudy) -> str:
+    """The scheme of a study: its method and, where it uses one, its quadrature."""
     label = f"method {study.method}"
     if study.quadrature is not None:
         label += f", quadrature {study.quadrature}"
-    if study.order != 2:
-        label += f", order {study.order}"
     return label
 
 
-def _fit_line(name: str, fit: OrderFit, unit: str, floor: float) -> str:
-    if fit.order is None:
-        return f"{name:<18}--    ({fit.reason})"
-    return (f"{name:<18}{fit.order:.2f}  (fit over dt = {min(fit.dts):g} ... {max(fit.dts):g} s, "
-            f"{len(fit.dts)} points; floor {floor:.1e} {unit})")
+def study_label(study: OrderStudy) -> str:
+    return f"{scheme_label(study)}, order {study.order}"
+
+
+def newton_label(study: OrderStudy) -> str:
+    """The Newton settings of the study's runs, as far as they are not the package's."""
+    if not study.newton_settings:
+        return "Newton: the package's defaults"
+    settings = ", ".join(f"{name} {_option_text(name, value)}"
+                         for name, value in study.newton_settings)
+    return f"Newton: {settings} (the package's defaults otherwise)"
+
+
+def _option_text(name: str, value) -> str:
+    if name == "reuse_jacobian":      # the mode's name, as the command line spells it
+        for mode in JACOBIAN_MODES:
+            if mode.value == value:
+                return mode.name.removeprefix("JACOBIAN_").lower().replace("_", "-")
+    return f"{value:g}"
 
 
 def format_table(study: OrderStudy) -> str:
-    """The study as plain text: one row per dt ('*' marks the fitted points), then the orders."""
+    """The study as plain text: one row per dt ('*' marks the fitted points), then the orders.
+
+    With energy flows the energy column and its order are the balance error's."""
+    energy = study.energy_name
     lines = [
-        f"{study.scene}: {study_label(study)}; t_end {study.t_end:g} s; reference: same method, "
-        f"dt_ref {study.dt_ref:g} s ({study.reference_wall_time:.3g} s); errors averaged over "
-        f"samples every {study.sample_interval:g} s",
-        f"{'dt [s]':>8}  {'energy error [J]':>17}  {'trajectory error [rad]':>23}  "
-        f"{'Newton mean/max':>15}  {'wall [s]':>9}",
+        f"{study.scene}: {study_label(study)}; t_end {study.t_end:g} s; reference: same method "
+        f"and order, dt_ref {study.dt_ref:g} s ({study.reference_wall_time:.3g} s); errors "
+        f"averaged over samples every {study.sample_interval:g} s",
+        f"step sizes of order {study.order}: {', '.join(f'{dt:g}' for dt in study.dts)} s; "
+        f"{newton_label(study)}",
+        f"{'dt [s]':>8}  {f'{energy} error [J]':>17}  {'trajectory error [rad]':>23}  "
+        f"{'rate error [rad/s]':>19}  {'Newton mean/max':>15}  {'wall [s]':>9}",
     ]
     for row in study.rows:
         if row.failed and row.energy_error is None:
             lines.append(f"{row.dt:>8g}  failed: {row.failure}")
             continue
-        energy_mark = "*" if row.dt in study.energy_fit.dts else " "
-        trajectory_mark = "*" if row.dt in study.trajectory_fit.dts else " "
+        marks = ["*" if row.dt in fit.dts else " "
+                 for fit in (study.energy_fit, study.trajectory_fit, study.rate_fit)]
         newton = f"{row.mean_newton_iterations:.2f} / {row.max_newton_iterations}"
-        line = (f"{row.dt:>8g}  {row.energy_error:>15.3e} {energy_mark}  "
-                f"{row.trajectory_error:>21.3e} {trajectory_mark}  {newton:>15}  "
-                f"{row.wall_time:>9.2e}")
+        line = (f"{row.dt:>8g}  {row.energy_error:>15.3e} {marks[0]}  "
+                f"{row.trajectory_error:>21.3e} {marks[1]}  {row.rate_error:>17.3e} {marks[2]}  "
+                f"{newton:>15}  {row.wall_time:>9.2e}")
         if row.failed:
             line += f"  ({row.failure})"
         lines.append(line)
     lines += [
-        _fit_line("energy order", study.energy_fit, "J", study.energy_floor),
-        _fit_line("trajectory order", study.trajectory_fit, "rad", study.trajectory_floor),
+        study.energy_fit.line(f"{energy} order", "J", study.energy_floor),
+        study.trajectory_fit.line("trajectory order", "rad", study.trajectory_floor),
+        study.rate_fit.line("rate order", "rad/s", study.rate_floor),
     ]
+    return "\n".join(lines)
+
+
+def _cell(value: float | None, width: int, spec: str) -> str:
+    return f"{value:>{width}{spec}}" if value is not None else f"{'--':>{width}}"
+
+
+def format_summary(studies) -> str:
+    """One row per order option: the fitted orders of the angles (the trajectory error), the
+    rates and the energy (the balance with energy flows); for es also the largest energy
+    (balance) and constraint errors at the sample times of all its runs, which the scheme keeps
+    at round-off at every order (model.md sections 4 and 14)."""
+    studies = tuple(studies)
+    if not studies:
+        raise ValueError("format_summary: no studies")
+    first = studies[0]
+    if len({(study.scene, study.method, study.quadrature) for study in studies}) > 1:
+        raise ValueError("format_summary: the studies are of different scenes or schemes")
+    energy, conserving = first.energy_name, first.method == "es"
+    header = (f"{'order option':>12}  {'angle order':>11}  {'rate order':>10}  "
+              f"{f'{energy} order':>13}")
+    if conserving:    # es's constraints c_i(q) are in m^2 (model.md section 8)
+        header += f"  {f'max {energy} error [J]':>21}  {'max constraint error [m^2]':>26}"
+    lines = [f"{first.scene}: {scheme_label(first)}; t_end {first.t_end:g} s; fitted orders "
+             "(slope of log error against log dt; --: no linear range above the floor)", header]
+    for study in studies:
+        line = (f"{study.order:>12}  {_cell(study.trajectory_order, 11, '.2f')}  "
+                f"{_cell(study.rate_order, 10, '.2f')}  {_cell(study.energy_order, 13, '.2f')}")
+        if conserving:
+            line += (f"  {_cell(study.max_energy_error, 21, '.2e')}  "
+                     f"{_cell(study.max_constraint_error, 26, '.2e')}")
+        if study.failed_dts:
+            line += f"  (failed at dt = {', '.join(f'{dt:g}' for dt in study.failed_dts)} s)"
+        lines.append(line)
     return "\n".join(lines)
