@@ -29,7 +29,8 @@ def number(text: str) -> float:
         raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
 
 
-def add_scheme_options(parser: argparse.ArgumentParser) -> None:
+def add_scheme_options(parser: argparse.ArgumentParser,
+                       order_default: str = "the scene's") -> None:
     parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format.md)")
     parser.add_argument("--method", choices=METHODS,
                         help="time-stepping scheme (default: the scene's [simulation].method)")
@@ -38,7 +39,7 @@ def add_scheme_options(parser: argparse.ArgumentParser) -> None:
                              "(default: the scene's)")
     parser.add_argument("--order", type=int, choices=ORDERS,
                         help="order of the step: 2 (the scheme's), 4 or 6 (a symmetric "
-                             "composition of its steps; es: 4 at most) (default: the scene's)")
+                             f"composition of its steps; es: 4 at most) (default: {order_default})")
 
 
 def paths(text: str) -> tuple[str, ...]:

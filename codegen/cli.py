@@ -128,7 +128,7 @@ def parser() -> argparse.ArgumentParser:
         description="The time-step study (docs/model.md, section 8) of every order option the "
                     "method takes (es: 2 and 4; vi, midpoint: 2, 4 and 6), each on its own step "
                     "sizes, then a summary of the fitted orders; with --order N only order N.")
-    add_scheme_options(order)
+    add_scheme_options(order, order_default="every order the method takes")
     add_newton_options(order)
     order.add_argument("--t-end", type=number, default=10.0,
                        help="duration of each run in s (default 10)")
