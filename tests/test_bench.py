@@ -21,7 +21,7 @@ from chaingen.generate.package import generate_package
 from chaingen.runtime import Solver
 from chaingen.scene.kinematics import spring_geometry
 from chaingen.studies.bench import bench_config
-from chaingen.studies.bench.config import VARIANTS
+from chaingen.studies.bench.config import ADAPTIVE_K, VARIANTS
 from chaingen.studies.bench.harness import Harness
 from chaingen.studies.bench.headlines import (
     adaptive_headlines,
@@ -227,12 +227,13 @@ def test_headlines_f_to_h_without_runs_say_so():
 # -- headline i: adaptive es against fixed steps of the same CPU ------------------------------
 
 def _adaptive_rows(adaptive_cost: float, adaptive_error: float, energy: float = 1e-13):
-    fixed = [_held_row("chaingen", "es K=5", cost, error, 1e-13)
+    fixed = [_held_row("chaingen", f"es K={ADAPTIVE_K}", cost, error, 1e-13)
              for cost, error in ((1e-2, 1e-5), (4e-2, 1e-6), (1.6e-1, 1e-7))]
     adaptive = dataclasses.replace(
-        _held_row("chaingen", "es K=5 adaptive", adaptive_cost, adaptive_error, energy),
+        _held_row("chaingen", f"es K={ADAPTIVE_K} adaptive", adaptive_cost, adaptive_error,
+                  energy),
         setting="rtol = atol = 1e-08, samples every 0.05 s")
-    order4 = dataclasses.replace(adaptive, method="es K=5 order 4 adaptive",
+    order4 = dataclasses.replace(adaptive, method=f"es K={ADAPTIVE_K} order 4 adaptive",
                                  early_trajectory_error=1e-12)
     return fixed + [order4, adaptive]
 

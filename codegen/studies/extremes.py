@@ -72,7 +72,7 @@ def run(scene: Scene, method: str, *, dt: float, t_end: float, every: int = 1,
     details = (f"max abs energy error {energy:.2e} J ({energy / scale:.1e} relative), "
                f"constraint {result.constraint_error.max():.1e}, Newton mean "
                f"{result.mean_newton_iterations:.2f} / max {result.max_newton_iterations} "
-               f"a {step}, {result.wall_time / max(steps, 1) * 1e6:.2f} us/{step}")
+               f"per {step}, {result.wall_time / max(steps, 1) * 1e6:.2f} us/{step}")
     if result.full_newton_fallbacks or result.split_steps:
         details += (f"; fallbacks: {result.full_newton_fallbacks} steps by full Newton, "
                     f"{result.split_steps} split")

@@ -29,6 +29,8 @@ from ...generate.package import generate_package
 from ...runtime import Solver
 from ...scene import Scene, quadrature_used
 from .config import (
+    ADAPTIVE_BRACKET_DTS,
+    ADAPTIVE_SCENE,
     BRACKET_DTS,
     EARLY_T,
     HARNESS_FLAGS,
@@ -116,6 +118,9 @@ def scheme_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
         if name == HEADLINE_SCENE and method == "es":
             dts = tuple(dt for dt in BRACKET_DTS if _divides(dt, t_end)
                         and dt not in dts) + dts
+        if name == ADAPTIVE_SCENE and method == "es" and not config.quick:
+            dts = dts + tuple(dt for dt in ADAPTIVE_BRACKET_DTS if _divides(dt, t_end)
+                              and dt not in dts)
         with Harness(package, flags=HARNESS_FLAGS) as harness:
             for dt in dts:
                 n_steps = steps(t_end, dt)
