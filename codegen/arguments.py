@@ -79,10 +79,9 @@ JACOBIAN_CHOICES = {mode.name.removeprefix("JACOBIAN_").lower().replace("_", "-"
 
 def adaptive_tolerance(text: str) -> float:
     value = number(text)
-    if not (value == 0 or contract.MIN_ADAPTIVE_TOLERANCE <= value < math.inf):
-        raise argparse.ArgumentTypeError(
-            f"must be 0 (fixed steps) or from {contract.MIN_ADAPTIVE_TOLERANCE:g} up, and finite, "
-            f"got {text!r}")
+    if not contract.is_adaptive_tolerance(value):
+        raise argparse.ArgumentTypeError(f"must be {contract.ADAPTIVE_TOLERANCE_RULE}, got "
+                                         f"{text!r}")
     return value
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
-from .runtime.contract import ADAPTIVE_TOLERANCES, MIN_ADAPTIVE_TOLERANCE
+from .runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from .scene import METHODS, QUADRATURE_RANGE, Scene
 from .symbolic.composition import order_error
 
@@ -90,11 +90,10 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
     given = {"rtol": rtol, "atol": atol}
     for name in ADAPTIVE_TOLERANCES:
         value = getattr(settings, name)
-        if not (value == 0 or MIN_ADAPTIVE_TOLERANCE <= value < math.inf):
+        if not is_adaptive_tolerance(value):
             where = (f"--{name}" if given[name] is not None
                      else f"{scene_source}simulation.{name}")
-            raise SettingsError(f"{where}: must be 0 (fixed steps) or from "
-                                f"{MIN_ADAPTIVE_TOLERANCE:g} up, and finite, got {value}")
+            raise SettingsError(f"{where}: must be {ADAPTIVE_TOLERANCE_RULE}, got {value}")
     refused = order_error(settings.method, settings.order)
     if refused:
         raise SettingsError(f"--order: {refused}")

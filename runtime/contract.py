@@ -163,6 +163,13 @@ NEWTON_OPTION_DEFAULTS = {field.name: field.default for field in NEWTON_OPTIONS}
 #: chance, at steps ever shorter.
 MIN_ADAPTIVE_TOLERANCE = 1e-14
 ADAPTIVE_TOLERANCES = ("rtol", "atol")
+#: What rtol and atol may be, as error messages say it.
+ADAPTIVE_TOLERANCE_RULE = f"0 (fixed steps) or from {MIN_ADAPTIVE_TOLERANCE:g} up, and finite"
+
+
+def is_adaptive_tolerance(value: float) -> bool:
+    """Whether `value` may be an rtol or atol (ADAPTIVE_TOLERANCE_RULE)."""
+    return value == 0 or MIN_ADAPTIVE_TOLERANCE <= value < float("inf")
 
 #: Solutions of chained steps kept for the warm start: extrapolation of degree
 #: WARM_START_HISTORY - 1 (quadratic).

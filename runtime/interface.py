@@ -75,9 +75,9 @@ def _newton_options_class():
 def _check_options(options) -> None:
     for name in contract.ADAPTIVE_TOLERANCES:
         value = getattr(options, name)
-        if not (value == 0 or contract.MIN_ADAPTIVE_TOLERANCE <= value < float("inf")):
-            raise ValueError(f"NewtonOptions.{name}: must be 0 (fixed steps) or from "
-                             f"{contract.MIN_ADAPTIVE_TOLERANCE:g} up, and finite, got {value!r}")
+        if not contract.is_adaptive_tolerance(value):
+            raise ValueError(f"NewtonOptions.{name}: must be {contract.ADAPTIVE_TOLERANCE_RULE}, "
+                             f"got {value!r}")
     modes = tuple(mode.value for mode in contract.JACOBIAN_MODES)
     if options.reuse_jacobian not in modes:
         names = ", ".join(f"{mode.value} {mode.comment}" for mode in contract.JACOBIAN_MODES)

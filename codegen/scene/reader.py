@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from ..errors import SceneError
-from ..runtime.contract import ADAPTIVE_TOLERANCES, MIN_ADAPTIVE_TOLERANCE
+from ..runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from . import kinematics
 from .values import METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
 
@@ -464,10 +464,9 @@ class SceneReader:
                 fields[key] = self.positive(where, item, "duration in s")
             elif key in ADAPTIVE_TOLERANCES:
                 if (isinstance(item, bool) or not isinstance(item, (int, float))
-                        or not (item == 0 or MIN_ADAPTIVE_TOLERANCE <= item < math.inf)):
-                    self.fail(where, "must be 0 (fixed steps) or a number from "
-                                     f"{MIN_ADAPTIVE_TOLERANCE:g} up (local error tolerance of "
-                                     "adaptive steps)", item)
+                        or not is_adaptive_tolerance(item)):
+                    self.fail(where, f"must be {ADAPTIVE_TOLERANCE_RULE} (the local error "
+                                     "tolerance of adaptive steps)", item)
                 fields[key] = float(item)
             else:
                 self.unknown_key("simulation", key, item, _SIMULATION_KEYS)

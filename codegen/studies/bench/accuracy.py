@@ -14,8 +14,6 @@ from __future__ import annotations
 import statistics
 import time
 
-import numpy as np
-
 from ...errors import NewtonError
 from ...generate.package import generate_package
 from ...runtime import Solver
@@ -25,17 +23,16 @@ from .config import (
     EARLY_T,
     HARNESS_FLAGS,
     BenchConfig,
-    _divides,
     steps,
 )
 from .harness import Harness, HarnessError
 from .runs import (
     RunRow,
-    angle_error,
     compiled_rows,
     method_label,
     mujoco_rows,
     reference_angles_at_end,
+    run_errors,
     scheme_rows,
     scipy_rows,
 )
@@ -45,19 +42,6 @@ def order_label(scene: Scene, method: str, quadrature: int, order: int) -> str:
     """The line of a configuration of ours: "es K=5 order 4"; order 2 as runs.method_label."""
     label = method_label(scene, method, quadrature)
     return label if order == 2 else f"{label} order {order}"
-
-
-def _errors(result, method: str, t_end: float, dt: float, reference_angles) -> dict:
-    early_t = min(EARLY_T, t_end)
-    return dict(
-        energy_error=float(np.abs(result.energy_error).max()),
-        constraint_error=(None if method == "midpoint"
-                          else float(result.constraint_error.max())),
-        trajectory_error=(angle_error(result.phi[-1], reference_angles[0])
-                          if reference_angles[0] is not None else None),
-        early_trajectory_error=(angle_error(result.phi[steps(early_t, dt)], reference_angles[1])
-                                if reference_angles[1] is not None and _divides(dt, early_t)
-                                else None))
 
 
 def higher_order_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
@@ -88,7 +72,7 @@ def higher_order_rows(scene: Scene, name: str, config: BenchConfig, t_end: float
                 row = RunRow(**base, step_seconds=step, run_seconds=step * n_steps,
                              newton_iterations=timings.mean_iterations,
                              step_over_evaluation=timings.step_over_evaluation,
-                             **_errors(result, method, t_end, dt, reference_angles))
+                             **run_errors(result, method, t_end, dt, reference_angles))
                 rows.append(row)
                 progress(f"{name} {label} dt={dt:g}: {step * 1e6:.2f} us/step, "
                          f"energy {row.energy_error:.1e}")
@@ -127,7 +111,7 @@ def adaptive_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
             run = statistics.median(cpu)
             row = RunRow(**base, step_seconds=run / result.accepted_steps, run_seconds=run,
                          newton_iterations=result.newton_iterations / result.accepted_steps,
-                         **_errors(result, method, t_end, dt, reference_angles))
+                         **run_errors(result, method, t_end, dt, reference_angles))
             rows.append(row)
             progress(f"{name} {label} rtol={tolerance:g}: {run * 1e3:.1f} ms, "
                      f"{result.accepted_steps} steps ({result.rejected_steps} refused, dt "

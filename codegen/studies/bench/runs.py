@@ -93,6 +93,22 @@ def angle_error(phi, reference) -> float:
     return float(np.max(np.abs(np.remainder(difference + np.pi, 2 * np.pi) - np.pi)))
 
 
+def run_errors(result, method: str, t_end: float, dt: float, reference_angles) -> dict:
+    """The error fields of a RunRow from a run of ours (samples every dt): the energy and
+    constraint errors over the run, the trajectory errors at t_end and at EARLY_T against
+    reference_angles (None where there is no reference or dt does not divide the time)."""
+    early_t = min(EARLY_T, t_end)
+    return dict(
+        energy_error=float(np.abs(result.energy_error).max()),
+        constraint_error=(None if method == "midpoint"
+                          else float(result.constraint_error.max())),
+        trajectory_error=(angle_error(result.phi[-1], reference_angles[0])
+                          if reference_angles[0] is not None else None),
+        early_trajectory_error=(angle_error(result.phi[steps(early_t, dt)], reference_angles[1])
+                                if reference_angles[1] is not None and _divides(dt, early_t)
+                                else None))
+
+
 def scheme_configurations(scene: Scene, config: BenchConfig) -> list[tuple[str, int]]:
     """(method, quadrature) pairs to run: es at each K if the scene has springs (K applies to
     nothing else), vi and midpoint once."""
@@ -139,20 +155,11 @@ def scheme_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
                         progress(f"{name} {label} dt={dt:g} ({variant.label}): failed: {error}")
                         continue
                     step = timings.step_ns * 1e-9
-                    trajectory = (angle_error(result.phi[-1], reference_angles[0])
-                                  if reference_angles[0] is not None else None)
-                    early_t = min(EARLY_T, t_end)
-                    early = (angle_error(result.phi[steps(early_t, dt)], reference_angles[1])
-                             if reference_angles[1] is not None and _divides(dt, early_t)
-                             else None)
                     row = RunRow(
                         **base, step_seconds=step, run_seconds=step * n_steps,
-                        energy_error=float(np.abs(result.energy_error).max()),
-                        constraint_error=(None if method == "midpoint"
-                                          else float(result.constraint_error.max())),
-                        trajectory_error=trajectory, early_trajectory_error=early,
                         newton_iterations=timings.mean_iterations,
-                        step_over_evaluation=timings.step_over_evaluation)
+                        step_over_evaluation=timings.step_over_evaluation,
+                        **run_errors(result, method, t_end, dt, reference_angles))
                     rows.append(row)
                     progress(f"{name} {label} dt={dt:g} ({variant.label}): "
                              f"{step * 1e6:.2f} us/step, energy {row.energy_error:.1e}")
