@@ -13,7 +13,7 @@ from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
 from .runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from .scene import METHODS, QUADRATURE_RANGE, Scene
-from .symbolic.composition import order_error
+from .symbolic.composition import order_error, quadrature_error
 
 #: A run of more steps is refused: at about 1 us a step it would take days.
 MAX_STEPS = 10 ** 12
@@ -97,6 +97,9 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
     refused = order_error(settings.method, settings.order)
     if refused:
         raise SettingsError(f"--order: {refused}")
+    refused = quadrature_error(settings.method, settings.order, settings.quadrature)
+    if refused:
+        raise SettingsError(f"--quadrature: {refused}")
     return settings
 
 

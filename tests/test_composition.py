@@ -12,8 +12,8 @@ import pytest
 from chaingen.errors import SceneError, SettingsError
 from chaingen.generate.package import generate_package
 from chaingen.scene import ORDERS, parse_scene
-from chaingen.symbolic.composition import COMPOSITIONS
-from chaingen.symbolic.schemes import build_scheme
+from chaingen.symbolic.composition import COMPOSITIONS, FROM_ORDER_4
+from chaingen.symbolic.schemes import build_scheme, es, galerkin
 
 from helpers import load, scene_path
 
@@ -21,9 +21,12 @@ from helpers import load, scene_path
 TIGHT = {"reuse_jacobian": 0, "residual_tol": 1e-14, "update_rtol": 1e-14,
          "update_atol": 1e-14, "max_iterations": 50}
 T_END = 1.0
-#: Two steps where every composed order is above the reference's error floor (1e-14 rad).
+#: Two steps where every composed order is above the reference's error floor (1e-14 rad); es at
+#: order 6, the most accurate, is at 5e-15 rad at dt = 0.05 s on three_link_multi, so it
+#: takes two longer steps.
 DTS = (0.1, 0.05)
-CASES = [("es", 4), ("vi", 4), ("vi", 6), ("midpoint", 4), ("midpoint", 6)]
+LONGER_DTS = {("es", 6): (0.2, 0.1)}
+CASES = [("es", 4), ("es", 6), ("vi", 4), ("vi", 6), ("midpoint", 4), ("midpoint", 6)]
 
 
 @cache
@@ -63,10 +66,18 @@ def test_a_scene_names_its_order_and_a_bad_one_is_refused():
         parse_scene(text.replace("[simulation]", "[simulation]\norder = 3"), "s.toml", "s")
 
 
-def test_es_refuses_order_6():
+def test_es_composes_its_galerkin_step_to_order_6_and_refuses_k_1():
+    """es at order 6: Suzuki's 5 stages of the k = 1 Galerkin step (order 4) in joint space;
+    at order 4 its own COM step composed; K = 1 is too few nodes for the Galerkin step."""
     scene = load("three_link_mono")
-    with pytest.raises(SettingsError, match=r"--order 6: es reaches order 4 at most"):
-        build_scheme(scene, "es", 3, order=6)
+    sixth = build_scheme(scene, "es", 3, order=6)
+    fourth = build_scheme(scene, "es", 3, order=4)
+    assert sixth.summary == galerkin.SUMMARY and fourth.summary == es.SUMMARY
+    assert sixth.composition == FROM_ORDER_4 and len(fourth.composition) == 5
+    assert sixth.unknowns.shape[0] == (3 + 4) * scene.n
+    assert sixth.state_from_joint_space and not fourth.state_from_joint_space
+    with pytest.raises(SettingsError, match=r"--quadrature: es at order 6 .* needs K >= 2"):
+        build_scheme(scene, "es", 1, order=6)
 
 
 def test_composed_es_chains_its_sensitivities_in_the_whole_state():
@@ -103,7 +114,7 @@ def test_composed_steps_reach_their_order_in_angles_and_rates(name, method, orde
     scene = load(name)
     built = solver(name, method, order)
     angle_errors, rate_errors = [], []
-    for dt in DTS:
+    for dt in LONGER_DTS.get((method, order), DTS):
         run = built.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
                              n_steps=round(T_END / dt), every=round(T_END / dt), options=TIGHT)
         angle_errors.append(np.abs(wrapped(run.phi[-1] - phi_ref)).max())
@@ -114,22 +125,26 @@ def test_composed_steps_reach_their_order_in_angles_and_rates(name, method, orde
 
 
 @pytest.mark.compile
-def test_composed_es_keeps_energy_and_constraints():
-    """es of order 4 (K = 5) over 10 s at dt = 0.05 s: energy error <= 1e-12 J, constraint
-    error <= 1e-13, though one stage in five steps backwards."""
+@pytest.mark.parametrize("order", [4, 6])
+def test_composed_es_keeps_energy_and_constraints(order):
+    """es of order 4 and 6 (K = 5) over 10 s at dt = 0.05 s: energy error <= 1e-12 J,
+    constraint error <= 1e-13 (none at order 6: joint angles), though one stage in five steps
+    backwards."""
     scene = load("three_link_mono")
-    run = solver("three_link_mono", "es", 4, quadrature=5).simulate(
+    run = solver("three_link_mono", "es", order, quadrature=5).simulate(
         scene.initial_angles, scene.initial_velocities, dt=0.05, n_steps=200, every=1)
     assert np.abs(run.energy_error).max() <= 1e-12
     assert run.constraint_error.max() <= 1e-13
 
 
 @pytest.mark.compile
-def test_composed_es_keeps_the_energy_balance_with_torques_and_damping():
+@pytest.mark.parametrize("order", [4, 6])
+def test_composed_es_keeps_the_energy_balance_with_torques_and_damping(order):
     """four_link_actuated (damping, actuation): per step H_1 - H_0 = work - dissipated, the
-    flows summed over the stages."""
+    flows summed over the stages. (At order 6 the Galerkin step's balance holds to its
+    quadrature, every term's: K = 7 here, where K = 5 leaves 2e-11 J over the 400 steps.)"""
     scene = load("four_link_actuated")
-    built = solver("four_link_actuated", "es", 4, quadrature=5)
+    built = solver("four_link_actuated", "es", order, quadrature=5 if order == 4 else 7)
     rng = np.random.default_rng(16)
     torques = rng.uniform(-1.0, 1.0, (400, len(scene.actuated_joints)))
     run = built.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01, n_steps=400,
@@ -144,7 +159,8 @@ def test_composed_es_keeps_the_energy_balance_with_torques_and_damping():
 @pytest.mark.parametrize("name, method, order", [
     ("three_link_multi", "vi", 4), ("three_link_multi", "vi", 6),
     ("four_link_actuated", "midpoint", 4), ("four_link_actuated", "midpoint", 6),
-    ("three_link_multi", "es", 4), ("four_link_actuated", "es", 4)])
+    ("three_link_multi", "es", 4), ("four_link_actuated", "es", 4),
+    ("three_link_multi", "es", 6), ("four_link_actuated", "es", 6)])
 def test_composed_sensitivities_match_central_differences(name, method, order):
     """d s1/d s0 and d s1/d u of the composed step, by the chain rule through the stages,
     against central differences of the composed step (to 1e-6)."""

@@ -94,7 +94,7 @@ def synthetic_study(method: str, order: int, *, flows: bool = False, quadrature=
 def test_allowed_orders_are_those_the_composition_takes(method):
     orders = allowed_orders(method)
     assert orders == tuple(order for order in ORDERS if order_error(method, order) is None)
-    assert orders == ((2, 4) if method == "es" else (2, 4, 6))
+    assert orders == (2, 4, 6)
 
 
 def test_every_order_has_step_sizes_on_the_sample_grid_and_newton_settings():

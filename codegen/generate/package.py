@@ -85,7 +85,7 @@ def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool =
         code_relevant.pop(key)
     payload = {
         "scene": code_relevant, "method": method,
-        "quadrature": quadrature_used(scene, method, quadrature),
+        "quadrature": quadrature_used(scene, method, quadrature, order),
         "sensitivities": sensitivities, "parameters": list(parameters), "order": order,
         "chaingen": VERSION, "sympy": sympy.__version__, "casadi": casadi.__version__,
     }
@@ -125,8 +125,10 @@ def package_features(scheme: DiscreteScheme, sensitivities: bool) -> Features:
 
 
 def newton_defaults(scheme: DiscreteScheme) -> dict:
-    """The package's Newton defaults: the contract's, with the scheme's Jacobian reuse."""
-    return {**contract.NEWTON_OPTION_DEFAULTS, "reuse_jacobian": scheme.jacobian_reuse}
+    """The package's Newton defaults: the contract's, with the scheme's Jacobian reuse and
+    overrides."""
+    return {**contract.NEWTON_OPTION_DEFAULTS, "reuse_jacobian": scheme.jacobian_reuse,
+            **dict(scheme.newton_overrides)}
 
 
 def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,

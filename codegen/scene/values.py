@@ -16,13 +16,22 @@ QUADRATURE_RANGE = (1, 20)
 ORDERS = (2, 4, 6)
 
 
-def quadrature_used(scene: Scene, method: str, quadrature: int) -> int | None:
+#: The order from which "es" takes its k = 1 Galerkin step in joint angles (docs/model.md,
+#: section 16), whose quadrature rule integrates every term of the step.
+GALERKIN_ORDER = 6
+
+
+def quadrature_used(scene: Scene, method: str, quadrature: int, order: int = 2) -> int | None:
     """The quadrature a scheme of `scene` runs with, None where K plays no role.
 
-    Only "es" averages the spring gradient over the step by Gauss-Legendre quadrature
-    (docs/model.md, section 4); without springs there is nothing to average.
+    Only "es" uses K: up to order 4 it averages the spring gradient over the step by
+    Gauss-Legendre quadrature (docs/model.md, section 4), so without springs there is nothing
+    to average; at order 6 its Galerkin step integrates every term by the (K + 1)-point
+    Gauss-Lobatto rule (section 16).
     """
-    return quadrature if method == "es" and scene.springs else None
+    if method != "es":
+        return None
+    return quadrature if scene.springs or order >= GALERKIN_ORDER else None
 
 
 def c_identifier(name: str) -> str:

@@ -244,7 +244,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
     refused = order_error(method, order)
     if refused:
         raise OrderStudyError(f"order {order}: {refused}")
-    quadrature_in_use = quadrature_used(scene, method, quadrature)
+    quadrature_in_use = quadrature_used(scene, method, quadrature, order)
     if dts is None:
         dts = ORDER_DTS[order]
     if options is None:

@@ -11,12 +11,20 @@ its symplecticity and the unit norms. Every composition of order above 2 has a n
   whose error constant is much smaller than the triple jump's;
 - order 6: Kahan and Li's 9-stage composition s9odr6a (Hairer, Lubich and Wanner, Geometric
   Numerical Integration, V.3.2).
+
+"es" composes its own step to order 4 only: its nodal velocities meet C(q) v = 0 to O(dt^2),
+which stalls a composition of its steps there (docs/model.md, section 14). At order 6 it takes
+its k = 1 Galerkin step in joint angles instead, symmetric and of order 4
+(chaingen.symbolic.schemes.galerkin), composed by Suzuki's 5 stages (p, p, 1 - 4p, p, p) with
+p = 1 / (4 - 4^(1/5)), the same construction one order up.
 """
 from __future__ import annotations
 
 from ..scene import ORDERS
+from ..scene.values import GALERKIN_ORDER
 
 _P = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
+_P6 = 1.0 / (4.0 - 4.0 ** (1.0 / 5.0))
 _KAHAN_LI = (0.39216144400731413928, 0.33259913678935943860, -0.70624617255763935981,
              0.08221359629355080023, 0.79854399093482996340)
 
@@ -29,26 +37,36 @@ COMPOSITIONS: dict[int, tuple[float, ...]] = {
 if tuple(COMPOSITIONS) != ORDERS:
     raise ImportError(f"compositions {tuple(COMPOSITIONS)} do not match the orders {ORDERS}")
 
-#: Methods whose composed step stays below the highest order, and the order they reach: the
-#: nodal velocities of es meet C(q) v = 0 only to O(dt^2) (docs/model.md, section 14).
-MAX_ORDER = {"es": 4}
+#: The step fractions that compose a symmetric step of order 4 to order 6 (Suzuki).
+FROM_ORDER_4 = (_P6, _P6, 1.0 - 4.0 * _P6, _P6, _P6)
 
 
 def order_error(method: str, order: int) -> str | None:
     """Why `method` cannot take `order` (a sentence), or None when it can."""
     if order not in COMPOSITIONS:
         return f"must be one of {', '.join(map(str, ORDERS))}, got {order!r}"
-    highest = MAX_ORDER.get(method, ORDERS[-1])
-    if order > highest:
-        return (f"{method} reaches order {highest} at most (its nodal velocities meet "
-                "C(q) v = 0 only to O(dt^2), which limits a composition of its steps; "
-                f"docs/model.md, section 14): use order {highest}, or vi or midpoint for order "
-                f"{order}")
     return None
 
 
-def composition(order: int) -> tuple[float, ...]:
-    """The step fractions of the composition of `order` (ValueError for another order)."""
+#: The fewest Gauss points K es takes at GALERKIN_ORDER: its Galerkin step's Gauss-Lobatto rule
+#: has K + 1 >= 3 nodes, exact to degree 3, which its equations of order 4 need.
+GALERKIN_MIN_QUADRATURE = 2
+
+
+def quadrature_error(method: str, order: int, quadrature: int) -> str | None:
+    """Why `method` at `order` cannot take `quadrature` K (a sentence), or None when it can."""
+    if method == "es" and order >= GALERKIN_ORDER and quadrature < GALERKIN_MIN_QUADRATURE:
+        return (f"es at order {order} takes its k = 1 Galerkin step, whose Gauss-Lobatto rule "
+                f"needs K >= {GALERKIN_MIN_QUADRATURE} (K + 1 nodes, exact to degree 2K - 1; "
+                f"docs/model.md, section 16), got {quadrature}")
+    return None
+
+
+def composition(order: int, base_order: int = 2) -> tuple[float, ...]:
+    """The step fractions of the composition of `order` from a symmetric step of `base_order`
+    (2, or 4 for es's Galerkin step; ValueError for another order)."""
+    if base_order == 4 and order in (4, 6):
+        return (1.0,) if order == 4 else FROM_ORDER_4
     try:
         return COMPOSITIONS[order]
     except KeyError:

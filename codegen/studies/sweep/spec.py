@@ -28,7 +28,7 @@ import numpy as np
 from ...errors import ChaingenError, SceneError
 from ...scene import METHODS, QUADRATURE_RANGE, Scene, load_scene
 from ...scene.parameters import NumberPath, number_path, with_values
-from ...symbolic.composition import order_error
+from ...symbolic.composition import order_error, quadrature_error
 
 MODES = ("product", "zip", "sample")
 SAMPLERS = ("sobol", "latin-hypercube")
@@ -143,6 +143,9 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
     refused = order_error(method, order) if _integer(order) else "must be an integer"
     if refused:
         raise fail("order", refused)
+    refused = quadrature_error(method, order, quadrature)
+    if refused:
+        raise fail("quadrature", refused)
     mode = document.get("mode", "product")
     if mode not in MODES:
         raise fail("mode", f"must be one of {', '.join(MODES)}, got {mode!r}")

@@ -13,8 +13,9 @@ from sympy import ImmutableMatrix
 from ...errors import SceneError, SettingsError
 from ...scene import METHODS, Scene
 from ...scene.parameters import compiled_paths, number_path, with_symbols
+from ...scene.values import GALERKIN_ORDER
 from ..composition import composition
-from . import es, midpoint, vi
+from . import es, galerkin, midpoint, vi
 from .base import DiscreteScheme, FlowDescription, Layout, LinearSolve, segment_tolerances
 
 BUILDERS = {"es": es.build, "vi": vi.build, "midpoint": midpoint.build}
@@ -27,13 +28,15 @@ def build_scheme(scene: Scene, method: str, quadrature: int,
     """The discrete scheme `method` for `scene` (quadrature: Gauss points for spring terms),
     with the numbers at the key paths `parameters` as run-time parameters p, in that order
     ("all": every number of the scene a solver can take, chaingen.scene.parameters.
-    compiled_paths), its step composed to `order` (chaingen.symbolic.composition)."""
+    compiled_paths), its step composed to `order` (chaingen.symbolic.composition; es at order
+    6 composes its k = 1 Galerkin step, chaingen.symbolic.schemes.galerkin)."""
+    galerkin_step = method == "es" and order >= GALERKIN_ORDER
     try:
-        stages = composition(order)
+        stages = composition(order, 4 if galerkin_step else 2)
     except ValueError as error:
         raise SettingsError(f"--order: {error}") from None
     try:
-        builder = BUILDERS[method]
+        builder = galerkin.build if galerkin_step else BUILDERS[method]
     except KeyError:
         raise SettingsError(
             f"method {method!r} is not available in this version of chaingen "

@@ -104,6 +104,8 @@ class DiscreteScheme:
     segment_relative_tolerance: float = RUN_SEGMENT_RELATIVE_TOLERANCE
     # The Newton Jacobian reuse the package defaults to (a JACOBIAN_* mode of the contract).
     jacobian_reuse: int = JACOBIAN_EVERY_ITERATE
+    # Other Newton defaults of the package that differ from the contract's, (name, value).
+    newton_overrides: tuple[tuple[str, float], ...] = ()
     # Run-time parameters: scene numbers left as symbols p (every other number is a constant
     # folded into the code), with their key paths, units and the scene's own values.
     parameters: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)

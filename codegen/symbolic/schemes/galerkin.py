@@ -1,0 +1,178 @@
+"""The k = 1 Petrov-Galerkin step of "es" in joint angles and canonical momenta (docs/model.md,
+section 16): the step es takes at orders 4 and 6.
+
+Hamilton's equations of the chain in z = (phi, p), H(phi, p) = 1/2 p^T M(phi)^-1 p + V(phi),
+
+    phidot = dH/dp = w,    pdot = -dH/dphi + tau - D w = dL/dphi(phi, w) + tau - D w,
+
+with w = M(phi)^-1 p the joint rates and L = T - V, are discretised over a step of length dt with
+continuous piecewise quadratic trial functions phi(s), p(s) (s = t / dt in [0, 1]) and piecewise
+linear test functions psi in {1, 2 s - 1}:
+
+    int_0^1 psi (phi'(s) - dt w(s)) ds = 0,    int_0^1 psi (p'(s) - dt F(s)) ds = 0,
+
+F = dL/dphi + tau - D w, the integrals taken by the N = K + 1 point Gauss-Lobatto rule (exact to
+degree 2K - 1) and w at each node s_g from M(phi_g) w_g = p_g. Testing the first equation with
+the projection of dH/dphi and the second with that of dH/dp shows
+H_1 - H_0 = tau . (phi_1 - phi_0) - (dissipated >= 0) up to the quadrature of int dH: the
+energy error of the step is the rule's error, O(dt^(2K+1)) per step, nothing else. The step is
+symmetric, of order 4 in phi and in w (the nodes are superconvergent: 2k + 2), and there are no
+constraints to keep: the chain's geometry is exact in joint angles.
+
+Unknowns (increments from the step's start, so that nothing cancels at O(|p|)):
+dphi_m = phi(1/2) - phi_0, dphi_1 = phi_1 - phi_0, dp_m, dp_1 likewise, and dw_g = w_g - w_0 at
+the N - 1 nodes after s = 0 (the last is w_1): (K + 4) n unknowns. The state is (phi, w): p_0 =
+M(phi_0) w_0 follows from it.
+"""
+from __future__ import annotations
+
+import numpy as np
+import sympy as sp
+from sympy import ImmutableMatrix
+
+from ...errors import SettingsError
+from ...runtime.contract import JACOBIAN_PER_STEP
+from ...scene import Scene
+from ...scene.values import GALERKIN_ORDER
+from ..com_model import number
+from ..composition import quadrature_error
+from ..joint_model import angle_directions, joint_space_model
+from .base import (
+    DiscreteScheme,
+    FlowDescription,
+    Layout,
+    common_fields,
+    has_energy_flows,
+    input_symbols,
+    joint_torques,
+    segment_vectors,
+)
+from .es import COMPOSED_UPDATE_RTOL
+
+SUMMARY = ("Energy-conserving k = 1 Petrov-Galerkin step in joint angles and canonical momenta "
+           "(docs/model.md, section 16).")
+FLOWS = FlowDescription(
+    "sum_i tau_i (phi_1 - phi_0)_i", "dt sum_g b_g sum_i d_i phidot_i(s_g)^2",
+    "phidot(s_g) the rates of the quadratic trial function at the Gauss-Lobatto nodes s_g "
+    "(weights b_g). H_1 - H_0 = flows[0] - flows[1] to quadrature and solver accuracy.")
+
+def gauss_lobatto_nodes(points: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Nodes s_g in [0, 1] (both ends included) and weights b_g (summing to 1) of the
+    `points`-point Gauss-Lobatto rule, exact for polynomials of degree 2 points - 3."""
+    if points < 2:
+        raise ValueError(f"a Gauss-Lobatto rule needs at least two points, got {points}")
+    legendre = np.polynomial.legendre.Legendre.basis(points - 1)
+    interior = np.sort(legendre.deriv().roots().real)
+    x = np.concatenate([[-1.0], interior, [1.0]])
+    weights = 2.0 / (points * (points - 1) * legendre(x) ** 2)
+    return tuple((x + 1.0) / 2.0), tuple(weights / 2.0)
+
+
+def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> DiscreteScheme:
+    """The k = 1 step of `scene` with the (quadrature + 1)-point Gauss-Lobatto rule."""
+    refused = quadrature_error("es", GALERKIN_ORDER, quadrature)
+    if refused:
+        raise SettingsError(f"--quadrature: {refused}")
+    n = scene.n
+    dt = sp.Symbol("dt", positive=True)
+    phi0 = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
+    w0 = ImmutableMatrix(sp.symbols(f"w1:{n + 1}", real=True))
+    model = joint_space_model(scene, angle_directions(phi0), w0)
+    nodes, weights = gauss_lobatto_nodes(quadrature + 1)
+
+    def vector(name):
+        return ImmutableMatrix(sp.symbols(f"{name}1:{n + 1}", real=True))
+
+    dphi_m, dphi_1, dp_m, dp_1 = (vector(name) for name in ("dphim_", "dphi1_", "dpm_", "dp1_"))
+    dws = [vector(f"dw{g}_") for g in range(1, len(nodes))]
+
+    # Generic expressions in (phi0, w0), evaluated at each node by substitution.
+    lagrangian_gradient = ImmutableMatrix(
+        [model.kinetic_energy - model.potential]).jacobian(phi0).T
+    inputs = input_symbols(scene)
+    torques = ImmutableMatrix(joint_torques(scene, inputs))
+    damping = ImmutableMatrix([number(link.damping) for link in scene.links])
+    mass_matrix = model.mass_matrix
+
+    definitions = []
+    p0 = vector("p0_")
+    definitions += list(zip(p0, mass_matrix * w0))
+
+    def quadratic(start_change_mid, change_end, s):
+        """Increment of the quadratic through (0, 0), (1/2, mid), (1, end) at s, and its
+        derivative in s."""
+        value = start_change_mid * (4 * s * (1 - s)) + change_end * (s * (2 * s - 1))
+        slope = start_change_mid * (4 - 8 * s) + change_end * (4 * s - 1)
+        return value, slope
+
+    phi_rows = [ImmutableMatrix.zeros(n, 1), ImmutableMatrix.zeros(n, 1)]
+    p_rows = [ImmutableMatrix.zeros(n, 1), ImmutableMatrix.zeros(n, 1)]
+    momentum_rows = []
+    dissipated = sp.Integer(0)
+    for g, (s, b) in enumerate(zip(nodes, weights)):
+        s_value, b_value = sp.Float(s), sp.Float(b)
+        dphi, phi_slope = quadratic(dphi_m, dphi_1, s_value)
+        dp, p_slope = quadratic(dp_m, dp_1, s_value)
+        if g == 0:
+            phi_g, w_g, p_g = phi0, w0, p0
+        else:
+            phi_g, w_g = vector(f"phi_node{g}_"), vector(f"w_node{g}_")
+            p_g = vector(f"p_node{g}_")
+            definitions += list(zip(phi_g, phi0 + dphi)) + list(zip(w_g, w0 + dws[g - 1]))
+            definitions += list(zip(p_g, p0 + dp))
+            at_node = {**dict(zip(phi0, phi_g)), **dict(zip(w0, w_g))}
+            # w_g from M(phi_g) w_g = p_g, as a residual: Newton solves it with the rest.
+            momentum_rows.append(mass_matrix.xreplace(at_node) * w_g - p_g)
+        at_node = {**dict(zip(phi0, phi_g)), **dict(zip(w0, w_g))}
+        force = vector(f"force_node{g}_")
+        definitions += list(zip(force, lagrangian_gradient.xreplace(at_node) + torques
+                                - ImmutableMatrix([d * w for d, w in zip(damping, w_g)])))
+        for row, psi in enumerate((sp.Integer(1), 2 * s_value - 1)):
+            phi_rows[row] += b_value * psi * (phi_slope - dt * w_g)
+            p_rows[row] += b_value * psi * (p_slope - dt * force)
+        dissipated += b_value * sp.Add(*(number(link.damping) * phi_slope[i] ** 2
+                                         for i, link in enumerate(scene.links) if link.damping))
+    dissipated = dissipated / dt
+    residual = ImmutableMatrix.vstack(*phi_rows, *p_rows, *momentum_rows)
+    unknowns = ImmutableMatrix.vstack(dphi_m, dphi_1, dp_m, dp_1, *dws)
+
+    phi = ImmutableMatrix(sp.symbols(f"phi_init1:{n + 1}", real=True))
+    phidot = ImmutableMatrix(sp.symbols(f"phidot_init1:{n + 1}", real=True))
+    names = [f"{kind}_{i}" for kind in ("dphim", "dphi1", "dpm", "dp1") for i in range(1, n + 1)]
+    names += [f"dw{g}_{i}" for g in range(1, len(nodes)) for i in range(1, n + 1)]
+    return DiscreteScheme(
+        method="es", quadrature=quadrature, scene=scene, summary=SUMMARY, dt=dt,
+        state=ImmutableMatrix.vstack(phi0, w0), unknowns=unknowns,
+        residual=residual,
+        next_state=ImmutableMatrix.vstack(phi0 + dphi_1, w0 + dws[-1]),
+        predictor=ImmutableMatrix.vstack(dt * w0 / 2, dt * w0,
+                                         ImmutableMatrix.zeros((2 + len(dws)) * n, 1)),
+        joint_angles=ImmutableMatrix([sp.atan2(sp.sin(p), sp.cos(p)) for p in phi0]),
+        joint_velocities=w0,
+        energy=model.energy,
+        constraint_residuals=ImmutableMatrix.zeros(0, 1),
+        initial_angles=phi, initial_velocities=phidot,
+        initial_state=ImmutableMatrix.vstack(phi, phidot),
+        state_layout=Layout(
+            tuple(f"phi_{i}" for i in range(1, n + 1)) + tuple(f"w_{i}" for i in range(1, n + 1)),
+            "relative joint angles phi (rad, not wrapped), then joint rates w (rad/s)"),
+        unknowns_layout=Layout(
+            tuple(names),
+            "increments from the step's start of the joint angles at its mid-point and end "
+            "(rad), of the momenta there (N m s), and of the joint rates at the Gauss-Lobatto "
+            "nodes after its start, the last its end (rad/s)"),
+        residual_description=(
+            "the Galerkin equations of phi tested with 1 and 2s - 1 (2n entries, rad), those of "
+            "p (2n entries, N m s), then M(phi_g) w_g - p_g at each node after the start "
+            "(N m s)"),
+        inputs=inputs, segment_vectors=segment_vectors(model), definitions=tuple(definitions),
+        input_work=sp.Add(*(tau * d for tau, d in zip(torques, dphi_1))),
+        dissipated=dissipated,
+        flow_description=FLOWS if has_energy_flows(scene) else None,
+        jacobian_reuse=JACOBIAN_PER_STEP, order=order,
+        # Its stages start from their own previous solutions as es's composed ones do: the
+        # same tolerance (four_link_actuated, K = 7, 400 steps of 0.01 s: balance drift
+        # 2.0e-11 J at 1e-10, 1.0e-12 J at 1e-12).
+        newton_overrides=(("update_rtol", COMPOSED_UPDATE_RTOL),),
+        **common_fields(scene, phi),
+    )
