@@ -237,7 +237,7 @@ def test_every_scheme_example_is_clean_under_valgrind(tmp_path, scene, method):
                         "0.5"]))
 
 
-@pytest.mark.parametrize("method, order", [("es", 4), ("vi", 6), ("midpoint", 6)])
+@pytest.mark.parametrize("method, order", [("es", 4), ("es", 6), ("vi", 6), ("midpoint", 6)])
 def test_composed_examples_are_clean_under_valgrind_and_the_sanitizers(tmp_path, method, order):
     """A composed step (docs/model.md 14), actuated with damping: with the strict flags, the
     example program (its stages) and a call of the chained step sensitivities (es: chained in
@@ -418,7 +418,7 @@ def test_example_accepts_good_arguments(plain_example, arguments):
     assert 1 <= worst <= limit, output(result)
 
 
-@pytest.mark.parametrize("method, order", [("es", 2), ("es", 4), ("vi", 2), ("midpoint", 4)])
+@pytest.mark.parametrize("method, order", [("es", 2), ("es", 4), ("es", 6), ("vi", 2), ("midpoint", 4)])
 def test_adaptive_runs_are_clean_under_valgrind_and_the_sanitizers(tmp_path, method, order):
     """simulate with adaptive steps (rtol, atol) on an actuated, damped scene: with the strict
     flags the run completes, refuses at least one step (a first try at the whole interval), and
