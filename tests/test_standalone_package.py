@@ -418,7 +418,8 @@ def test_example_accepts_good_arguments(plain_example, arguments):
     assert 1 <= worst <= limit, output(result)
 
 
-@pytest.mark.parametrize("method, order", [("es", 2), ("es", 4), ("es", 6), ("vi", 2), ("midpoint", 4)])
+@pytest.mark.parametrize("method, order", [("es", 2), ("es", 4), ("es", 6), ("vi", 2),
+                                           ("midpoint", 4)])
 def test_adaptive_runs_are_clean_under_valgrind_and_the_sanitizers(tmp_path, method, order):
     """simulate with adaptive steps (rtol, atol) on an actuated, damped scene: with the strict
     flags the run completes, refuses at least one step (a first try at the whole interval), and

@@ -127,6 +127,25 @@ def test_python_api_returns_tables(tmp_path):
     assert len(only) == 1 and (tmp_path / "o" / "runs.parquet").exists()
 
 
+def test_an_adaptive_sweep_run_is_the_single_adaptive_run(tmp_path):
+    """rtol/atol in the spec: each run adapts its steps exactly as simulate does with them."""
+    runs = chaingen.sweep({"scene": str(MONO), "t_end": 1.0, "rtol": 1e-7, "atol": 1e-7,
+                           "axes": {"springs[0].stiffness": [3.0, 8.0]}})
+    fixed = chaingen.sweep({"scene": str(MONO), "t_end": 1.0,
+                            "axes": {"springs[0].stiffness": [3.0, 8.0]}})
+    scene = with_values(load("three_link_mono"), {"springs[0].stiffness": 8.0})
+    solver = build_solver(scene, "es", 3, sensitivities=False)
+    single = solver.simulate(scene.initial_angles, scene.initial_velocities,
+                             dt=scene.simulation.dt, n_steps=100,
+                             options={"rtol": 1e-7, "atol": 1e-7})
+    assert single.accepted_steps > 100
+    row = runs.iloc[1]
+    np.testing.assert_allclose([row[f"phi{i}"] for i in (1, 2, 3)], single.phi[-1], atol=1e-12,
+                               rtol=0)
+    assert np.abs(runs[["phi1", "phi2", "phi3"]].to_numpy()
+                  - fixed[["phi1", "phi2", "phi3"]].to_numpy()).max() > 1e-9
+
+
 def test_a_failing_run_is_a_row_and_the_sweep_goes_on(tmp_path):
     scene = ROOT / "scenes" / "collapsing_spring.toml"
     spec = load_spec(write_spec(tmp_path, f"""

@@ -37,6 +37,26 @@ def test_run_time_axes_are_not_parameters():
     assert found.n_steps({"simulation.dt": 0.005}) == round(found.t_end / 0.005)
 
 
+def test_adaptive_tolerances_come_from_the_spec_or_the_scene():
+    """rtol/atol: the spec's keys, else the scene's simulation.rtol/atol (fixed steps when both
+    are 0); every run then takes them as its Newton options."""
+    assert spec().options is None
+    adaptive = spec(rtol=1e-8, atol=1e-9)
+    assert (adaptive.rtol, adaptive.atol) == (1e-8, 1e-9)
+    assert adaptive.options == {"rtol": 1e-8, "atol": 1e-9}
+    assert adaptive.digest != spec().digest
+
+
+def test_a_scene_s_adaptive_tolerances_reach_the_sweep(tmp_path):
+    scene = tmp_path / "adaptive.toml"
+    scene.write_text((ROOT / "scenes" / "three_link_mono.toml").read_text().replace(
+        "[simulation]", "[simulation]\nrtol = 1e-7\natol = 1e-7"))
+    found = parse_spec({"scene": str(scene), "axes": {"springs[0].stiffness": [5.0]}})
+    assert found.options == {"rtol": 1e-7, "atol": 1e-7}
+    assert parse_spec({"scene": str(scene), "rtol": 0.0, "atol": 0.0,
+                       "axes": {"springs[0].stiffness": [5.0]}}).options is None
+
+
 def test_zip_pairs_values():
     found = spec(mode="zip", axes={"springs[0].stiffness": [1.0, 2.0, 3.0],
                                    "links[1].mass": [0.5, 0.6, 0.7]})
@@ -93,6 +113,8 @@ BAD_SPECS = {
     "quadrature": ({"quadrature": 0}, "quadrature", "integer"),
     "mode": ({"mode": "grid"}, "mode", "must be one of"),
     "order": ({"order": 3}, "order", "must be one of"),
+    "rtol": ({"rtol": 1e-16}, "rtol", "1e-14"),
+    "atol": ({"atol": "tight"}, "atol", "1e-14"),
     "quadrature below es's order 6": ({"method": "es", "order": 6, "quadrature": 1}, "quadrature",
                                       "needs K >= 2"),
     "out of range": ({"axes": {"links[1].mass": {"from": -1.0, "to": 1.0, "num": 3}}},

@@ -94,7 +94,7 @@ def run_chunk(spec: SweepSpec, solver: Solver, first: int, count: int,
         started = time.thread_time()
         try:
             simulated = solver.simulate(phi0, omega0, dt=dt, n_steps=steps, every=stride,
-                                        parameters=parameters, stop=stop)
+                                        options=spec.options, parameters=parameters, stop=stop)
             failure = None
         except NewtonError as error:
             if stop is not None and stop.stopped:

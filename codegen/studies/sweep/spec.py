@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ChaingenError, SceneError
+from ...runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from ...scene import METHODS, QUADRATURE_RANGE, Scene, load_scene
 from ...scene.parameters import NumberPath, number_path, with_values
 from ...symbolic.composition import order_error, quadrature_error
@@ -33,8 +34,8 @@ from ...symbolic.composition import order_error, quadrature_error
 MODES = ("product", "zip", "sample")
 SAMPLERS = ("sobol", "latin-hypercube")
 SPACINGS = ("linear", "log")
-TOP_KEYS = ("scene", "method", "quadrature", "order", "mode", "samples", "sampler", "seed",
-            "t_end", "every", "axes")
+TOP_KEYS = ("scene", "method", "quadrature", "order", "rtol", "atol", "mode", "samples",
+            "sampler", "seed", "t_end", "every", "axes")
 RANGE_KEYS = ("from", "to", "num", "spacing")
 #: A sweep of more runs than this is refused as a mistake (a product of long axes).
 MAX_RUNS = 10_000_000
@@ -79,6 +80,15 @@ class SweepSpec:
     document: dict = field(repr=False)
     scene_text: str = field(repr=False, default="")
     order: int = 2                # of the step (docs/model.md, section 14)
+    rtol: float = 0.0             # adaptive steps' tolerances (both 0: fixed steps of dt)
+    atol: float = 0.0
+
+    @property
+    def options(self) -> dict | None:
+        """The Newton options of every run: the adaptive tolerances, if any."""
+        if not (self.rtol or self.atol):
+            return None
+        return {"rtol": self.rtol, "atol": self.atol}
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -146,6 +156,13 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
     refused = quadrature_error(method, order, quadrature)
     if refused:
         raise fail("quadrature", refused)
+    tolerances = {}
+    for name in ADAPTIVE_TOLERANCES:
+        value = document.get(name, getattr(scene.simulation, name))
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not is_adaptive_tolerance(float(value)):
+            raise fail(name, f"must be {ADAPTIVE_TOLERANCE_RULE}, got {value!r}")
+        tolerances[name] = float(value)
     mode = document.get("mode", "product")
     if mode not in MODES:
         raise fail("mode", f"must be one of {', '.join(MODES)}, got {mode!r}")
@@ -185,7 +202,7 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
                      quadrature=quadrature, mode=mode, axes=axes, runs=tuple(runs),
                      t_end=float(t_end), every=every, seed=seed, sampler=sampler,
                      document=document, scene_text=scene_path.read_text(encoding="utf-8"),
-                     order=order)
+                     order=order, **tolerances)
     _check_values(spec)
     return spec
 

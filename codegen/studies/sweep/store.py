@@ -115,7 +115,7 @@ class SweepStore:
             record = {"source": self.spec.source, "digest": self.digest, "chunk": self.chunk,
                       "spec": self.spec.document, "scene": str(self.spec.scene_path),
                       "method": self.spec.method, "quadrature": self.spec.quadrature,
-                      "order": self.spec.order,
+                      "order": self.spec.order, "rtol": self.spec.rtol, "atol": self.spec.atol,
                       "parameters": list(self.spec.parameters),
                       "axes": [axis.path for axis in self.spec.axes],
                       "spacing": {axis.path: axis.spacing for axis in self.spec.axes},
