@@ -11,11 +11,11 @@ from chaingen.errors import ChaingenError, OrderStudyError
 from chaingen.runtime import NewtonOptions
 from chaingen.studies.order import (
     DEFAULT_DTS,
-    ORDER_DTS,
     ROUND_OFF_NEWTON,
     allowed_orders,
     format_summary,
     format_table,
+    order_dts,
     order_studies,
     order_study,
 )
@@ -183,7 +183,7 @@ def test_plot_without_matplotlib_is_a_clear_error(tmp_path, monkeypatch):
 def test_every_allowed_order_is_studied_and_summarised(method):
     studies = every_order(MONO, method)
     assert tuple(study.order for study in studies) == allowed_orders(method)
-    assert allowed_orders(method) == ((2, 4) if method == "es" else (2, 4, 6))
+    assert allowed_orders(method) == (2, 4, 6)
     summary = format_summary(studies).splitlines()
     assert "angle order" in summary[1] and "rate order" in summary[1]
     assert "energy order" in summary[1]
@@ -191,7 +191,7 @@ def test_every_allowed_order_is_studied_and_summarised(method):
     assert [int(row.split()[0]) for row in rows] == list(allowed_orders(method))
     for study, row in zip(studies, rows):
         assert study.failed_dts == ()
-        assert study.dts == ORDER_DTS[study.order]
+        assert study.dts == order_dts(method, study.order)
         assert row.split()[1:3] == [f"{study.trajectory_order:.2f}", f"{study.rate_order:.2f}"]
     assert ("max constraint error [m^2]" in summary[1]) == (method == "es")
 
@@ -209,7 +209,7 @@ def test_composed_steps_reach_their_order_in_angles_and_rates(method, order, tol
     # every fitted point is well above the round-off floor of the reference
     fitted = [row for row in result.rows if row.dt in result.trajectory_fit_dts]
     assert min(row.trajectory_error for row in fitted) > 10 * result.trajectory_floor
-    assert result.dt_ref == pytest.approx(min(ORDER_DTS[order]) / 10)
+    assert result.dt_ref == pytest.approx(min(order_dts(method, order)) / 10)
     # Newton to round-off, and said so in the header
     assert dict(result.newton_settings)["residual_tol"] == ROUND_OFF_NEWTON["residual_tol"]
     assert "residual_tol 1e-14" in table.splitlines()[1]
@@ -253,9 +253,9 @@ def test_the_command_runs_every_order_or_the_one_asked(tmp_path):
                                  "--plot", plot, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     tables = result.stdout.split("\n\n")
-    assert len(tables) == 3
-    assert "order 2;" in tables[0] and "order 4;" in tables[1]
-    assert tables[2].splitlines()[1].split()[:2] == ["order", "option"]
+    assert len(tables) == 4
+    assert "order 2;" in tables[0] and "order 4;" in tables[1] and "order 6;" in tables[2]
+    assert tables[3].splitlines()[1].split()[:2] == ["order", "option"]
     assert plot.read_bytes()[:8] == PNG_SIGNATURE
     one = chaingen_in_process("order", scene, "--method", "es", "--quadrature", "7",
                               "--order", "4", cwd=tmp_path)
