@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from chaingen.errors import SceneError, SettingsError
-from chaingen.generate.package import generate_package
+from chaingen.generate.package import generate_package, scheme_label
 from chaingen.scene import ORDERS, parse_scene
 from chaingen.symbolic.composition import COMPOSITIONS, FROM_ORDER_4
 from chaingen.symbolic.schemes import build_scheme, es, galerkin
@@ -76,6 +76,8 @@ def test_es_composes_its_galerkin_step_to_order_6_and_refuses_k_1():
     assert sixth.composition == FROM_ORDER_4 and len(fourth.composition) == 5
     assert sixth.unknowns.shape[0] == (3 + 4) * scene.n
     assert sixth.state_from_joint_space and not fourth.state_from_joint_space
+    assert "4-point Gauss-Lobatto quadrature of every term (K = 3)" in scheme_label(sixth)
+    assert "3-point Gauss-Legendre quadrature of the spring terms" in scheme_label(fourth)
     with pytest.raises(SettingsError, match=r"--quadrature: es at order 6 .* needs K >= 2"):
         build_scheme(scene, "es", 1, order=6)
 

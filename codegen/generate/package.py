@@ -111,7 +111,8 @@ def template_environment(interface: CInterface | None = None) -> jinja2.Environm
 def scheme_label(scheme: DiscreteScheme) -> str:
     label = f'method "{scheme.method}"'
     if scheme.quadrature is not None:
-        label += f", {scheme.quadrature}-point Gauss-Legendre quadrature of the spring terms"
+        label += ", " + (scheme.quadrature_rule or f"{scheme.quadrature}-point Gauss-Legendre "
+                                                    "quadrature of the spring terms")
     if scheme.order != 2:
         label += (f", order {scheme.order} by a symmetric composition of "
                   f"{len(scheme.composition)} steps")

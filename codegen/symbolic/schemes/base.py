@@ -106,6 +106,9 @@ class DiscreteScheme:
     jacobian_reuse: int = JACOBIAN_EVERY_ITERATE
     # Other Newton defaults of the package that differ from the contract's, (name, value).
     newton_overrides: tuple[tuple[str, float], ...] = ()
+    # What the quadrature K integrates, for the package's label (None: the spring terms by K
+    # Gauss-Legendre points, es's COM step).
+    quadrature_rule: str | None = None
     # Run-time parameters: scene numbers left as symbols p (every other number is a constant
     # folded into the code), with their key paths, units and the scene's own values.
     parameters: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)

@@ -174,5 +174,7 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
         # same tolerance (four_link_actuated, K = 7, 400 steps of 0.01 s: balance drift
         # 2.0e-11 J at 1e-10, 1.0e-12 J at 1e-12).
         newton_overrides=(("update_rtol", COMPOSED_UPDATE_RTOL),),
+        quadrature_rule=(f"the k = 1 Galerkin step with {quadrature + 1}-point Gauss-Lobatto "
+                         f"quadrature of every term (K = {quadrature})"),
         **common_fields(scene, phi),
     )
