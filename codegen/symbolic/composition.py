@@ -62,11 +62,9 @@ def quadrature_error(method: str, order: int, quadrature: int) -> str | None:
     return None
 
 
-def composition(order: int, base_order: int = 2) -> tuple[float, ...]:
-    """The step fractions of the composition of `order` from a symmetric step of `base_order`
-    (2, or 4 for es's Galerkin step; ValueError for another order)."""
-    if base_order == 4 and order in (4, 6):
-        return (1.0,) if order == 4 else FROM_ORDER_4
+def composition(order: int) -> tuple[float, ...]:
+    """The step fractions of the composition of `order` from a symmetric step of order 2
+    (ValueError for another order)."""
     try:
         return COMPOSITIONS[order]
     except KeyError:

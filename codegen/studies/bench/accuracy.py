@@ -40,7 +40,7 @@ from .runs import (
 
 def order_label(scene: Scene, method: str, quadrature: int, order: int) -> str:
     """The line of a configuration of ours: "es K=5 order 4"; order 2 as runs.method_label."""
-    label = method_label(scene, method, quadrature)
+    label = method_label(scene, method, quadrature, order)
     return label if order == 2 else f"{label} order {order}"
 
 

@@ -82,8 +82,8 @@ class RunRow:
             f"{self.method} ({self.variant})"
 
 
-def method_label(scene: Scene, method: str, quadrature: int) -> str:
-    used = quadrature_used(scene, method, quadrature)
+def method_label(scene: Scene, method: str, quadrature: int, order: int = 2) -> str:
+    used = quadrature_used(scene, method, quadrature, order)
     return method if used is None else f"{method} K={used}"
 
 

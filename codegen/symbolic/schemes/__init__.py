@@ -14,7 +14,7 @@ from ...errors import SceneError, SettingsError
 from ...scene import METHODS, Scene
 from ...scene.parameters import compiled_paths, number_path, with_symbols
 from ...scene.values import GALERKIN_ORDER
-from ..composition import composition
+from ..composition import FROM_ORDER_4, composition
 from . import es, galerkin, midpoint, vi
 from .base import DiscreteScheme, FlowDescription, Layout, LinearSolve, segment_tolerances
 
@@ -32,7 +32,7 @@ def build_scheme(scene: Scene, method: str, quadrature: int,
     6 composes its k = 1 Galerkin step, chaingen.symbolic.schemes.galerkin)."""
     galerkin_step = method == "es" and order >= GALERKIN_ORDER
     try:
-        stages = composition(order, 4 if galerkin_step else 2)
+        stages = FROM_ORDER_4 if galerkin_step else composition(order)
     except ValueError as error:
         raise SettingsError(f"--order: {error}") from None
     try:

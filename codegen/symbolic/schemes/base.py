@@ -196,3 +196,23 @@ def common_fields(scene: Scene, angles) -> dict:
     """The fields every scheme derives the same way from its scene (angles: the symbols of
     initial_angles)."""
     return {"holding_torques": holding_torques(scene, angles)}
+
+
+def joint_space_state(scene: Scene, angles, rates, energy) -> dict:
+    """The fields of a scheme whose state is x = (phi, w), the relative joint angles `angles`
+    (not wrapped) and rates `rates` (symbols), with energy H(x): its outputs, its start from
+    joint space, its layout and common_fields. Minimal coordinates: no constraint residuals."""
+    n = scene.n
+    phi = ImmutableMatrix(sp.symbols(f"phi_init1:{n + 1}", real=True))
+    phidot = ImmutableMatrix(sp.symbols(f"phidot_init1:{n + 1}", real=True))
+    return dict(
+        state=ImmutableMatrix.vstack(angles, rates),
+        joint_angles=ImmutableMatrix([sp.atan2(sp.sin(p), sp.cos(p)) for p in angles]),
+        joint_velocities=ImmutableMatrix(rates), energy=energy,
+        constraint_residuals=ImmutableMatrix.zeros(0, 1),
+        initial_angles=phi, initial_velocities=phidot,
+        initial_state=ImmutableMatrix.vstack(phi, phidot),
+        state_layout=Layout(
+            tuple(f"phi_{i}" for i in range(1, n + 1)) + tuple(f"w_{i}" for i in range(1, n + 1)),
+            "relative joint angles phi (rad, not wrapped), then joint rates w (rad/s)"),
+        **common_fields(scene, phi))

@@ -1,5 +1,5 @@
 """The k = 1 Petrov-Galerkin step of "es" in joint angles and canonical momenta (docs/model.md,
-section 16): the step es takes at orders 4 and 6.
+section 16): the step es composes to order 6.
 
 Hamilton's equations of the chain in z = (phi, p), H(phi, p) = 1/2 p^T M(phi)^-1 p + V(phi),
 
@@ -41,9 +41,9 @@ from .base import (
     DiscreteScheme,
     FlowDescription,
     Layout,
-    common_fields,
     has_energy_flows,
     input_symbols,
+    joint_space_state,
     joint_torques,
     segment_vectors,
 )
@@ -136,26 +136,16 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
     residual = ImmutableMatrix.vstack(*phi_rows, *p_rows, *momentum_rows)
     unknowns = ImmutableMatrix.vstack(dphi_m, dphi_1, dp_m, dp_1, *dws)
 
-    phi = ImmutableMatrix(sp.symbols(f"phi_init1:{n + 1}", real=True))
-    phidot = ImmutableMatrix(sp.symbols(f"phidot_init1:{n + 1}", real=True))
     names = [f"{kind}_{i}" for kind in ("dphim", "dphi1", "dpm", "dp1") for i in range(1, n + 1)]
     names += [f"dw{g}_{i}" for g in range(1, len(nodes)) for i in range(1, n + 1)]
     return DiscreteScheme(
         method="es", quadrature=quadrature, scene=scene, summary=SUMMARY, dt=dt,
-        state=ImmutableMatrix.vstack(phi0, w0), unknowns=unknowns,
+        unknowns=unknowns,
         residual=residual,
         next_state=ImmutableMatrix.vstack(phi0 + dphi_1, w0 + dws[-1]),
         predictor=ImmutableMatrix.vstack(dt * w0 / 2, dt * w0,
                                          ImmutableMatrix.zeros((2 + len(dws)) * n, 1)),
-        joint_angles=ImmutableMatrix([sp.atan2(sp.sin(p), sp.cos(p)) for p in phi0]),
-        joint_velocities=w0,
-        energy=model.energy,
-        constraint_residuals=ImmutableMatrix.zeros(0, 1),
-        initial_angles=phi, initial_velocities=phidot,
-        initial_state=ImmutableMatrix.vstack(phi, phidot),
-        state_layout=Layout(
-            tuple(f"phi_{i}" for i in range(1, n + 1)) + tuple(f"w_{i}" for i in range(1, n + 1)),
-            "relative joint angles phi (rad, not wrapped), then joint rates w (rad/s)"),
+        **joint_space_state(scene, phi0, w0, model.energy),
         unknowns_layout=Layout(
             tuple(names),
             "increments from the step's start of the joint angles at its mid-point and end "
@@ -176,5 +166,4 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
         newton_overrides=(("update_rtol", COMPOSED_UPDATE_RTOL),),
         quadrature_rule=(f"the k = 1 Galerkin step with {quadrature + 1}-point Gauss-Lobatto "
                          f"quadrature of every term (K = {quadrature})"),
-        **common_fields(scene, phi),
     )

@@ -21,9 +21,9 @@ from .base import (
     DiscreteScheme,
     FlowDescription,
     Layout,
-    common_fields,
     has_energy_flows,
     input_symbols,
+    joint_space_state,
     joint_torques,
     segment_vectors,
 )
@@ -64,23 +64,12 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         forces = forces - model.damping_torques(w0)
     residual = model.mass_matrix.xreplace(at_midpoint) * dw + dt * forces.xreplace(at_midpoint)
 
-    phi = ImmutableMatrix(sp.symbols(f"phi_init1:{n + 1}", real=True))
-    phidot = ImmutableMatrix(sp.symbols(f"phidot_init1:{n + 1}", real=True))
     return DiscreteScheme(
-        method="midpoint", quadrature=None, scene=scene, summary=SUMMARY, dt=dt,
-        state=ImmutableMatrix.vstack(phi0, w0), unknowns=dw,
+        method="midpoint", quadrature=None, scene=scene, summary=SUMMARY, dt=dt, unknowns=dw,
         residual=ImmutableMatrix(residual),
         next_state=ImmutableMatrix.vstack(phi0 + dt * wm, w0 + dw),
         predictor=ImmutableMatrix.zeros(n, 1),
-        joint_angles=ImmutableMatrix([sp.atan2(sp.sin(p), sp.cos(p)) for p in phi0]),
-        joint_velocities=w0,
-        energy=model.energy,
-        constraint_residuals=ImmutableMatrix.zeros(0, 1),
-        initial_angles=phi, initial_velocities=phidot,
-        initial_state=ImmutableMatrix.vstack(phi, phidot),
-        state_layout=Layout(
-            tuple(f"phi_{i}" for i in range(1, n + 1)) + tuple(f"w_{i}" for i in range(1, n + 1)),
-            "relative joint angles phi (rad, not wrapped), then joint rates w (rad/s)"),
+        **joint_space_state(scene, phi0, w0, model.energy),
         unknowns_layout=Layout(tuple(f"dw_{i}" for i in range(1, n + 1)),
                                "the increment dw = w_1 - w_0 of the joint rates (rad/s)"),
         residual_description=("dt-scaled midpoint equations of motion M(phi_m) dw + dt "
@@ -90,5 +79,5 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         dissipated=dt * sp.Add(*(number(link.damping) * w ** 2
                                  for link, w in zip(scene.links, wm) if link.damping)),
         flow_description=FLOWS if has_energy_flows(scene) else None,
-        jacobian_reuse=JACOBIAN_PER_STEP, **common_fields(scene, phi),
+        jacobian_reuse=JACOBIAN_PER_STEP,
     )
