@@ -81,23 +81,23 @@ TRANSLATION_CASES = ([case(name, "es", name in OWN_SCENES) for name in ALL_SCENE
 
 def output_values(scheme, x):
     """(phi, omega, energy) of the scheme at state x, solving the output's linear system."""
-    values = dict(zip(scheme.state, x))
-    if scheme.output_solve:
-        solve = scheme.output_solve
-        matrix = np.array(solve.matrix.xreplace(values).evalf(), dtype=float)
-        rhs = np.array(solve.rhs.xreplace(values).evalf(), dtype=float).ravel()
-        values.update(zip(solve.symbols, np.linalg.solve(matrix, rhs)))
-    symbols = list(values)
-    args = [values[k] for k in symbols]
-    return (numeric(scheme.joint_angles, symbols, args),
-            numeric(scheme.joint_velocities, symbols, args),
-            numeric(sp.Matrix([scheme.energy]), symbols, args)[0])
+    solve = scheme.output_solve
+    solved = []
+    if solve:
+        matrix = np.array(scheme.state_function(list(solve.matrix))(*x), dtype=float)
+        size = int(round(np.sqrt(matrix.size)))
+        rhs = np.array(scheme.state_function(solve.rhs)(*x), dtype=float).ravel()
+        solved = list(np.linalg.solve(matrix.reshape(size, size), rhs))
+    outputs = scheme.state_function(list(scheme.joint_angles) + list(scheme.joint_velocities)
+                                    + [scheme.energy], list(solve.symbols) if solve else [])
+    values = np.array(outputs(*x, *solved), dtype=float).ravel()
+    n = scheme.scene.n
+    return values[:n], values[n:2 * n], values[2 * n]
 
 
 def initial(scheme, phi, phidot):
-    return numeric(scheme.initial_state,
-                   list(scheme.initial_angles) + list(scheme.initial_velocities),
-                   list(phi) + list(phidot))
+    """x(phi, phidot), evaluating the scheme's initial definitions in order."""
+    return np.array(scheme.initial_function()(*phi, *phidot), dtype=float).ravel()
 
 
 def random_joint_state(n):
@@ -211,10 +211,8 @@ def test_casadi_functions_equal_sympy(case):
         np.testing.assert_allclose(np.array(outputs[1]).ravel(), rates, atol=1e-12)
         assert float(outputs[2]) == pytest.approx(energy, rel=1e-13)
     phi, phidot = random_joint_state(n)
-    np.testing.assert_allclose(
-        np.array(functions.initial_state(phi, phidot)).ravel(),
-        numeric(scheme.initial_state, list(scheme.initial_angles) +
-                list(scheme.initial_velocities), list(phi) + list(phidot)), rtol=1e-13, atol=1e-14)
+    np.testing.assert_allclose(np.array(functions.initial_state(phi, phidot)).ravel(),
+                               initial(scheme, phi, phidot), rtol=1e-13, atol=1e-14)
 
 
 def test_translation_of_powers_and_functions():

@@ -198,6 +198,13 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     solve = scheme.output_solve
     solved = list(solve.symbols) if solve else []
     state_inputs = list(scheme.state) + parameters
+    for symbol, expression in scheme.state_definitions:
+        check_free_symbols(f"state definition of {symbol}", [expression], state_inputs)
+        state_inputs.append(symbol)
+    initial_inputs = list(scheme.initial_angles) + list(scheme.initial_velocities) + parameters
+    for symbol, expression in scheme.initial_definitions:
+        check_free_symbols(f"initial definition of {symbol}", [expression], initial_inputs)
+        initial_inputs.append(symbol)
     check_free_symbols("predictor", scheme.predictor, state_inputs + solved + [scheme.dt])
     if solve:
         check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), state_inputs)
@@ -208,9 +215,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     if scheme.holding_torques is not None:
         check_free_symbols("holding_torques", scheme.holding_torques,
                            list(scheme.initial_angles) + parameters)
-    check_free_symbols("initial_state", scheme.initial_state,
-                       list(scheme.initial_angles) + list(scheme.initial_velocities)
-                       + parameters)
+    check_free_symbols("initial_state", scheme.initial_state, initial_inputs)
 
     parameter_bindings = dict(zip(parameters, ca.vertsplit(p)))
     bindings = dict(zip(scheme.unknowns, ca.vertsplit(z)))
@@ -226,18 +231,25 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     x1 = _vector(step, scheme.next_state)
     options = {"cse": True}
 
+    def bind_all(translate: SympyToCasadi, definitions) -> SympyToCasadi:
+        for symbol, expression in definitions:
+            translate.bind(symbol, translate(expression), translate.is_parametric(expression))
+        return translate
+
     def state_translator(state: ca.SX, extra: dict | None = None) -> SympyToCasadi:
-        """Expressions in the state, p and the output_solve symbols, bound to `state`."""
+        """Expressions in the state, p, the state definitions and the output_solve symbols,
+        bound to `state`."""
         state_bindings = dict(zip(scheme.state, ca.vertsplit(state)))
         state_bindings.update(parameter_bindings)
         state_bindings.update(extra or {})
+        bound = bind_all(SympyToCasadi(state_bindings, parameters), scheme.state_definitions)
         if solve:
-            bound = SympyToCasadi(state_bindings, parameters)
             matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
                                   for row in solve.matrix.tolist()])
             solution = ca.solve(matrix, _vector(bound, solve.rhs))
-            state_bindings.update(zip(solve.symbols, ca.vertsplit(solution)))
-        return SympyToCasadi(state_bindings, parameters)
+            for symbol, value in zip(solve.symbols, ca.vertsplit(solution)):
+                bound.bind(symbol, value)
+        return bound
 
     def joint_space(state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
@@ -248,9 +260,11 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
 
     x = ca.SX.sym("x", nx)
     phi, phidot = ca.SX.sym("phi", n), ca.SX.sym("phidot", n)
-    initial = SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
-                             **dict(zip(scheme.initial_velocities, ca.vertsplit(phidot))),
-                             **parameter_bindings}, parameters)
+    initial = bind_all(SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
+                                      **dict(zip(scheme.initial_velocities,
+                                                 ca.vertsplit(phidot))),
+                                      **parameter_bindings}, parameters),
+                       scheme.initial_definitions)
     initial_state = _vector(initial, scheme.initial_state)
 
     with_p = ([p] if n_p else [], ["p"] if n_p else [])

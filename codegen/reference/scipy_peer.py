@@ -7,7 +7,7 @@ docs/model.md, section 6, solved for the accelerations,
 
 with tau = -d_i w_i the joint damping (model.md 7) and no input torques. M, the Coriolis terms
 and V are derived by SymPy exactly as for the "midpoint" scheme (chaingen.symbolic.joint_model,
-chaingen.symbolic.schemes.midpoint.coriolis), translated to CasADi SX and compiled to C, so that the
+chaingen.symbolic.joint_model.coriolis), translated to CasADi SX and compiled to C, so that the
 peer's right-hand side costs what compiled code costs and SciPy's own overhead is what is
 compared.
 
@@ -51,8 +51,7 @@ from ..generate.casadi_functions import (
 )
 from ..runtime.build import build_shared_library, cache_directory
 from ..scene import Scene
-from ..symbolic.joint_model import angle_directions, joint_space_model
-from ..symbolic.schemes.midpoint import coriolis
+from ..symbolic.joint_model import angle_directions, coriolis, joint_space_model
 from ..version import VERSION
 
 #: solve_ivp's methods by name; the implicit ones get the compiled Jacobian.

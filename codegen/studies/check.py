@@ -19,7 +19,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import sympy as sp
 
 from ..runtime import NewtonOptions, Solver
 from ..symbolic.schemes import DiscreteScheme
@@ -96,22 +95,17 @@ class _SympyFunctions:
     """The scheme's expressions, lambdified over the same inputs as the C functions."""
 
     def __init__(self, scheme: DiscreteScheme):
-        state = list(scheme.state) + list(scheme.parameters)
         solve = scheme.output_solve
         solved = list(solve.symbols) if solve else []
-
-        def lam(inputs, expressions):
-            return sp.lambdify(inputs, list(expressions), modules="numpy", cse=True)
-
         self.residual = scheme.step_function(scheme.residual)
         self.next_state = scheme.step_function(scheme.next_state)
         self.composition = scheme.composition
-        self.initial_state = lam(list(scheme.initial_angles) + list(scheme.initial_velocities)
-                                 + list(scheme.parameters), scheme.initial_state)
-        self.outputs = lam(state + solved, list(scheme.joint_angles)
-                           + list(scheme.joint_velocities) + [scheme.energy]
-                           + list(scheme.constraint_residuals))
-        self.solve = (lam(state, list(solve.matrix)), lam(state, solve.rhs)) if solve else None
+        self.initial_state = scheme.initial_function()
+        self.outputs = scheme.state_function(list(scheme.joint_angles)
+                                             + list(scheme.joint_velocities) + [scheme.energy]
+                                             + list(scheme.constraint_residuals), solved)
+        self.solve = ((scheme.state_function(list(solve.matrix)),
+                       scheme.state_function(solve.rhs)) if solve else None)
         self.n = scheme.scene.n
         self.nconstraint = scheme.constraint_residuals.shape[0]
 

@@ -120,3 +120,11 @@ def attitude_directions(attitudes) -> list[ImmutableMatrix]:
         e = rotate(e, q)
         directions.append(e)
     return directions
+
+
+def coriolis(model: JointSpaceModel, angles) -> ImmutableMatrix:
+    """Mdot w - dT/dphi = (d(M w)/dphi) w - 1/2 grad_phi (w^T M w), M = M(phi)."""
+    w = model.rates
+    momentum = model.mass_matrix * w
+    return ImmutableMatrix(momentum.jacobian(angles) * w
+                           - ImmutableMatrix([model.kinetic_energy]).jacobian(angles).T)

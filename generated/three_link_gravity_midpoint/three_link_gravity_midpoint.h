@@ -157,7 +157,7 @@ typedef struct {
     const double *arg[3];
     double *res[4];
     long long int iw[1];
-    double w[157];
+    double w[58];
     double z[THREE_LINK_GRAVITY_MIDPOINT_NZ];
     double dz[THREE_LINK_GRAVITY_MIDPOINT_NZ];
     double residual[THREE_LINK_GRAVITY_MIDPOINT_NZ];

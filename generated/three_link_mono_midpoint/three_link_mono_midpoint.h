@@ -161,7 +161,7 @@ typedef struct {
     const double *arg[3];
     double *res[4];
     long long int iw[1];
-    double w[216];
+    double w[99];
     double z[THREE_LINK_MONO_MIDPOINT_NZ];
     double dz[THREE_LINK_MONO_MIDPOINT_NZ];
     double residual[THREE_LINK_MONO_MIDPOINT_NZ];

@@ -163,7 +163,7 @@ typedef struct {
     const double *arg[3];
     double *res[4];
     long long int iw[1];
-    double w[350];
+    double w[177];
     double z[THREE_LINK_MONO_VI_NZ];
     double dz[THREE_LINK_MONO_VI_NZ];
     double residual[THREE_LINK_MONO_VI_NZ];

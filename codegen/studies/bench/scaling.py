@@ -62,9 +62,8 @@ class ScalingRow:
 
 
 def _numeric_initial_state(scheme, scene: Scene) -> np.ndarray:
-    values = dict(zip(scheme.initial_angles, scene.initial_angles))
-    values.update(zip(scheme.initial_velocities, scene.initial_velocities))
-    return np.array([float(entry.subs(values).evalf()) for entry in scheme.initial_state])
+    return np.array(scheme.initial_function()(*scene.initial_angles, *scene.initial_velocities),
+                    float).ravel()
 
 
 def peak_resident_kib() -> int | None:

@@ -93,6 +93,12 @@ class DiscreteScheme:
     # a sequence of small ones (model.md's spring segments at each quadrature node), which code
     # generation translates once and shares, instead of SymPy expanding them into every use.
     definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+    # The same for the expressions of the state alone (joint_angles, joint_velocities, energy,
+    # constraint_residuals, segment_vectors, predictor, output_solve), in the state and p; and
+    # for initial_state, in initial_angles, initial_velocities and p. A joint-space chain's
+    # recursions (chaingen.symbolic.recursion) keep these O(n) too.
+    state_definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+    initial_definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
     # How the flows above are measured (None for a scene without energy flows).
     flow_description: FlowDescription | None = None
     # dV/dphi in the symbols initial_angles: the joint torques that hold the chain still at a
@@ -135,12 +141,19 @@ class DiscreteScheme:
         """A numpy function of the step_inputs' values that evaluates `expressions`, which may
         use the definitions. The definitions are evaluated in order, as the generated C does,
         not substituted into one another (for a long chain that takes SymPy minutes)."""
-        def eliminate(reduced):
-            shared, reduced = sp.cse(reduced, symbols=sp.numbered_symbols("_shared"))
-            return list(self.definitions) + shared, reduced
+        return numpy_function(self.step_inputs, self.definitions, expressions)
 
-        return sp.lambdify(self.step_inputs, list(expressions), modules="numpy",
-                           cse=eliminate if self.definitions else True)
+    def state_function(self, expressions, extra=()):
+        """A numpy function of (state, p, *extra) for state-only expressions, which may use
+        the state_definitions."""
+        return numpy_function(list(self.state) + list(self.parameters) + list(extra),
+                              self.state_definitions, expressions)
+
+    def initial_function(self):
+        """The numpy function (phi, phidot, p) -> initial_state."""
+        return numpy_function(list(self.initial_angles) + list(self.initial_velocities)
+                              + list(self.parameters), self.initial_definitions,
+                              self.initial_state)
 
     @property
     def has_energy_flows(self) -> bool:
@@ -153,6 +166,17 @@ class DiscreteScheme:
                              f"{self.unknowns.shape[0]} unknowns")
         if self.next_state.shape[0] != self.state.shape[0]:
             raise ValueError(f"{self.method}: next_state does not match the state")
+
+
+def numpy_function(inputs, definitions, expressions):
+    """sp.lambdify of `expressions` over `inputs`, evaluating `definitions` (symbol, expression)
+    in order first."""
+    def eliminate(reduced):
+        shared, reduced = sp.cse(reduced, symbols=sp.numbered_symbols("_shared"))
+        return list(definitions) + shared, reduced
+
+    return sp.lambdify(list(inputs), list(expressions), modules="numpy",
+                       cse=eliminate if definitions else True)
 
 
 def has_energy_flows(scene: Scene) -> bool:

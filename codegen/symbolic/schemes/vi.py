@@ -15,6 +15,11 @@ g = dL/dphi = 1/2 d(w^T M w)/dphi - dV/dphi, where d/dphi_j of a function of q i
 q_j dotted with S q_j (thesis 4.25). f = tau - d w are the joint torques, the inputs of the actuated
 joints and viscous damping, entering as the midpoint discrete Lagrange-d'Alembert forces
 (model.md 7). Over a step their work is tau . theta and the damping dissipates dt d w^2.
+
+M(q_m) w is the momentum recursion, dT/dphi_j = P_j x V_j, dV/dphi by the recursion of gravity
+and segment by segment for the springs, and the rates of a state w = M(q)^-1 p by the
+articulated-body recursion (chaingen.symbolic.recursion, model.md 17): O(n) definitions, no
+M(q) of the whole chain.
 """
 from __future__ import annotations
 
@@ -23,18 +28,16 @@ from sympy import ImmutableMatrix
 
 from ...runtime.contract import JACOBIAN_ACROSS_STEPS
 from ...scene import Scene
-from ..com_model import S, number
-from ..joint_model import attitude_directions, joint_space_model, rotate
+from .. import recursion
+from ..com_model import number
 from .base import (
     DiscreteScheme,
     FlowDescription,
     Layout,
-    LinearSolve,
     common_fields,
     has_energy_flows,
     input_symbols,
     joint_torques,
-    segment_vectors,
 )
 
 SUMMARY = ("Lie-group variational integrator on unit attitude vectors, position-momentum form "
@@ -43,13 +46,6 @@ FLOWS = FlowDescription(
     "sum_i tau_i theta_i", "sum_i d_i theta_i^2 / dt",
     "theta the rotation increments of the step. H_1 - H_0 - flows[0] + flows[1] is the scheme's "
     "energy error, O(dt^2).")
-
-
-def angle_derivative(expr, attitudes) -> ImmutableMatrix:
-    """d expr / dphi_j = grad_{q_j} expr . S q_j for every joint j (thesis 4.25)."""
-    return ImmutableMatrix([
-        sp.diff(expr, c) * (S * q)[0] + sp.diff(expr, s) * (S * q)[1]
-        for q, (c, s) in ((q, (q[0], q[1])) for q in attitudes)])
 
 
 def unit(angle) -> ImmutableMatrix:
@@ -65,50 +61,62 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     ss = sp.symbols(f"s1:{n + 1}", real=True)
     attitudes = [ImmutableMatrix([c, s]) for c, s in zip(cs, ss)]
     p0 = ImmutableMatrix(sp.symbols(f"p1:{n + 1}", real=True))
-    w = ImmutableMatrix(sp.symbols(f"w1:{n + 1}", real=True))
     theta = ImmutableMatrix(sp.symbols(f"theta1:{n + 1}", real=True))
-    model = joint_space_model(scene, attitude_directions(attitudes), w)
 
-    lagrangian = model.kinetic_energy - model.potential
-    g = angle_derivative(lagrangian, attitudes)
-    inputs = input_symbols(scene)
-    torques = joint_torques(scene, inputs)
-    forces = g + ImmutableMatrix(torques)
-    if any(link.damping for link in scene.links):
-        forces = forces + model.damping_torques(w)
-    halves = [unit(t / 2) for t in theta]
-    q_mid = [rotate(q, half) for q, half in zip(attitudes, halves)]
+    step = recursion.Definitions("step_")
+    halves = [step.vector(f"h{k}", unit(t / 2)) for k, t in enumerate(theta, start=1)]
+    q_mid = [step.vector(f"qm{k}", recursion.complex_product(q, half))
+             for k, (q, half) in enumerate(zip(attitudes, halves), start=1)]
     # Rot(theta) = Rot(theta/2)^2: the step's rotation from the half-angle's cosine and sine the
     # residual already needs, instead of two more trigonometric calls per joint.
-    q_next = [rotate(q, rotate(half, half)) for q, half in zip(attitudes, halves)]
-    at_midpoint = {symbol: value for q, qm in zip(attitudes, q_mid)
-                   for symbol, value in zip(q, qm)}
-    at_midpoint.update(zip(w, theta / dt))
-    momentum = (model.mass_matrix * w).xreplace(at_midpoint)
-    impulse = (dt / 2 * forces).xreplace(at_midpoint)
+    q_next = [recursion.complex_product(q, recursion.complex_product(half, half))
+              for q, half in zip(attitudes, halves)]
+    frames = recursion.link_frames(scene, recursion.attitude_directions(step, q_mid))
+    w = [step.define(f"w{k}", t / dt) for k, t in enumerate(theta, start=1)]
+    momentum, kinetic_gradient = recursion.momenta(
+        scene, frames, recursion.absolute_rates(step, w), step)
+    springs, _ = recursion.spring_gradient(scene, frames, step)
+    gravity = recursion.gravity_gradient(scene, frames, step)
+    inputs = input_symbols(scene)
+    torques = joint_torques(scene, inputs)
+    # g + f = dT/dphi - dV/dphi + tau - d w at the mid-point
+    forces = [dT - spring - weight + tau - number(link.damping) * rate
+              for dT, spring, weight, tau, link, rate
+              in zip(kinetic_gradient, springs, gravity, torques, scene.links, w)]
+    impulse = [dt / 2 * force for force in forces]
+
+    # The state's rates w = M(q)^-1 p and energy H = 1/2 w . p + V, by recursions.
+    at_state = recursion.Definitions("state_")
+    frames0 = recursion.link_frames(scene, recursion.attitude_directions(at_state, attitudes))
+    rates0 = recursion.rates_from_momenta(scene, frames0, p0, at_state)
+    _, spring_energy = recursion.spring_gradient(scene, frames0, at_state)
+    energy = (sp.Add(*(rate * p for rate, p in zip(rates0, p0))) / 2
+              + recursion.gravity_potential(scene, frames0, at_state) + spring_energy)
 
     state = ImmutableMatrix(list(cs) + list(ss) + list(p0))
     phi = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
     phidot = ImmutableMatrix(sp.symbols(f"phidot1:{n + 1}", real=True))
-    at_initial = {symbol: value for q, angle in zip(attitudes, phi)
-                  for symbol, value in zip(q, unit(angle))}
+    # p = M(q(phi)) phidot at the start, by the momentum recursion.
+    at_start = recursion.Definitions("initial_")
+    frames_start = recursion.link_frames(scene, recursion.angle_directions(at_start, phi))
+    start_momenta, _ = recursion.momenta(scene, frames_start,
+                                         recursion.absolute_rates(at_start, phidot), at_start)
     return DiscreteScheme(
         method="vi", quadrature=None, scene=scene, summary=SUMMARY, dt=dt,
         state=state, unknowns=theta,
-        residual=ImmutableMatrix(momentum - impulse - p0),
+        residual=ImmutableMatrix([m - i - p for m, i, p in zip(momentum, impulse, p0)]),
         next_state=ImmutableMatrix([qn[0] for qn in q_next] + [qn[1] for qn in q_next]
-                                   + list(2 * momentum - p0)),
+                                   + [2 * m - p for m, p in zip(momentum, p0)]),
         # First guess: the rotation at the current rates, theta = dt w_0 (w_0 = M(q_0)^-1 p_0).
-        predictor=ImmutableMatrix(dt * w),
+        predictor=ImmutableMatrix([dt * rate for rate in rates0]),
         joint_angles=ImmutableMatrix([sp.atan2(s, c) for c, s in zip(cs, ss)]),
-        joint_velocities=w,
-        energy=model.energy,
+        joint_velocities=ImmutableMatrix(rates0),
+        energy=energy,
         constraint_residuals=ImmutableMatrix([sp.sqrt(c ** 2 + s ** 2) - 1
                                               for c, s in zip(cs, ss)]),
         initial_angles=phi, initial_velocities=phidot,
         initial_state=ImmutableMatrix(
-            [sp.cos(a) for a in phi] + [sp.sin(a) for a in phi]
-            + list((model.mass_matrix * phidot).xreplace(at_initial))),
+            [sp.cos(a) for a in phi] + [sp.sin(a) for a in phi] + start_momenta),
         state_layout=Layout(
             tuple(f"c_{i}" for i in range(1, n + 1)) + tuple(f"s_{i}" for i in range(1, n + 1))
             + tuple(f"p_{i}" for i in range(1, n + 1)),
@@ -118,8 +126,9 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
                                "rotation increments theta of the step (rad)"),
         residual_description=("discrete Legendre transform M(q_m) w - dt/2 (g + f) - p_0, "
                               "w = theta/dt (N m s)"),
-        output_solve=LinearSolve(symbols=w, matrix=model.mass_matrix, rhs=p0),
-        inputs=inputs, segment_vectors=segment_vectors(model),
+        inputs=inputs, segment_vectors=recursion.segment_vector_entries(scene, frames0),
+        definitions=tuple(step.items), state_definitions=tuple(at_state.items),
+        initial_definitions=tuple(at_start.items),
         input_work=sp.Add(*(tau * t for tau, t in zip(torques, theta))),
         dissipated=sp.Add(*(number(link.damping) * t ** 2 for link, t in zip(scene.links, theta)
                             if link.damping)) / dt,
