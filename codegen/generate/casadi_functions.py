@@ -14,6 +14,7 @@ import casadi as ca
 import sympy as sp
 
 from ..symbolic.schemes import DiscreteScheme
+from .jacobians import JACOBIAN_CHUNK, jacobian_by_directions, unrolled_jacobian
 
 #: SymPy functions with a CasADi counterpart of the same meaning.
 _FUNCTIONS = {
@@ -227,7 +228,8 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     for symbol, expression in scheme.definitions:
         step.bind(symbol, step(expression), step.is_parametric(expression))
     residual = _vector(step, scheme.residual)
-    jacobian = ca.densify(ca.jacobian(residual, z))
+    jacobian = unrolled_jacobian(residual, z, [z, x0, u, p, dt])
+    directions = None if jacobian is not None else JACOBIAN_CHUNK
     x1 = _vector(step, scheme.next_state)
     options = {"cse": True}
 
@@ -363,7 +365,8 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     names = dict(
         residual=fn("residual", step_args, step_names, [residual], ["F"]),
         residual_jacobian=fn("residual_jacobian", step_args, step_names,
-                             [residual, jacobian], ["F", "J"]),
+                             [residual, residual if jacobian is None else jacobian],
+                             ["F", "J"]),
         predictor=fn("predictor", [x0] + with_p[0] + [dt], ["x0"] + with_p[1] + ["dt"],
                      [_predictor(scheme, x0, dt, state_translator)], ["z"]),
         next_state=fn("next_state", step_args, step_names, [x1] + flows,
@@ -375,7 +378,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
         sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map, joint_maps=joint_maps,
         holding_torques=holding, segment_margins=margins,
     )
-    built = _build(specs, prefix, p, options)
+    built = _build(specs, prefix, p, options, directions)
     return SchemeFunctions(**{field: None if name is None else built[name]
                               for field, name in names.items()},
                            parameters=built.get(PARAMETERS_FUNCTION))
@@ -385,13 +388,18 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
 PARAMETERS_FUNCTION = "parameters"
 
 
-def _build(specs: dict[str, tuple], prefix: str, p: ca.SX, options: dict) -> dict:
+def _build(specs: dict[str, tuple], prefix: str, p: ca.SX, options: dict,
+           directions: int | None = None) -> dict:
     """The recorded functions as CasADi Functions. With run-time parameters p, every
     subexpression that depends on p alone is hoisted out of them (CasADi's extract_parametric,
     one pass over all of them, so a subexpression they share is one entry): a function
     `parameters` computes those, q = Q(p), and every other function takes q in p's place. The
-    C code evaluates Q once when p changes instead of in every residual of every step."""
+    C code evaluates Q once when p changes instead of in every residual of every step.
+    directions: the Newton Jacobian's forward directions per pass (None: unrolled)."""
     def function(name, inputs, input_names, outputs, output_names):
+        if name == "residual_jacobian" and directions:   # z is the first input
+            return jacobian_by_directions(f"{prefix}_model_{name}", inputs, input_names,
+                                          outputs[0], 0, directions, options)
         return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
                            options)
 

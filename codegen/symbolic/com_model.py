@@ -159,8 +159,9 @@ def spring_terms(scene: Scene, spring: Spring, joints, normals) -> SpringTerms:
     return SpringTerms(spring, tuple(lengths), energy, tuple(vectors))
 
 
-def com_model(scene: Scene) -> ComModel:
-    """Derive the COM-coordinate model of model.md section 4 for `scene`."""
+def coordinates(scene: Scene) -> tuple[ImmutableMatrix, ImmutableMatrix]:
+    """The symbols q = (x_1..x_n, y_1..y_n) and v of COM coordinates (model.md 4.1), or
+    UnsupportedSceneError for a link whose COM is at its proximal joint."""
     n = scene.n
     for i, link in enumerate(scene.links):
         if link.com ** 2 + link.com_normal ** 2 == 0:
@@ -171,8 +172,14 @@ def com_model(scene: Scene) -> ComModel:
     ys = sp.symbols(f"y1:{n + 1}", real=True)
     vxs = sp.symbols(f"vx1:{n + 1}", real=True)
     vys = sp.symbols(f"vy1:{n + 1}", real=True)
-    q = ImmutableMatrix(list(xs) + list(ys))
-    v = ImmutableMatrix(list(vxs) + list(vys))
+    return ImmutableMatrix(list(xs) + list(ys)), ImmutableMatrix(list(vxs) + list(vys))
+
+
+def com_model(scene: Scene) -> ComModel:
+    """Derive the COM-coordinate model of model.md section 4 for `scene`."""
+    n = scene.n
+    q, v = coordinates(scene)
+    xs, ys = q[:n], q[n:]
 
     joints = [ImmutableMatrix([0, 0])]
     directions, normals = [], [ImmutableMatrix([0, 1])]

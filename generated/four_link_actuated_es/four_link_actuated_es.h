@@ -195,7 +195,7 @@ typedef struct {
     const double *arg[4];
     double *res[4];
     long long int iw[1];
-    double w[527];
+    double w[419];
     double z[FOUR_LINK_ACTUATED_ES_NZ];
     double dz[FOUR_LINK_ACTUATED_ES_NZ];
     double residual[FOUR_LINK_ACTUATED_ES_NZ];

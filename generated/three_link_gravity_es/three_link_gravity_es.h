@@ -168,7 +168,7 @@ typedef struct {
     const double *arg[3];
     double *res[4];
     long long int iw[1];
-    double w[120];
+    double w[92];
     double z[THREE_LINK_GRAVITY_ES_NZ];
     double dz[THREE_LINK_GRAVITY_ES_NZ];
     double residual[THREE_LINK_GRAVITY_ES_NZ];

@@ -172,7 +172,7 @@ typedef struct {
     const double *arg[3];
     double *res[4];
     long long int iw[1];
-    double w[321];
+    double w[242];
     double z[THREE_LINK_MONO_ES_NZ];
     double dz[THREE_LINK_MONO_ES_NZ];
     double residual[THREE_LINK_MONO_ES_NZ];

@@ -173,7 +173,7 @@ typedef struct {
     const double *arg[3];
     double *res[4];
     long long int iw[1];
-    double w[372];
+    double w[264];
     double z[THREE_LINK_MULTI_ES_NZ];
     double dz[THREE_LINK_MULTI_ES_NZ];
     double residual[THREE_LINK_MULTI_ES_NZ];

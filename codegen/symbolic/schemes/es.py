@@ -20,17 +20,10 @@ from sympy import ImmutableMatrix
 from ...errors import SettingsError
 from ...runtime.contract import JACOBIAN_PER_STEP
 from ...scene import Scene, quadrature_used
-from ..com_model import (
-    com_model,
-    cross2,
-    dot2,
-    joint_space_positions,
-    joint_space_velocities,
-    linear_coefficients,
-    number,
-)
+from ..com_model import com_model, coordinates, number
+from ..com_recursion import es_step, joint_space_start, state_quantities
 from ..composition import order_error
-from ..quadrature import gauss_legendre_nodes
+from ..recursion import Definitions
 from .base import (
     DiscreteScheme,
     FlowDescription,
@@ -40,7 +33,6 @@ from .base import (
     has_energy_flows,
     input_symbols,
     joint_torques,
-    segment_vectors,
 )
 
 #: The composed step's Newton tolerance on the update, relative: each stage starts from its own
@@ -56,74 +48,6 @@ FLOWS = FlowDescription(
     "phidot(m) the joint rates at the step's mid-point, where the torques enter. The scheme is "
     "passive: H_1 - H_0 = flows[0] - flows[1] to quadrature and solver accuracy (docs/model.md, "
     "section 7).")
-
-
-def averaged_spring_gradient(model, q0, q1, quadrature: int):
-    """sum_g w_g grad V_springs(q_0 + tau_g (q_1 - q_0)) (model.md section 4), and the
-    definitions it uses.
-
-    Every segment vector d_j = P_{j+1} - P_j is affine in q, d_j = D_j q + c_j, so with
-    s_j = |d_j| and the stretch e = sum_j s_j - S_0 the gradient of 1/2 k e^2 is
-    k e sum_j D_j^T d_j / s_j: written down, not differentiated. At a quadrature node
-    d_j(q_tau) = d_j(q_0) + tau (d_j(q_1) - d_j(q_0)); the node's segment vectors and lengths
-    are defined once as symbols (DiscreteScheme.definitions), so that a long chain's gradient
-    stays a sum of small terms.
-    """
-    nodes, weights = gauss_legendre_nodes(quadrature)
-    total = [sp.Integer(0)] * len(model.q)
-    increments = sp.symbols([f"d{symbol}" for symbol in map(str, model.q)], real=True)
-    definitions = [(d, b - a) for d, a, b in zip(increments, q0, q1)]
-    increments = ImmutableMatrix(increments)
-    for i, term in enumerate(model.springs):
-        segments = []
-        for j, vector in enumerate(term.segment_vectors):
-            D, c = linear_coefficients(vector, model.q)
-            start = sp.symbols(f"spring{i}_d{j}_x spring{i}_d{j}_y", real=True)
-            change = sp.symbols(f"spring{i}_dd{j}_x spring{i}_dd{j}_y", real=True)
-            definitions += list(zip(start, D * q0 + c)) + list(zip(change, D * increments))
-            segments.append((j, D, ImmutableMatrix(start), ImmutableMatrix(change)))
-        for g, (tau, weight) in enumerate(zip(nodes, weights)):
-            lengths, directions = [], []
-            for j, D, start, change in segments:
-                dx, dy, length = sp.symbols(f"spring{i}_d{j}_node{g}_x spring{i}_d{j}_node{g}_y "
-                                            f"spring{i}_s{j}_node{g}", real=True)
-                point = start + sp.Float(tau) * change
-                definitions += [(dx, point[0]), (dy, point[1]),
-                                (length, sp.sqrt(dx ** 2 + dy ** 2))]
-                lengths.append(length)
-                directions.append((j, D, dx, dy, length))
-            stretch = sp.Add(*lengths) - number(term.spring.rest_length)
-            force = sp.Symbol(f"spring{i}_force{g}", real=True)
-            definitions.append((force, sp.Float(weight) * number(term.spring.stiffness) * stretch))
-            for j, D, dx, dy, length in directions:
-                # The force along the segment, (fx, fy) = w k e d_j / s_j, once per segment and
-                # node: the gradient's entries are then sums of constant multiples of it.
-                fx, fy = sp.symbols(f"spring{i}_f{j}_node{g}_x spring{i}_f{j}_node{g}_y",
-                                    real=True)
-                scale = sp.Symbol(f"spring{i}_scale{j}_node{g}", real=True)
-                definitions += [(scale, force / length), (fx, scale * dx), (fy, scale * dy)]
-                for k in range(len(model.q)):
-                    if D[0, k] != 0 or D[1, k] != 0:
-                        total[k] += D[0, k] * fx + D[1, k] * fy
-    return ImmutableMatrix(total), tuple(definitions)
-
-
-def relative_rates(model) -> list[sp.Expr]:
-    """phidot_i = thetadot_i - thetadot_{i-1}, linear in v (model.md sections 4 and 7)."""
-    rates = (sp.Integer(0),) + model.absolute_rates()
-    return [after - before for before, after in zip(rates[:-1], rates[1:])]
-
-
-def joint_force(model, torques) -> ImmutableMatrix:
-    """Generalised force f = sum_i tau_i grad_v(phidot_i) of joint torques tau_i (model.md 7).
-
-    Its power f . v is sum_i tau_i phidot_i, because phidot_i is linear in v.
-    """
-    force = sp.zeros(len(model.v), 1)
-    for rate, torque in zip(relative_rates(model), torques):
-        if torque != 0:
-            force += torque * ImmutableMatrix([rate]).jacobian(model.v).T
-    return ImmutableMatrix(force)
 
 
 def tangent_velocity_solve(model) -> tuple[LinearSolve, ImmutableMatrix]:
@@ -157,62 +81,59 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     if order > 4:
         raise ValueError("es composes its own step to order 4 at most: order 6 is "
                          "chaingen.symbolic.schemes.galerkin's")
-    model = com_model(scene)
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
-    q0, v0 = model.q, model.v
+    q0, v0 = coordinates(scene)
     # The unknown is the velocity increment dv = v_1 - v_0 (then dq = dt (v_0 + dv/2), the
     # same scheme). With q_1 or dq as unknown, M (v_1 - v_0) is a difference of O(|v|) terms
     # whose round-off, eps |M v| per step, random-walks into the energy (2-4e-12 over the
     # standard gravity run); with dv it is computed without cancellation.
-    dv = ImmutableMatrix(sp.symbols([f"d{s}" for s in map(str, model.v)], real=True))
+    dv = ImmutableMatrix(sp.symbols([f"d{s}" for s in map(str, v0)], real=True))
     mu = ImmutableMatrix(sp.symbols(f"mu1:{n + 1}", real=True))
     dq = dt * (v0 + dv / 2)
     q1 = q0 + dq
     v1 = v0 + dv
-    qm = q0 + dq / 2
-    constraint_jacobian_mid = model.constraint_jacobian.xreplace(dict(zip(model.q, qm)))
-
-    gradient = ImmutableMatrix([model.gravity_potential]).jacobian(model.q).T
-    definitions = ()
-    if model.springs:
-        spring_gradient, definitions = averaged_spring_gradient(model, q0, q1, quadrature)
-        gradient = gradient + spring_gradient
-    momentum_balance = (model.mass_matrix * dv - constraint_jacobian_mid.T * mu
-                        + dt * gradient)
-    # Joint torques, input u and damping -d_i phidot_i, enter f~ at the mid-point (model.md 7):
+    # The residual by recursions over the links (com_recursion): O(n) definitions. Joint
+    # torques, input u and damping -d_i phidot_i, enter f~ at the mid-point (model.md 7):
     # then dt f~ . v_m = dt sum_i tau_i phidot_i(m), and the discrete energy balance
     # H_1 - H_0 = work - dissipated holds to quadrature and solver accuracy.
     inputs = input_symbols(scene)
-    midpoint = {**dict(zip(model.q, qm)), **dict(zip(model.v, (v0 + v1) / 2))}
-    rates_mid = [rate.xreplace(midpoint) for rate in relative_rates(model)]
-    torques = [u - number(link.damping) * rate for u, link, rate
-               in zip(joint_torques(scene, inputs), scene.links, relative_rates(model))]
-    if any(torque != 0 for torque in torques):
-        momentum_balance -= dt * joint_force(model, torques).xreplace(midpoint)
-    input_work = dt * sp.Add(*(u * rate for u, rate in zip(joint_torques(scene, inputs),
-                                                           rates_mid)))
+    applied = joint_torques(scene, inputs)
+
+    def torques_of(rates):
+        return [u - number(link.damping) * rate
+                for u, link, rate in zip(applied, scene.links, rates)]
+
+    step = Definitions("step_")
+    momentum_balance, constraint_increment, rates_mid = es_step(
+        scene, q0, v0, dv, mu, dt, quadrature if scene.springs else 1, torques_of, step)
+    definitions = tuple(step.items)
+    input_work = dt * sp.Add(*(u * rate for u, rate in zip(applied, rates_mid)))
     dissipated = dt * sp.Add(*(number(link.damping) * rate ** 2
                                for link, rate in zip(scene.links, rates_mid) if link.damping))
-    constraint_increment = constraint_jacobian_mid * dq
-    residual = ImmutableMatrix.vstack(momentum_balance, constraint_increment)
+    residual = ImmutableMatrix(list(momentum_balance) + list(constraint_increment))
 
-    # Joint space: phi_i is the angle from e_{i-1} to e_i, wrapped to (-pi, pi] by atan2.
-    directions = (ImmutableMatrix([1, 0]),) + model.directions
-    angles = [sp.atan2(cross2(a, b), dot2(a, b)) for a, b in zip(directions[:-1], directions[1:])]
-    velocities = relative_rates(model)
+    # Joint space: phi_i is the angle from e_{i-1} to e_i, wrapped to (-pi, pi] by atan2; the
+    # state's quantities by the same recursions (com_recursion.state_quantities).
+    at_state = Definitions("state_")
+    quantities = state_quantities(scene, q0, v0, at_state)
+    velocities = quantities["rates"]
     output_solve = None
     if order > 2:
+        # The rates of the projected velocity: plain expressions in the solve's symbols (the
+        # state definitions are evaluated before the solve).
+        model = com_model(scene)
         output_solve, tangent = tangent_velocity_solve(model)
-        velocities = [rate.xreplace(dict(zip(model.v, tangent))) for rate in velocities]
+        absolute = [rate.xreplace(dict(zip(v0, tangent))) for rate in model.absolute_rates()]
+        velocities = [after - before for before, after
+                      in zip([sp.Integer(0)] + absolute[:-1], absolute)]
 
     phi = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
     phidot = ImmutableMatrix(sp.symbols(f"phidot1:{n + 1}", real=True))
-    xs, ys = joint_space_positions(scene, phi)
-    vxs, vys = joint_space_velocities(scene, phi, phidot)
-    initial_state = ImmutableMatrix(xs + ys + vxs + vys)
+    at_start = Definitions("initial_")
+    initial_state = ImmutableMatrix(joint_space_start(scene, phi, phidot, at_start))
 
-    coordinates = [f"x_{i}" for i in range(1, n + 1)] + [f"y_{i}" for i in range(1, n + 1)]
+    names = [f"x_{i}" for i in range(1, n + 1)] + [f"y_{i}" for i in range(1, n + 1)]
     return DiscreteScheme(
         method="es", quadrature=quadrature_used(scene, "es", quadrature), scene=scene,
         summary=SUMMARY, dt=dt,
@@ -221,24 +142,26 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         residual=residual,
         next_state=ImmutableMatrix.vstack(q1, v1),
         predictor=ImmutableMatrix.zeros(3 * n, 1),
-        joint_angles=ImmutableMatrix(angles),
+        joint_angles=ImmutableMatrix(quantities["angles"]),
         joint_velocities=ImmutableMatrix(velocities),
         output_solve=output_solve,
-        energy=model.energy,
-        constraint_residuals=model.constraints,
+        energy=quantities["energy"],
+        constraint_residuals=ImmutableMatrix(quantities["constraints"]),
         initial_angles=phi, initial_velocities=phidot, initial_state=initial_state,
         state_layout=Layout(
-            tuple(coordinates + ["v" + c for c in coordinates]),
+            tuple(names + ["v" + c for c in names]),
             "COM positions q = (x_1..x_n, y_1..y_n) in m, then their velocities v in m/s"),
         unknowns_layout=Layout(
-            tuple("dv" + c for c in coordinates) + tuple(f"mu_{i}" for i in range(1, n + 1)),
+            tuple("dv" + c for c in names) + tuple(f"mu_{i}" for i in range(1, n + 1)),
             "the increment dv = v_1 - v_0 of the COM velocities over the step (m/s), then the "
             "constraint impulses mu = Lambda_1 - Lambda_0 (kg/s: C^T mu is a momentum)"),
         residual_description=(
             "dt-scaled momentum balance M dv - C(q_m)^T mu + dt (gradV~ - f~) (2n entries, "
             "kg m/s), then the constraint increments C(q_m) (q_1 - q_0) (n entries, m^2)"),
         inputs=inputs, input_work=input_work, dissipated=dissipated,
-        segment_vectors=segment_vectors(model), definitions=definitions,
+        segment_vectors=ImmutableMatrix(quantities["segment_vectors"]),
+        definitions=definitions, state_definitions=tuple(at_state.items),
+        initial_definitions=tuple(at_start.items),
         flow_description=FLOWS if has_energy_flows(scene) else None,
         # Newton-chord: from the warm start the chord update is already at round-off, so a step
         # costs one Jacobian, one factorisation and two residuals, with the energy balance of

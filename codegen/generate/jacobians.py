@@ -1,0 +1,55 @@
+"""How the Newton Jacobian dF/dz is generated: unrolled entry by entry, or by forward
+directions in a loop (docs/model.md, section 17).
+
+CasADi's symbolic Jacobian of a residual is fast to evaluate, but its generated code has one
+expression per entry: for a chain in joint space, whose Jacobian is dense, O(n^2), and gcc's
+time on one function grows faster than its size. By directions, the generated code is one
+forward derivative of F in a few directions, called in a loop over the columns: O(n).
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+#: Forward directions per pass of a Jacobian evaluated by directions (jacobian_by_directions).
+JACOBIAN_CHUNK = 4
+#: The Newton Jacobian is generated entry by entry (CasADi's symbolic Jacobian, unrolled) while
+#: that takes at most this many instructions; above, by forward directions in a loop: the code
+#: then grows with the residual, O(n), not with the Jacobian's n^2 entries, and gcc -O2 compiles
+#: it in seconds instead of minutes (gcc's time grows faster than the size of one function).
+#: Measured on the bench's scaling chain of 20 links: midpoint's unrolled Jacobian has 9.9e3
+#: instructions (build 7.0 s, 10.2 us a step), vi's 2.1e4 (21.4 s, 11.1 us); by directions
+#: vi builds in 9.4 s and steps in 22.9 us. es's Galerkin step at K = 7 (n = 3) has 1.8e4.
+UNROLLED_JACOBIAN_MAX_INSTRUCTIONS = 20_000
+#: More unknowns than this go by directions without trying the unrolled Jacobian.
+UNROLLED_JACOBIAN_MAX_UNKNOWNS = 64
+
+
+def unrolled_jacobian(residual: ca.SX, z: ca.SX, inputs) -> ca.SX | None:
+    """dF/dz dense and unrolled, or None where it is too large (see
+    UNROLLED_JACOBIAN_MAX_INSTRUCTIONS): then the Jacobian is evaluated by directions."""
+    if z.shape[0] > UNROLLED_JACOBIAN_MAX_UNKNOWNS:
+        return None
+    jacobian = ca.densify(ca.jacobian(residual, z))
+    size = ca.Function("size", inputs, [residual, jacobian]).n_instructions()
+    return jacobian if size <= UNROLLED_JACOBIAN_MAX_INSTRUCTIONS else None
+
+
+def jacobian_by_directions(name: str, inputs, input_names, residual: ca.SX, unknown: int,
+                           chunk: int, options: dict) -> ca.Function:
+    """(F, dF/dz dense) with dF/dz computed `chunk` columns at a time: the forward derivative
+    of F in `chunk` directions, mapped serially over ceil(nz / chunk) passes with the columns
+    of the identity as seeds. The generated C is a loop over the passes around one forward
+    derivative, so it grows with F, not with the nz^2 entries of the Jacobian; the cost is
+    one evaluation of F's nominal part per pass more than the unrolled Jacobian's."""
+    z = inputs[unknown]
+    nz = z.shape[0]
+    passes = -(-nz // chunk)
+    nominal = ca.Function(f"{name}_F", inputs, [residual], options)
+    forward = nominal.forward(chunk).map(passes, "serial")
+    symbols = [ca.MX.sym(label, item.shape[0], item.shape[1])
+                for label, item in zip(input_names, inputs)]
+    value = nominal(*symbols)
+    seeds = [ca.horzcat(ca.DM.eye(nz), ca.DM(nz, passes * chunk - nz)) if index == unknown
+             else ca.DM(item.shape[0], passes * chunk) for index, item in enumerate(inputs)]
+    tangents = forward(*symbols, value, *seeds)
+    return ca.Function(name, symbols, [value, tangents[:, :nz]], input_names, ["F", "J"])

@@ -1,0 +1,265 @@
+"""es's step in COM coordinates by recursions over the links (model.md 4.3 and 17).
+
+In COM coordinates q = (x_1..x_n, y_1..y_n) the joints are linear in q but nested: with the
+constant map R_k of the arm x_k - X_k to the direction e_k (com_frame_map),
+
+    X_1 = 0,    X_{k+1} = X_k + L_k R_k (x_k - X_k),
+
+so X_k depends on every COM before it, and a whole-chain expression of a spring segment, a row
+of C(q) or of M has O(n) terms: the residual O(n^2). Here every linear map of q the step needs
+is the recursion above, applied to positions or increments (definitions, O(n)), and every
+transpose of one (the gradients: M dv, C(q_m)^T mu, the springs', the joint torques') is one
+sweep from the tip back to the base that pulls point forces on the joints back to q:
+
+    g_x[k] += (L_k R_k)^T G_{k+1},      G_k = g_X[k] + (I - L_k R_k)^T G_{k+1}.
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+from ..scene import Scene
+from .com_model import com_frame_map, number
+from .quadrature import gauss_legendre_nodes
+from .recursion import Definitions, add, cross, perp, scale
+
+ZERO = (sp.Integer(0), sp.Integer(0))
+
+
+def apply(matrix, v):
+    return (matrix[0, 0] * v[0] + matrix[0, 1] * v[1], matrix[1, 0] * v[0] + matrix[1, 1] * v[1])
+
+
+def apply_transpose(matrix, v):
+    return (matrix[0, 0] * v[0] + matrix[1, 0] * v[1], matrix[0, 1] * v[0] + matrix[1, 1] * v[1])
+
+
+def sub(a, b):
+    return (a[0] - b[0], a[1] - b[1])
+
+
+class ComChain:
+    """The joint recursion of a scene's COM model and its transpose."""
+
+    def __init__(self, scene: Scene, defs: Definitions):
+        self.scene = scene
+        self.defs = defs
+        self.maps = [com_frame_map(link) for link in scene.links]
+        self.lengths = [number(link.length) for link in scene.links]
+
+    def joints(self, coms, name: str) -> list:
+        """X_1 .. X_{n+1} of the COM vectors `coms` (positions or increments: the map is
+        linear, X_1 = 0), as definitions."""
+        joint = ZERO
+        out = [joint]
+        for k, (com, R, L) in enumerate(zip(coms, self.maps, self.lengths), start=2):
+            joint = self.defs.vector(f"{name}{k}", add(joint, scale(L, apply(R, sub(com, joint)))))
+            out.append(joint)
+        return out
+
+    def normal(self, k: int, coms, joints) -> tuple:
+        """n_k = S R_k (x_k - X_k) (1-based k >= 1; linear in q)."""
+        return perp(apply(self.maps[k - 1], sub(coms[k - 1], joints[k - 1])))
+
+    def fastening(self, j: int, r, coms, joints, increments: bool) -> tuple:
+        """P_j = X_j + r n_{j-1} (n_0 = (0, 1), the base: constant, so no increment)."""
+        if j == 1:
+            return ZERO if increments else (sp.Integer(0), number(r))
+        return add(joints[j - 1], scale(number(r), self.normal(j - 1, coms, joints)))
+
+    def sweep(self, direct, through, points, name: str) -> list:
+        """The q-gradient sum_k E_k^T direct_k + B_k^T through_k + sum_j (dP_j/dq)^T points_j.
+
+        direct, through: one vector per link (None for none); B_k q = x_k - X_k. points:
+        {j: (F, r F)}, the force on the fastening P_j and its offset times it (summed over the
+        springs fastened there). Returns one (x, y) gradient per link."""
+        n = self.scene.n
+        on_com = [list(d) if d is not None else [0, 0] for d in direct]
+        on_joint = [[sp.Integer(0), sp.Integer(0)] for _ in range(n + 2)]
+        for k, t in enumerate(through, start=1):
+            if t is not None:
+                on_com[k - 1] = [on_com[k - 1][0] + t[0], on_com[k - 1][1] + t[1]]
+                on_joint[k] = [on_joint[k][0] - t[0], on_joint[k][1] - t[1]]
+        for j, (force, moment) in points.items():
+            if j == 1:
+                continue
+            # P_j = X_j + r S R_{j-1} (x_{j-1} - X_{j-1}): the joint takes the force F, the arm
+            # (r S R_{j-1})^T F; with several springs at P_j, F = sum F_i and r F = sum r_i F_i.
+            on_joint[j] = [on_joint[j][0] + force[0], on_joint[j][1] + force[1]]
+            pulled = apply_transpose(self.maps[j - 2], (moment[1], -moment[0]))
+            on_com[j - 2] = [on_com[j - 2][0] + pulled[0], on_com[j - 2][1] + pulled[1]]
+            on_joint[j - 1] = [on_joint[j - 1][0] - pulled[0], on_joint[j - 1][1] - pulled[1]]
+        carried = ZERO
+        gradient = [None] * n
+        for k in range(n, 0, -1):
+            R, L = self.maps[k - 1], self.lengths[k - 1]
+            incoming = add(tuple(on_joint[k + 1]), carried)
+            incoming = self.defs.vector(f"{name}G{k + 1}", incoming)
+            back = scale(L, apply_transpose(R, incoming))
+            gradient[k - 1] = add(tuple(on_com[k - 1]), back)
+            carried = sub(incoming, back)
+        return gradient
+
+
+def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of, defs: Definitions):
+    """The es residual (model.md 4.4) by recursions: (momentum balance, 2n entries in q's
+    order; constraint increments, n; joint rates at the mid-point, n).
+
+    torques_of(rates): the joint torques tau_i (inputs and damping) at the mid-point rates."""
+    n = scene.n
+    chain = ComChain(scene, defs)
+
+    def vectors(values):
+        return [(values[k], values[n + k]) for k in range(n)]
+
+    q0v, v0v, dvv = vectors(q0), vectors(v0), vectors(dv)
+    dq = [defs.vector(f"dq{k}", scale(dt, add(v, scale(sp.Rational(1, 2), d))))
+          for k, (v, d) in enumerate(zip(v0v, dvv), start=1)]
+    joints0 = chain.joints(q0v, "X")
+    joint_steps = chain.joints(dq, "dX")
+    # The arms at the mid-point, a_k = x_k - X_k at q_m = q_0 + dq/2.
+    arms = [defs.vector(f"arm_m{k}", sub(add(x, scale(sp.Rational(1, 2), d)),
+                                         add(X, scale(sp.Rational(1, 2), dX))))
+            for k, (x, d, X, dX) in enumerate(zip(q0v, dq, joints0, joint_steps), start=1)]
+    constraint_increments = [2 * (a[0] * (d[0] - dX[0]) + a[1] * (d[1] - dX[1]))
+                             for a, d, dX in zip(arms, dq, joint_steps)]
+
+    direct = []
+    through = []
+    velocity_steps = chain.joints(dvv, "dV")
+    for k, link in enumerate(scene.links):
+        m = number(link.mass)
+        term = scale(m, dvv[k])
+        if scene.gravity:
+            term = add(term, (sp.Integer(0), dt * m * number(scene.gravity)))
+        direct.append(term)
+        c2 = number(link.com ** 2 + link.com_normal ** 2)
+        item = scale(-2 * mu[k], arms[k])
+        if link.inertia:
+            item = add(item, scale(number(link.inertia) / c2, sub(dvv[k], velocity_steps[k])))
+        through.append(item)
+
+    # Joint rates at the mid-point: thetadot_k = a_k x (v_k - V_k) / |c_k|^2 at v_m.
+    vm = [add(v, scale(sp.Rational(1, 2), d)) for v, d in zip(v0v, dvv)]
+    joint_velocities = chain.joints(vm, "Vm")
+    absolute = [defs.define(f"thetadot_m{k}", cross(a, sub(v, V))
+                            / number(link.com ** 2 + link.com_normal ** 2))
+                for k, (a, v, V, link) in enumerate(zip(arms, vm, joint_velocities,
+                                                        scene.links), start=1)]
+    rates = [after - before for before, after in zip([sp.Integer(0)] + absolute[:-1], absolute)]
+    torques = torques_of(rates)
+    if any(t != 0 for t in torques):
+        following = list(torques[1:]) + [sp.Integer(0)]
+        for k, link in enumerate(scene.links):
+            weight = torques[k] - following[k]
+            if weight != 0:
+                c2 = number(link.com ** 2 + link.com_normal ** 2)
+                through[k] = add(through[k], scale(-dt * weight / c2, perp(arms[k])))
+
+    points = {}
+    if scene.springs:
+        nodes, weights = gauss_legendre_nodes(quadrature)
+        for i, spring in enumerate(scene.springs):
+            offsets = scene.spring_fastenings(spring)
+            js = list(range(spring.first, spring.last + 1))
+            starts, changes = [], []
+            for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:])):
+                start = sub(chain.fastening(j + 1, r1, q0v, joints0, False),
+                            chain.fastening(j, r0, q0v, joints0, False))
+                change = sub(chain.fastening(j + 1, r1, dq, joint_steps, True),
+                             chain.fastening(j, r0, dq, joint_steps, True))
+                starts.append(defs.vector(f"spring{i}_d{j}", start))
+                changes.append(defs.vector(f"spring{i}_dd{j}", change))
+            totals = [ZERO for _ in js]
+            for g, (tau, weight) in enumerate(zip(nodes, weights)):
+                lengths, node_vectors = [], []
+                for j, start, change in zip(js, starts, changes):
+                    point = defs.vector(f"spring{i}_d{j}_node{g}",
+                                        add(start, scale(sp.Float(tau), change)))
+                    lengths.append(defs.define(f"spring{i}_s{j}_node{g}",
+                                               sp.sqrt(point[0] ** 2 + point[1] ** 2)))
+                    node_vectors.append(point)
+                stretch = sp.Add(*lengths) - number(spring.rest_length)
+                force = defs.define(f"spring{i}_force{g}", sp.Float(weight)
+                                    * number(spring.stiffness) * stretch)
+                for s, (length, point) in enumerate(zip(lengths, node_vectors)):
+                    share = defs.define(f"spring{i}_scale{js[s]}_node{g}", force / length)
+                    totals[s] = add(totals[s], scale(share, point))
+            for j, total, r0, r1 in zip(js, totals, offsets[:-1], offsets[1:]):
+                total = defs.vector(f"spring{i}_f{j}", scale(dt, total))
+                # dt F_j on d_j = P_{j+1} - P_j: +F_j on P_{j+1}, -F_j on P_j
+                for point, sign, r in ((j + 1, 1, r1), (j, -1, r0)):
+                    force, moment = points.get(point, (ZERO, ZERO))
+                    points[point] = (add(force, scale(sign, total)),
+                                     add(moment, scale(sign * number(r), total)))
+    gradient = chain.sweep(direct, through, points, "sweep_")
+    momentum = [g[0] for g in gradient] + [g[1] for g in gradient]
+    return momentum, constraint_increments, rates
+
+
+
+def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:
+    """The state-only expressions of es by the same recursions: relative joint angles and
+    rates, H = T + V, the constraint residuals and every spring segment vector.
+
+    T = sum_k 1/2 m_k |v_k|^2 + J_k / (2 |c_k|^2) |v_k - V_k|^2 (model.md 4.1, the constant M
+    of COM coordinates), V = gravity + springs; c_k = |x_k - X_k|^2 - |c_k|^2."""
+    n = scene.n
+    chain = ComChain(scene, defs)
+    coms = [(q[k], q[n + k]) for k in range(n)]
+    velocities = [(v[k], v[n + k]) for k in range(n)]
+    joints = chain.joints(coms, "X")
+    joint_velocities = chain.joints(velocities, "V")
+    arms = [defs.vector(f"arm{k}", sub(x, X))
+            for k, (x, X) in enumerate(zip(coms, joints), start=1)]
+    directions = [(sp.Integer(1), sp.Integer(0))] + [
+        defs.vector(f"e{k}", apply(R, a)) for k, (R, a) in enumerate(zip(chain.maps, arms),
+                                                                     start=1)]
+    angles = [sp.atan2(cross(a, b), a[0] * b[0] + a[1] * b[1])
+              for a, b in zip(directions[:-1], directions[1:])]
+    kinetic = sp.Integer(0)
+    absolute = []
+    constraints = []
+    for k, link in enumerate(scene.links):
+        c2 = number(link.com ** 2 + link.com_normal ** 2)
+        relative = defs.vector(f"arm_rate{k + 1}", sub(velocities[k], joint_velocities[k]))
+        absolute.append(defs.define(f"thetadot{k + 1}", cross(arms[k], relative) / c2))
+        kinetic += number(link.mass) * (velocities[k][0] ** 2 + velocities[k][1] ** 2) / 2
+        if link.inertia:
+            kinetic += number(link.inertia) / (2 * c2) * (relative[0] ** 2 + relative[1] ** 2)
+        constraints.append(arms[k][0] ** 2 + arms[k][1] ** 2 - c2)
+    rates = [after - before for before, after in zip([sp.Integer(0)] + absolute[:-1], absolute)]
+    potential = sp.Integer(0)
+    if scene.gravity:
+        potential = sp.Add(*(number(link.mass * scene.gravity) * com[1]
+                             for link, com in zip(scene.links, coms)))
+    segments = []
+    for i, spring in enumerate(scene.springs):
+        offsets = scene.spring_fastenings(spring)
+        lengths = []
+        for j, (r0, r1) in zip(range(spring.first, spring.last + 1),
+                               zip(offsets[:-1], offsets[1:])):
+            d = defs.vector(f"spring{i}_d{j}", sub(chain.fastening(j + 1, r1, coms, joints, False),
+                                                   chain.fastening(j, r0, coms, joints, False)))
+            segments += list(d)
+            lengths.append(sp.sqrt(d[0] ** 2 + d[1] ** 2))
+        stretch = sp.Add(*lengths) - number(spring.rest_length)
+        potential += number(spring.stiffness) / 2 * stretch ** 2
+    return dict(angles=angles, rates=rates, energy=kinetic + potential,
+                constraints=constraints, segment_vectors=segments)
+
+
+def joint_space_start(scene: Scene, phi, phidot, defs: Definitions) -> list:
+    """x(phi, phidot) = (q, v): the COM positions and velocities of a joint-space state, by the
+    recursions of chaingen.symbolic.recursion (model.md 1)."""
+    from .recursion import absolute_rates, angle_directions, link_frames, velocities
+
+    frames = link_frames(scene, angle_directions(defs, phi))
+    joint = ZERO
+    coms = []
+    for k in range(scene.n):
+        coms.append(add(joint, frames.arms[k]))
+        if k + 1 < scene.n:
+            joint = defs.vector(f"X{k + 2}", add(joint, frames.vectors[k]))
+    com_velocities, _ = velocities(scene, frames, absolute_rates(defs, phidot), defs)
+    return ([c[0] for c in coms] + [c[1] for c in coms] + [v[0] for v in com_velocities]
+            + [v[1] for v in com_velocities])
