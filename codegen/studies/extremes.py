@@ -216,7 +216,7 @@ def edge_chain_length(quick: bool) -> list[Outcome]:
 def edge_largest_n(quick: bool, budget: float = 120.0) -> list[Outcome]:
     """Grow n until generating and building takes more than `budget` seconds."""
     rows = []
-    candidates = (3, 6) if quick else (5, 10, 15, 20, 30, 40)
+    candidates = (3, 6) if quick else (5, 10, 20, 50, 100, 150, 200)
     for method in METHODS:
         largest, largest_time, over = None, None, None
         for n in candidates:

@@ -416,9 +416,11 @@ static int finish_step(const double *x0, const double *u, double dt, double *x1,
     return FOUR_LINK_ACTUATED_ES_OK;
 }
 
-/* One step, climbing the ladder of solve_step; when Newton fails on the whole step, two half
- * steps, each climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy on
- * any sequence of steps: the halves keep its energy balance. The energy flows are the halves'
+/* One step, climbing the ladder of solve_step; when Newton fails on the whole step, or its
+ * solution fails the segment test (a spurious root of a step too long for the motion turns a
+ * segment through 90 degrees; a segment that really collapses fails every half too), two
+ * half steps, each climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy
+ * on any sequence of steps: the halves keep its energy balance. The energy flows are the halves'
  * sum; iterations counts every linear solve. */
 static int advance(const double *x0, const double *u, double dt, double *x1, double *flows,
                    const four_link_actuated_es_options *options,
@@ -431,7 +433,8 @@ static int advance(const double *x0, const double *u, double dt, double *x1, dou
     }
     *iterations += spent;
     if ((status == FOUR_LINK_ACTUATED_ES_NOT_CONVERGED || status == FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN
-         || status == FOUR_LINK_ACTUATED_ES_NONFINITE) && depth < MAX_SPLIT) {
+         || status == FOUR_LINK_ACTUATED_ES_NONFINITE || status == FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED)
+        && depth < MAX_SPLIT) {
         double *middle = workspace->split_state[depth];
         double halves[2][2] = {{0.0, 0.0}, {0.0, 0.0}};
         ++workspace->step_splits;

@@ -380,9 +380,9 @@ static int finish_step(const double *x0, double dt, double *x1,
     return THREE_LINK_GRAVITY_VI_OK;
 }
 
-/* One step, climbing the ladder of solve_step; when Newton fails on the whole step, two half
- * steps, each climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy on
- * any sequence of steps: the halves keep its energy balance. The energy flows are the halves'
+/* One step, climbing the ladder of solve_step; when Newton fails on the whole step, two
+ * half steps, each climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy
+ * on any sequence of steps: the halves keep its energy balance. The energy flows are the halves'
  * sum; iterations counts every linear solve. */
 static int advance(const double *x0, double dt, double *x1,
                    const three_link_gravity_vi_options *options,
@@ -395,7 +395,8 @@ static int advance(const double *x0, double dt, double *x1,
     }
     *iterations += spent;
     if ((status == THREE_LINK_GRAVITY_VI_NOT_CONVERGED || status == THREE_LINK_GRAVITY_VI_SINGULAR_JACOBIAN
-         || status == THREE_LINK_GRAVITY_VI_NONFINITE) && depth < MAX_SPLIT) {
+         || status == THREE_LINK_GRAVITY_VI_NONFINITE)
+        && depth < MAX_SPLIT) {
         double *middle = workspace->split_state[depth];
         ++workspace->step_splits;
         status = advance(x0, 0.5 * dt, middle, options, workspace, iterations, depth + 1);

@@ -394,9 +394,11 @@ static int finish_step(const double *x0, double dt, double *x1,
     return THREE_LINK_MULTI_ES_OK;
 }
 
-/* One step, climbing the ladder of solve_step; when Newton fails on the whole step, two half
- * steps, each climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy on
- * any sequence of steps: the halves keep its energy balance. The energy flows are the halves'
+/* One step, climbing the ladder of solve_step; when Newton fails on the whole step, or its
+ * solution fails the segment test (a spurious root of a step too long for the motion turns a
+ * segment through 90 degrees; a segment that really collapses fails every half too), two
+ * half steps, each climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy
+ * on any sequence of steps: the halves keep its energy balance. The energy flows are the halves'
  * sum; iterations counts every linear solve. */
 static int advance(const double *x0, double dt, double *x1,
                    const three_link_multi_es_options *options,
@@ -409,7 +411,8 @@ static int advance(const double *x0, double dt, double *x1,
     }
     *iterations += spent;
     if ((status == THREE_LINK_MULTI_ES_NOT_CONVERGED || status == THREE_LINK_MULTI_ES_SINGULAR_JACOBIAN
-         || status == THREE_LINK_MULTI_ES_NONFINITE) && depth < MAX_SPLIT) {
+         || status == THREE_LINK_MULTI_ES_NONFINITE || status == THREE_LINK_MULTI_ES_SEGMENT_COLLAPSED)
+        && depth < MAX_SPLIT) {
         double *middle = workspace->split_state[depth];
         ++workspace->step_splits;
         status = advance(x0, 0.5 * dt, middle, options, workspace, iterations, depth + 1);

@@ -79,7 +79,7 @@ HIGHER_ORDER_DTS = (0.1, 0.05, 0.04, 0.02, 0.01)
 #: es at order 2 with the scenes' own K = 3; at order 4 with K = 5 (its steps are longer).
 ADAPTIVE_RUNS = (("es", 2, 3, (1e-6, 1e-8, 1e-10)), ("es", 4, 5, (1e-6, 1e-8, 1e-10)))
 ADAPTIVE_SAMPLE = 0.05
-SCALING_NS = (2, 3, 5, 10, 20)
+SCALING_NS = (2, 3, 5, 10, 20, 50, 100)
 #: (method, quadrature) of the scaling series.
 SCALING_METHODS = (("es", 3), ("vi", 3), ("midpoint", 3))
 #: dt of the scaling series' per-step time, and the smaller ones tried if a scheme fails at it.

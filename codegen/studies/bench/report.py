@@ -227,12 +227,13 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
         lines += ["## Scaling", "",
                   "`chaingen.studies.bench.scenes.scaling_scene(n)`: n identical links "
                   "(1 kg, 0.4 m), g = 9.81, "
-                  "a mono-articular spring across every joint and one multi-articular spring "
-                  "over joints 1..min(n, 3). Generate (SymPy, CasADi, rendering) and build "
+                  "a mono-articular spring across every joint, a multi-articular spring "
+                  "over joints 1..min(n, 3) and, for n >= 6, one over joints n-2..n. Generate "
+                  "(SymPy, CasADi, rendering) and build "
                   "(gcc with the package's per-source flags, sources compiled side by side) "
                   "run in a child process with a limit of "
                   f"{config.timeout:g} s; a scheme over the limit, or that the lower bound "
-                  "t(n') >= t(n) (n'/n)^2 puts over it, is not run at larger n. "
+                  "t(n') >= t(n) n'/n puts over it, is not run at larger n. "
                   "Peak RSS: of the generating Python process (VmHWM), and of the compiler "
                   "with the passes it runs (GNU time). "
                   f"Per step: {config.scaling_steps} steps from the initial state.", "",

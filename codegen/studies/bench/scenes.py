@@ -22,7 +22,7 @@ def scaling_scene_text(n: int) -> str:
     link = SCALING_LINK
     inertia = link["mass"] * link["length"] ** 2 / 12
     lines = [f"# chaingen bench scaling series: {n} identical links, a mono-articular spring",
-             "# across every joint and one multi-articular spring over the first joints.",
+             "# across every joint, multi-articular springs over the first and last joints.",
              f'name = "scaling-{n}"', "gravity = 9.81", "", "[base]",
              f"fastening = {link['fastening']!r}", ""]
     for _ in range(n):
@@ -34,9 +34,14 @@ def scaling_scene_text(n: int) -> str:
         lines += ["[[springs]]", f"joints = [{j}, {j}]",
                   f"stiffness = {SCALING_MONO_STIFFNESS!r}",
                   f"rest_length = {SCALING_REST_FRACTION * link['length']!r}", ""]
-    last = min(n, 3)
-    lines += ["[[springs]]", f"joints = [1, {last}]", f"stiffness = {SCALING_MULTI_STIFFNESS!r}",
-              f"rest_length = {SCALING_REST_FRACTION * last * link['length']!r}", ""]
+    # Multi-articular springs over the first three joints and, from n = 6 on, over the last
+    # three.
+    spans = [(1, min(n, 3))] + ([(n - 2, n)] if n >= 6 else [])
+    for first, last in spans:
+        lines += ["[[springs]]", f"joints = [{first}, {last}]",
+                  f"stiffness = {SCALING_MULTI_STIFFNESS!r}",
+                  f"rest_length = {SCALING_REST_FRACTION * (last - first + 1) * link['length']!r}",
+                  ""]
     angles = ", ".join([repr(-math.pi / 2 + SCALING_HANGING_DEFLECTION)]
                        + [repr(SCALING_INITIAL_ANGLE)] * (n - 1))
     lines += ["[initial]", f"angles = [{angles}]", f"velocities = [{', '.join(['0.0'] * n)}]",
@@ -47,8 +52,9 @@ def scaling_scene_text(n: int) -> str:
 
 def scaling_scene(n: int) -> Scene:
     """n identical links (1 kg, 0.4 m, COM at 0.2 m, J = m L^2 / 12, fastenings 0.05 m off the
-    axis), g = 9.81, a mono-articular spring across every joint and one multi-articular spring
-    over joints 1..min(n, 3), rest lengths 95 % of the straight posture's. At rest, hanging
-    0.2 rad off the vertical with every other joint bent by 0.1 rad. Parsed from TOML like a
+    axis), g = 9.81, a mono-articular spring across every joint, a multi-articular spring over
+    joints 1..min(n, 3) and, for n >= 6, one over joints n-2..n, rest lengths 95 % of the
+    straight posture's. At rest, hanging 0.2 rad off the vertical with every other joint bent
+    by 0.1 rad. Parsed from TOML like a
     user's file, so it is validated like one."""
     return parse_scene(scaling_scene_text(n), f"<scaling scene n={n}>", f"scaling-{n}")

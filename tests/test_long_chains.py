@@ -1,0 +1,121 @@
+"""Long chains (docs/model.md, section 17): the recursions, the Jacobian by directions, code that
+grows linearly with n, and a 20-link chain against MuJoCo."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from chaingen.generate import casadi_functions, jacobians
+from chaingen.generate.casadi_functions import casadi_c_source, scheme_functions
+from chaingen.scene import kinematics
+from chaingen.studies.bench.scenes import scaling_scene
+from chaingen.symbolic.schemes import build_scheme
+
+from helpers import load
+
+METHODS = ("es", "vi", "midpoint")
+rng = np.random.default_rng(20261202)
+
+
+def step_point(scheme):
+    nz, nx, nu = len(scheme.unknowns), len(scheme.state), len(scheme.inputs)
+    phi = rng.uniform(-1.0, 1.0, scheme.scene.n)
+    x0 = np.array(scheme.initial_function()(*phi, *rng.normal(0, 1, scheme.scene.n)),
+                  float).ravel()
+    assert x0.shape == (nx,)
+    return [rng.normal(0, 0.1, nz), x0] + ([rng.normal(0, 1, nu)] if nu else []) + [0.01]
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_the_jacobian_by_directions_equals_the_unrolled_one(method, monkeypatch):
+    """Forcing the Jacobian by directions (4 at a time) on a small chain gives the unrolled
+    Jacobian to round-off, and the code generator emits the loop over the passes."""
+    scheme = build_scheme(load("four_link_actuated"), method, 3)
+    unrolled = scheme_functions(scheme, "t", sensitivities=False).residual_jacobian
+    monkeypatch.setattr(casadi_functions, "unrolled_jacobian", lambda *args: None)
+    directions = scheme_functions(scheme, "t", sensitivities=False).residual_jacobian
+    assert unrolled.class_name() == "SXFunction" and directions.class_name() == "MXFunction"
+    for _ in range(3):
+        point = step_point(scheme)
+        F0, J0 = (np.array(v) for v in unrolled(*point))
+        F1, J1 = (np.array(v) for v in directions(*point))
+        np.testing.assert_allclose(F1, F0, rtol=0, atol=1e-14 * max(1.0, np.abs(F0).max()))
+        np.testing.assert_allclose(J1, J0, rtol=1e-12, atol=1e-12 * np.abs(J0).max())
+    source, _ = casadi_c_source([directions], "t")
+    assert "for (i=0; i<" in source
+
+
+def test_the_unrolled_jacobian_is_kept_only_while_it_is_small():
+    small = build_scheme(load("three_link_multi"), "vi", 3)
+    functions = scheme_functions(small, "t", sensitivities=False)
+    assert functions.residual_jacobian.class_name() == "SXFunction"
+    assert functions.residual_jacobian.n_instructions() <= \
+        jacobians.UNROLLED_JACOBIAN_MAX_INSTRUCTIONS
+
+
+@pytest.mark.heavy
+@pytest.mark.parametrize("method", METHODS)
+def test_the_generated_model_grows_linearly_with_the_chain(method):
+    """Model C of the scaling chain at n = 20 and 40: doubling n at most 2.2x the code, and at
+    n = 40 the Jacobian goes by directions."""
+    sizes = {}
+    for n in (20, 40):
+        scheme = build_scheme(scaling_scene(n), method, 3)
+        functions = scheme_functions(scheme, "t", sensitivities=False)
+        sizes[n] = len(casadi_c_source(functions.all(), "t")[0])
+        if n == 40:
+            assert functions.residual_jacobian.class_name() == "MXFunction"
+    assert sizes[40] <= 2.2 * sizes[20], sizes
+
+
+@pytest.mark.heavy
+@pytest.mark.parametrize("method", METHODS)
+def test_long_chain_energy_equals_the_independent_kinematics(method):
+    """At n = 12 the recursions' energy and start equal model.md 1-3 in plain numpy."""
+    scene = scaling_scene(12)
+    scheme = build_scheme(scene, method, 3)
+    start = scheme.initial_function()
+    outputs = scheme.state_function(list(scheme.joint_angles) + list(scheme.joint_velocities)
+                                    + [scheme.energy])
+    for _ in range(3):
+        phi, phidot = rng.uniform(-np.pi, np.pi, 12), rng.normal(0, 1.5, 12)
+        values = np.array(outputs(*np.array(start(*phi, *phidot), float).ravel()), float).ravel()
+        np.testing.assert_allclose(np.cos(values[:12]), np.cos(phi), atol=1e-12)
+        np.testing.assert_allclose(values[12:24], phidot, atol=1e-11)
+        assert values[24] == pytest.approx(kinematics.total_energy(scene, phi, phidot),
+                                           rel=1e-12)
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("method", METHODS)
+def test_a_twenty_link_chain_agrees_with_mujoco(method):
+    """The scaling chain of 20 links (a spring on every joint, two multi-articular springs) at
+    dt = 1e-4: the joint angles at t = 1 s within 1e-5 rad of MuJoCo RK4 at the same dt."""
+    pytest.importorskip("mujoco")
+    from chaingen.reference.mujoco_runs import simulate_mujoco
+    from chaingen.simulation import build_solver
+
+    scene = scaling_scene(20)
+    assert len(scene.springs) == 22
+    solver = build_solver(scene, method, 3, sensitivities=False)
+    result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=1e-4,
+                             n_steps=10_000, every=10_000)
+    reference = simulate_mujoco(scene, dt=1e-4, t_end=1.0, sample_times=(1.0,))
+    error = np.abs((result.phi[1] - reference.angles[0] + np.pi) % (2 * np.pi) - np.pi).max()
+    assert error <= 1e-5, f"{method}: angles at t = 1 s differ by {error:.2e} rad"
+
+
+@pytest.mark.compile
+def test_a_step_whose_solution_turns_a_segment_is_retried_in_halves():
+    """midpoint on the 20-link chain at dt = 0.01 s: whole steps whose Newton solution turns a
+    segment through 90 degrees (a spurious root of a step too long for the motion; the
+    segments here never come near zero length) are taken as halves instead of stopping the
+    run (measured: 129 split steps up to t = 27.8 s, where the run stops)."""
+    from chaingen.simulation import build_solver
+
+    scene = scaling_scene(20)
+    solver = build_solver(scene, "midpoint", 3, sensitivities=False)
+    result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                             n_steps=2500, every=10)
+    assert result.split_steps >= 1
+    assert np.all(np.isfinite(result.samples))
