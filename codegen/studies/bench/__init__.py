@@ -48,7 +48,8 @@ __all__ = ["BenchConfig", "BenchReport", "bench_config", "run_bench", "scaling_s
 
 def knob_study(config: BenchConfig, progress, emit) -> list:
     """The speed knobs (the knobs module): every scheme on the headline scene at the
-    headline dt, and the compiler knobs of "es" on the largest chain of the scaling series up to n = 20."""
+    headline dt, and the compiler knobs of "es" on the largest chain of the scaling series up
+    to n = 20."""
     scene = load_reference_scene(HEADLINE_SCENE)
     t_end = config.t_end or scene.simulation.t_end
     rows = []
