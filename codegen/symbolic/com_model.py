@@ -250,23 +250,3 @@ def joint_space_positions(scene: Scene, phi) -> tuple[list, list]:
         ys.append(com[1])
         joint = joint + number(link.length) * e
     return xs, ys
-
-
-def joint_space_velocities(scene: Scene, phi, phidot) -> tuple[list, list]:
-    """COM velocities from relative joint angles and rates (model.md section 1): link i turns at
-    thetadot_i = phidot_1 + ... + phidot_i, so xdot_i = Xdot_i + thetadot_i S (a_i e_i + b_i n_i)
-    and Xdot_{i+1} = Xdot_i + thetadot_i L_i S e_i. Returns (vxs, vys), written down rather than
-    differentiated from joint_space_positions."""
-    theta = theta_dot = sp.Integer(0)
-    joint_velocity = ImmutableMatrix([0, 0])
-    vxs, vys = [], []
-    for i, link in enumerate(scene.links):
-        theta = theta + phi[i]
-        theta_dot = theta_dot + phidot[i]
-        e = ImmutableMatrix([sp.cos(theta), sp.sin(theta)])
-        arm = number(link.com) * e + number(link.com_normal) * (S * e)
-        velocity = joint_velocity + theta_dot * (S * arm)
-        vxs.append(velocity[0])
-        vys.append(velocity[1])
-        joint_velocity = joint_velocity + theta_dot * number(link.length) * (S * e)
-    return vxs, vys

@@ -20,7 +20,17 @@ import sympy as sp
 from ..scene import Scene
 from .com_model import com_frame_map, number
 from .quadrature import gauss_legendre_nodes
-from .recursion import Definitions, add, cross, perp, scale
+from .recursion import (
+    Definitions,
+    absolute_rates,
+    add,
+    angle_directions,
+    cross,
+    link_frames,
+    perp,
+    scale,
+    velocities,
+)
 
 ZERO = (sp.Integer(0), sp.Integer(0))
 
@@ -206,9 +216,9 @@ def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:
     n = scene.n
     chain = ComChain(scene, defs)
     coms = [(q[k], q[n + k]) for k in range(n)]
-    velocities = [(v[k], v[n + k]) for k in range(n)]
+    com_rates = [(v[k], v[n + k]) for k in range(n)]
     joints = chain.joints(coms, "X")
-    joint_velocities = chain.joints(velocities, "V")
+    joint_velocities = chain.joints(com_rates, "V")
     arms = [defs.vector(f"arm{k}", sub(x, X))
             for k, (x, X) in enumerate(zip(coms, joints), start=1)]
     directions = [(sp.Integer(1), sp.Integer(0))] + [
@@ -221,9 +231,9 @@ def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:
     constraints = []
     for k, link in enumerate(scene.links):
         c2 = number(link.com ** 2 + link.com_normal ** 2)
-        relative = defs.vector(f"arm_rate{k + 1}", sub(velocities[k], joint_velocities[k]))
+        relative = defs.vector(f"arm_rate{k + 1}", sub(com_rates[k], joint_velocities[k]))
         absolute.append(defs.define(f"thetadot{k + 1}", cross(arms[k], relative) / c2))
-        kinetic += number(link.mass) * (velocities[k][0] ** 2 + velocities[k][1] ** 2) / 2
+        kinetic += number(link.mass) * (com_rates[k][0] ** 2 + com_rates[k][1] ** 2) / 2
         if link.inertia:
             kinetic += number(link.inertia) / (2 * c2) * (relative[0] ** 2 + relative[1] ** 2)
         constraints.append(arms[k][0] ** 2 + arms[k][1] ** 2 - c2)
@@ -251,8 +261,6 @@ def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:
 def joint_space_start(scene: Scene, phi, phidot, defs: Definitions) -> list:
     """x(phi, phidot) = (q, v): the COM positions and velocities of a joint-space state, by the
     recursions of chaingen.symbolic.recursion (model.md 1)."""
-    from .recursion import absolute_rates, angle_directions, link_frames, velocities
-
     frames = link_frames(scene, angle_directions(defs, phi))
     joint = ZERO
     coms = []

@@ -42,12 +42,6 @@ class JointSpaceModel:
                                 for link, w in zip(self.scene.links, rates)])
 
 
-def rotate(direction, unit) -> ImmutableMatrix:
-    """The planar rotation of `direction` by the unit vector `unit` (complex product)."""
-    return ImmutableMatrix([direction[0] * unit[0] - direction[1] * unit[1],
-                            direction[0] * unit[1] + direction[1] * unit[0]])
-
-
 def joint_space_model(scene: Scene, directions, rates) -> JointSpaceModel:
     """Kinematics, energies and mass matrix from the absolute link directions e_i.
 
@@ -110,15 +104,6 @@ def angle_directions(angles) -> list[ImmutableMatrix]:
     for phi in angles:
         theta = theta + phi
         directions.append(ImmutableMatrix([sp.cos(theta), sp.sin(theta)]))
-    return directions
-
-
-def attitude_directions(attitudes) -> list[ImmutableMatrix]:
-    """e_i = q_1 q_2 ... q_i (complex products of the unit attitude vectors, model.md 5)."""
-    directions, e = [], ImmutableMatrix([1, 0])
-    for q in attitudes:
-        e = rotate(e, q)
-        directions.append(e)
     return directions
 
 
