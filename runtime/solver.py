@@ -311,8 +311,9 @@ class Solver:
 
         torques: (n_steps, nu) inputs of the actuated joints, row k held over step k (zero if
         None). progress: called as progress(steps_done) about 20 times a second during the run
-        (the run's samples do not depend on it). Ctrl-C, or an exception raised by progress,
-        stops the run within a step and propagates (KeyboardInterrupt, or the exception itself).
+        and once at its end (the run's samples do not depend on it). Ctrl-C, or an exception
+        raised by progress, stops the run within a step and propagates (KeyboardInterrupt, or
+        the exception itself).
         stop: a StopSignal another thread may use to end the run after its current step.
         Raises NewtonError naming the failing step and time; the rows written before it are in
         its `result`.
@@ -404,4 +405,6 @@ class Solver:
             raise
         if isinstance(outcome[0], BaseException):
             raise outcome[0]
+        if progress is not None:
+            progress(int(control.steps))     # the end, also of a run shorter than one look
         return outcome[0]

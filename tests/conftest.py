@@ -17,6 +17,7 @@ fill the user's cache, and subprocesses of CLI tests share it.
 from __future__ import annotations
 
 import os
+import signal
 
 import pytest
 
@@ -30,6 +31,14 @@ def pytest_collection_modifyitems(items):
     for item in items:
         if not any(item.get_closest_marker(tier) for tier in SLOW_TIERS):
             item.add_marker(pytest.mark.fast)
+
+
+def pytest_configure(config):
+    """Ctrl-C as on a terminal, also when the tests run as a background job: a shell starts
+    those with SIGINT ignored, which every child would inherit, and the tests that interrupt
+    a run (test_faults, test_sweep) would see it run on."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(scope="session", autouse=True)
