@@ -29,6 +29,12 @@ INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
         "const double *dt, {prefix}_workspace *workspace")),
     EntryPoint("first_guess", "static int", _parameters(
         f"const double *x0, {P_ARGUMENT}, double dt, int warm, {{prefix}}_workspace *workspace")),
+    EntryPoint("predict", "static int", _parameters(
+        f"const double *x0, {P_ARGUMENT}, double dt, double *guess, "
+        "{prefix}_workspace *workspace")),
+    EntryPoint("choose_warm_start", "static int", _parameters(
+        f"const double *x0, {P_ARGUMENT}, double dt, const {{prefix}}_options *options, "
+        "{prefix}_workspace *workspace")),
     EntryPoint("newton", "static int", _parameters(
         f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
         "const {prefix}_options *options, int warm, {prefix}_workspace *workspace, "

@@ -170,34 +170,89 @@ int four_link_actuated_es_residual_jacobian(const double *z, const double *x0, c
 /* Halvings of a step that Newton fails on whole: at most 2^MAX_SPLIT substeps. */
 #define MAX_SPLIT 4
 
+/* The scheme's predictor from x0 into guess. */
+static int predict(const double *x0, double dt, double *guess,
+                   four_link_actuated_es_workspace *workspace)
+{
+    workspace->arg[0] = x0;
+    workspace->arg[1] = &dt;
+    workspace->res[0] = guess;
+    return evaluate(four_link_actuated_es_model_predictor, workspace);
+}
+
+/* Entry i of the extrapolation of the last `points` solutions in previous_z (polynomial of
+ * degree points - 1 through them, at the next step). */
+static double extrapolate(const four_link_actuated_es_workspace *workspace, int points, int i)
+{
+    const double (*previous)[NZ] = (const double (*)[NZ])workspace->previous_z;
+    switch (points) {
+    case 1:
+        return previous[0][i];
+    case 2:
+        return 2.0 * previous[0][i] - previous[1][i];
+    default:
+        return 3.0 * (previous[0][i] - previous[1][i]) + previous[2][i];
+    }
+}
+
 /* The first Newton guess: the scheme's predictor from x0, or with `warm`, when this step
- * continues the workspace's previous one, the extrapolation of the previous solutions. */
+ * continues the workspace's previous one, the guess that would have been best for that step
+ * (warm_choice, set by choose_warm_start): the predictor, or the extrapolation of the previous
+ * solutions, from all of them (quadratic) or from fewer. */
 static int first_guess(const double *x0, double dt, int warm,
                        four_link_actuated_es_workspace *workspace)
 {
     int i;
     workspace->chained = warm && workspace->history > 0 && dt == workspace->previous_dt
                          && !memcmp(x0, workspace->previous_x1, sizeof(double) * NX);
-    if (workspace->chained) {
-        const double (*previous)[NZ] = (const double (*)[NZ])workspace->previous_z;
+    if (workspace->chained && workspace->warm_choice != 1) {
+        const int fewer = workspace->warm_choice - 1;   /* > 0: extrapolate from these */
+        const int points = fewer > 0 && fewer < workspace->history ? fewer : workspace->history;
         for (i = 0; i < NZ; ++i) {
-            switch (workspace->history) {
-            case 1:
-                workspace->z[i] = previous[0][i];
-                break;
-            case 2:
-                workspace->z[i] = 2.0 * previous[0][i] - previous[1][i];
-                break;
-            default:
-                workspace->z[i] = 3.0 * (previous[0][i] - previous[1][i]) + previous[2][i];
-            }
+            workspace->z[i] = extrapolate(workspace, points, i);
         }
         return FOUR_LINK_ACTUATED_ES_OK;
     }
-    workspace->arg[0] = x0;
-    workspace->arg[1] = &dt;
-    workspace->res[0] = workspace->z;
-    return evaluate(four_link_actuated_es_model_predictor, workspace);
+    return predict(x0, dt, workspace->z, workspace);
+}
+
+/* After a chained step converged to workspace->z: which first guess would have been closest,
+ * in the weighted norm of Newton's update test? The scheme's predictor, or the extrapolation
+ * from the last 1, 2 or 3 solutions. The next step starts from it. Quadratic extrapolation is
+ * best while a step resolves the motion; where it does not (a long chain's fast tail at dt =
+ * 0.01 s), extrapolation magnifies the step-to-step changes and a lower degree, or the
+ * predictor, is closer. Costs one predictor evaluation. */
+static int choose_warm_start(const double *x0, double dt,
+                             const four_link_actuated_es_options *options,
+                             four_link_actuated_es_workspace *workspace)
+{
+    double error[HISTORY + 1] = {0.0};
+    double *guess = workspace->dz;   /* free once Newton has converged */
+    int d, i, best = 0;
+    if (!workspace->chained || workspace->history < 1) {
+        return FOUR_LINK_ACTUATED_ES_OK;
+    }
+    if (predict(x0, dt, guess, workspace)) {
+        return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
+    }
+    for (i = 0; i < NZ; ++i) {
+        const double weight = 1.0 / (options->update_atol
+                                     + options->update_rtol * fabs(workspace->z[i]));
+        for (d = 0; d <= workspace->history; ++d) {
+            const double value = d == 0 ? guess[i] : extrapolate(workspace, d, i);
+            const double distance = fabs(value - workspace->z[i]) * weight;
+            if (!(distance <= error[d])) {
+                error[d] = distance;
+            }
+        }
+    }
+    for (d = 1; d <= workspace->history; ++d) {
+        if (error[d] < error[best]) {
+            best = d;
+        }
+    }
+    workspace->warm_choice = best + 1;
+    return FOUR_LINK_ACTUATED_ES_OK;
 }
 
 /* Newton's method on F(z, x0, u, dt) = 0 from the first guess, full, simplified or chord (see
@@ -312,6 +367,9 @@ static int newton(const double *x0, const double *u, double dt,
             }
             previous_update = update_norm;
         }
+    }
+    if (status == FOUR_LINK_ACTUATED_ES_OK) {
+        status = choose_warm_start(x0, dt, options, workspace);
     }
     *iterations = iteration;
     return status;

@@ -187,6 +187,9 @@ typedef struct {
     double previous_dt;
     double factors_dt;                 /* dt of the factorised Jacobian in jacobian/pivot */
     int history;                       /* solutions in previous_z: 0 to 3 */
+    int warm_choice;                   /* first guess of a chained step: 0 extrapolate from all of
+                                          previous_z, 1 the scheme's predictor, d + 1 from the
+                                          last d; the best for the last step */
     int chained;                       /* this step continues the previous one */
     int factors_valid;                 /* jacobian/pivot hold a usable factorisation */
     double residual_scale[THREE_LINK_MULTI_ES_NZ];  /* 1 + S_i of the residual test */
