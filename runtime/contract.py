@@ -13,7 +13,9 @@ An entry, a parameter or a status code may exist only in packages with a feature
 - ``flows``: energy can enter or leave the chain (actuation or joint damping);
 - ``sensitivities``: the package was generated with the step sensitivities;
 - ``segments``: the scene has springs, whose segments are watched for collapse;
-- ``parameters``: the package takes some of the scene's numbers as run-time parameters p.
+- ``parameters``: the package takes some of the scene's numbers as run-time parameters p;
+- ``energy_check``: the scheme's step does not keep the energy balance exactly (vi, midpoint), so
+  a converged step is checked against it (a spurious Newton root, docs/model.md, section 13).
 
 This module is plain data: it imports nothing of chaingen and nothing beyond the standard library.
 """
@@ -23,7 +25,7 @@ import re
 from dataclasses import dataclass
 
 #: The features an entry point, a parameter or a status may depend on.
-FEATURES = ("inputs", "flows", "sensitivities", "segments", "parameters")
+FEATURES = ("inputs", "flows", "sensitivities", "segments", "parameters", "energy_check")
 
 
 @dataclass(frozen=True)
@@ -35,6 +37,7 @@ class Features:
     sensitivities: bool = False
     segments: bool = False
     parameters: bool = False
+    energy_check: bool = False
 
     @classmethod
     def from_manifest(cls, manifest: dict) -> Features:
@@ -42,7 +45,8 @@ class Features:
         return cls(inputs=bool(manifest["nu"]), flows=bool(manifest["energy_flows"]),
                    sensitivities=bool(manifest["sensitivities"]),
                    segments=manifest["segment_tolerance"] is not None,
-                   parameters=bool(manifest["parameters"]))
+                   parameters=bool(manifest["parameters"]),
+                   energy_check=bool(manifest["energy_check"]))
 
     def has(self, when: str | None) -> bool:
         """Whether something present `when` a feature is there (None: always)."""
@@ -78,7 +82,8 @@ STATUSES = (
     Status("NONFINITE", 3, "NaN or Inf in the residual or the iterate",
            "NaN or Inf in the residual or the Newton iterate"),
     Status("BAD_ARGUMENT", 4, "a null pointer, dt <= 0, n_steps < 0, every < 1, interval < 1, "
-                              "an unknown reuse_jacobian or a bad rtol or atol", "bad argument"),
+                              "an unknown reuse_jacobian or a bad rtol, atol or energy_tol",
+           "bad argument"),
     Status("EVALUATION_FAILED", 5, "a generated function reported an error",
            "a generated function reported an evaluation error"),
     Status("SEGMENT_COLLAPSED", 6,
@@ -93,6 +98,12 @@ STATUSES = (
     Status("STEP_TOO_SMALL", 8, "adaptive steps: the error test or Newton failed at a step "
                                 "below 1e-12 dt", "the adaptive step fell below 1e-12 of the "
                                 "sample interval dt without passing the error test and Newton"),
+    Status("ENERGY_JUMP", 9,
+           "the converged step missed the energy balance by more than energy_tol times the "
+           "kinetic energy at its ends: a spurious root of a step too long for the motion",
+           "the converged step missed the energy balance by more than energy_tol times its "
+           "kinetic energy (a spurious Newton root of a step too long for the motion)",
+           when="energy_check"),
 )
 STATUS_CODES = {status.name: status.code for status in STATUSES}
 
@@ -145,6 +156,11 @@ class OptionField:
         return bool if self.switch else int if self.c_type == "int" else float
 
 
+#: The energy check's default (docs/model.md, section 13): a converged step of vi or midpoint
+#: whose energy balance misses by more than this times the kinetic energy at its ends is a
+#: spurious root, refused and split.
+DEFAULT_ENERGY_TOL = 0.01
+
 NEWTON_OPTIONS = (
     OptionField("max_iterations", "int", 20, "bounds the work of one step"),
     OptionField("update_rtol", "double", 1e-10),
@@ -152,6 +168,9 @@ NEWTON_OPTIONS = (
     OptionField("residual_tol", "double", 1e-8, "units of F"),
     OptionField("warm_start", "int", 1, "continue from the previous solutions", switch=True),
     OptionField("reuse_jacobian", "int", JACOBIAN_EVERY_ITERATE, "one of the JACOBIAN_* modes"),
+    OptionField("energy_tol", "double", DEFAULT_ENERGY_TOL,
+                "vi, midpoint: a step with |H_1 - H_0 - W + D| > energy_tol (T_0 + T_1) is "
+                "refused and split; 0: no check"),
     OptionField("rtol", "double", 0.0, "adaptive steps: relative local error, 0 or >= 1e-14; 0 "
                                        "with atol 0: fixed steps of dt"),
     OptionField("atol", "double", 0.0, "adaptive steps: absolute local error (rad, rad/s), 0 "

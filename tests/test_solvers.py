@@ -188,6 +188,41 @@ def test_failed_newton_solve_raises_with_the_step():
                     options=NewtonOptions(max_iterations=1))
 
 
+@pytest.mark.parametrize("method", ["vi", "midpoint"])
+def test_the_energy_check_refuses_a_step_that_misses_the_balance(method):
+    """vi and midpoint keep the energy balance only up to their error: a step whose balance
+    error exceeds energy_tol (T_0 + T_1) fails the check (ENERGY_JUMP) and is split; when every
+    half fails too, it is refused. With a tolerance no step meets, the step fails; with the
+    default, the same step passes, and a resolved 50 s run never trips it. (From rest, the
+    halves' balance error is within the check's round-off floor: the step starts at t = 1 s.)"""
+    from chaingen.runtime.contract import STATUS_CODES
+    scene = load("three_link_mono")
+    solver = solver_for("three_link_mono", method, 3)
+    moving = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                             n_steps=100, every=100)
+    x0 = solver.initial_state(moving.phi[-1], moving.omega[-1])
+    with pytest.raises(NewtonError, match="energy balance") as caught:
+        solver.step(x0, 0.01, options={"energy_tol": 1e-300})
+    assert caught.value.status == STATUS_CODES["ENERGY_JUMP"]
+    assert np.all(np.isfinite(solver.step(x0, 0.01).x1))
+    assert np.all(np.isfinite(solver.step(x0, 0.01, options={"energy_tol": 0.0}).x1))
+    with pytest.raises(NewtonError, match="bad argument"):
+        solver.step(x0, 0.01, options={"energy_tol": -1.0})
+    run = solver.simulate(scene.initial_angles, scene.initial_velocities, **STANDARD)
+    assert run.split_steps == 0
+
+
+def test_es_has_no_energy_check():
+    """es keeps the balance at every root: its package has no check, and energy_tol changes
+    nothing."""
+    scene = load("three_link_mono")
+    solver = solver_for("three_link_mono", "es", 3)
+    assert not solver.manifest["energy_check"]
+    x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
+    np.testing.assert_array_equal(solver.step(x0, 0.01, options={"energy_tol": 1e-300}).x1,
+                                  solver.step(x0, 0.01, options={"energy_tol": 0.0}).x1)
+
+
 def test_step_matches_simulate():
     scene = load("three_link_multi")
     solver = solver_for("three_link_multi", "es", 3)

@@ -13,7 +13,8 @@ import pytest
 import sympy as sp
 
 from chaingen.errors import UnsupportedSceneError
-from chaingen.generate.casadi_functions import SympyToCasadi, mark_parameters_used, scheme_functions
+from chaingen.generate.casadi_functions import SympyToCasadi, scheme_functions
+from chaingen.generate.casadi_source import mark_parameters_used
 from chaingen.scene import kinematics
 from chaingen.symbolic.com_model import com_model
 from chaingen.symbolic.quadrature import gauss_legendre_nodes

@@ -7,7 +7,6 @@ stage only translates: everything it needs is on the DiscreteScheme.
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 import casadi as ca
@@ -147,6 +146,8 @@ class SchemeFunctions:
     holding_torques: ca.Function | None  # (phi) -> dV/dphi, actuated scenes only
     segment_margins: ca.Function | None  # (x0, x1) -> (s_j(x1) / tol_j, cos of each segment's
                                          # turn over the step), scenes with springs only
+    energy_check: ca.Function | None = None  # (x0, x1) -> (H_1 - H_0, T_0 + T_1, |H_0| +
+                                             # |H_1|): schemes with a kinetic_energy only
     parameters: ca.Function | None = None  # p -> q, the derived parameters every other
                                            # function takes in p's place (packages with p)
 
@@ -154,8 +155,7 @@ class SchemeFunctions:
         functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
                      self.outputs, self.initial_state, self.sensitivity_rhs,
                      self.sensitivity_map, self.joint_maps, self.holding_torques,
-                     self.segment_margins,
-                     self.parameters)
+                     self.segment_margins, self.energy_check, self.parameters)
         return tuple(function for function in functions if function is not None)
 
 
@@ -210,7 +210,8 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     if solve:
         check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), state_inputs)
     check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
-                       + [scheme.energy] + list(scheme.constraint_residuals),
+                       + [scheme.energy] + list(scheme.constraint_residuals)
+                       + [e for e in [scheme.kinetic_energy] if e is not None],
                        state_inputs + solved)
     check_free_symbols("segment_vectors", scheme.segment_vectors, state_inputs)
     if scheme.holding_torques is not None:
@@ -355,6 +356,14 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
         turn = ca.sum1(before * after).T / (lengths_before * lengths_after)
         margins = fn("segment_margins", [x0, x] + with_p[0], ["x0", "x1"] + with_p[1],
                      [ca.vertcat(lengths_after / tolerances, turn)], ["margins"])
+    check = None
+    if scheme.kinetic_energy is not None:
+        ends = [state_translator(x0), state_translator(x)]
+        energies = [end(scheme.energy) for end in ends]
+        check = fn("energy_check", [x0, x] + with_p[0], ["x0", "x1"] + with_p[1],
+                   [ca.vertcat(energies[1] - energies[0],
+                               ends[0](scheme.kinetic_energy) + ends[1](scheme.kinetic_energy),
+                               ca.fabs(energies[0]) + ca.fabs(energies[1]))], ["balance"])
     holding = None
     if scheme.holding_torques is not None:
         torques = _vector(SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
@@ -376,7 +385,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
         initial_state=fn("initial_state", [phi, phidot] + with_p[0],
                          ["phi", "phidot"] + with_p[1], [initial_state], ["x"]),
         sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map, joint_maps=joint_maps,
-        holding_torques=holding, segment_margins=margins,
+        holding_torques=holding, segment_margins=margins, energy_check=check,
     )
     built = _build(specs, prefix, p, options, directions)
     return SchemeFunctions(**{field: None if name is None else built[name]
@@ -428,72 +437,3 @@ def _predictor(scheme: DiscreteScheme, x0: ca.SX, dt: ca.SX, state_translator) -
     if not any(scheme.predictor):
         return ca.SX.zeros(scheme.unknowns.shape[0], 1)
     return _vector(state_translator(x0, {scheme.dt: dt}), scheme.predictor)
-
-
-@dataclass(frozen=True)
-class WorkSizes:
-    """Largest CasADi work arrays over a set of functions (the caller-owned workspace)."""
-
-    arg: int
-    res: int
-    iw: int
-    w: int
-
-
-def work_sizes(functions) -> WorkSizes:
-    functions = list(functions)
-    return WorkSizes(arg=max(f.sz_arg() for f in functions),
-                     res=max(f.sz_res() for f in functions),
-                     iw=max(f.sz_iw() for f in functions),
-                     w=max(f.sz_w() for f in functions))
-
-
-def casadi_c_source(functions, prefix: str) -> tuple[str, str]:
-    """C source and header of `functions` from CasADi's CodeGenerator, symbols prefixed.
-
-    Internal symbols get `prefix` through CasADi's own prefix option; the exported ones are
-    the function names, which already carry it. No export attributes: visibility is left to
-    the build.
-    """
-    generator = ca.CodeGenerator(f"{prefix}_model.c", {
-        "prefix": f"{prefix}_", "with_header": True, "with_export": False,
-        "casadi_int": "long long int"})
-    for function in functions:
-        generator.add(function)
-    source = mark_parameters_used(generator.dump())
-    header = _casadi_header(functions, prefix)
-    return source, header
-
-
-_DEFINITION = re.compile(r"^(?:static )?[A-Za-z_][\w \*]*\b(\w+)\(([^()]*)\) ?\{$")
-
-
-def mark_parameters_used(source: str) -> str:
-    """Add `(void)name;` for every parameter of every function CasADi defines.
-
-    CasADi's generated functions take (arg, res, iw, w, mem) whether they use them or not, which
-    -Wextra reports as unused parameters (CasADi issues 1875, 2014); acados patches the text
-    the same way. Casting a parameter to void changes no behaviour.
-    """
-    lines = []
-    for line in source.splitlines(keepends=True):
-        lines.append(line)
-        match = _DEFINITION.match(line.rstrip("\n"))
-        if not match or match.group(2).strip() in ("", "void"):
-            continue
-        names = [re.split(r"[\s\*]+", parameter.strip())[-1]
-                 for parameter in match.group(2).split(",")]
-        lines.append("  " + " ".join(f"(void){name};" for name in names) + "\n")
-    return "".join(lines)
-
-
-def _casadi_header(functions, prefix: str) -> str:
-    """Declarations of the evaluation entry points we call (CasADi's header declares many more
-    bookkeeping functions we never use)."""
-    guard = f"{prefix.upper()}_MODEL_H"
-    lines = [f"#ifndef {guard}", f"#define {guard}", ""]
-    for function in functions:
-        lines.append(f"int {function.name()}(const double** arg, double** res, "
-                     "long long int* iw, double* w, int mem);")
-    lines += ["", f"#endif /* {guard} */", ""]
-    return "\n".join(lines)

@@ -44,7 +44,8 @@ INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
         "const {prefix}_options *options, {prefix}_workspace *workspace, int *iterations")),
     EntryPoint("finish_step", "static int", _parameters(
         f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
-        "double *flows [flows], {prefix}_workspace *workspace")),
+        "double *flows [flows], const {prefix}_options *options [energy_check], "
+        "{prefix}_workspace *workspace")),
     EntryPoint("advance", "static int", _parameters(
         f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
         "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "

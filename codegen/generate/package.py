@@ -26,7 +26,8 @@ from ..runtime.files import write_directory
 from ..scene import Scene, quadrature_used
 from ..symbolic.schemes import DiscreteScheme, build_scheme
 from ..version import VERSION
-from .casadi_functions import casadi_c_source, chains_state, scheme_functions, work_sizes
+from .casadi_functions import chains_state, scheme_functions
+from .casadi_source import casadi_c_source, work_sizes
 from .example import example_context
 from .interface import CInterface, c_literal
 
@@ -122,7 +123,8 @@ def scheme_label(scheme: DiscreteScheme) -> str:
 def package_features(scheme: DiscreteScheme, sensitivities: bool) -> Features:
     return Features(inputs=bool(scheme.inputs.shape[0]), flows=scheme.has_energy_flows,
                     sensitivities=sensitivities, segments=bool(scheme.segment_tolerances),
-                    parameters=bool(scheme.parameter_paths))
+                    parameters=bool(scheme.parameter_paths),
+                    energy_check=scheme.kinetic_energy is not None)
 
 
 def newton_defaults(scheme: DiscreteScheme) -> dict:
@@ -172,6 +174,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     context = {
         "nu": nu, "actuated_joints": scene.actuated_joints, "flows": features.flows,
         "sensitivities": sensitivities, "segments": len(scheme.segment_tolerances),
+        "energy_check": features.energy_check,
         "nsens": 2 * n + nu + n_p,
         # The state the stages of a composed step chain their Jacobians in: x (es) or s.
         "chain_state": chains_state(scheme),
@@ -243,6 +246,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
                               scheme.parameter_values)],
         "energy_flows": features.flows, "sensitivities": sensitivities,
         "segment_tolerance": scheme.segment_relative_tolerance if features.segments else None,
+        "energy_check": features.energy_check,
         "state": list(scheme.state_layout.entries),
         "unknowns": list(scheme.unknowns_layout.entries),
         "sample_columns": [name for name, _ in columns],

@@ -65,7 +65,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import ScipyPeerError
-from ..generate.casadi_functions import mark_parameters_used
+from ..generate.casadi_source import mark_parameters_used
 from ..runtime.build import build_shared_library, cache_directory
 from ..scene import Scene
 from .scipy_peer import CompiledODE, ScipyRun, _read_only, compile_ode, ode_functions

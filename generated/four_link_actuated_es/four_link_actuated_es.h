@@ -102,7 +102,7 @@ extern "C" {
 #define FOUR_LINK_ACTUATED_ES_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0, every
                                                    * < 1, interval < 1, an unknown reuse_jacobian
-                                                   * or a bad rtol or atol */
+                                                   * or a bad rtol, atol or energy_tol */
 #define FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                                    * geometry's size of zero length, or passed
@@ -147,7 +147,8 @@ extern "C" {
  *
  * Warm start (warm_start = 1): when x0 is bitwise the state the workspace's previous step
  * produced, with the same dt, the first guess extrapolates the previous steps' solutions z
- * (quadratically from three, linearly from two, constantly from one) instead of the scheme's predictor from x0 alone.
+ * (quadratically from three, linearly from two, constantly from one) or is the scheme's predictor
+ * from x0 alone: whichever of them would have been closest to the previous step's solution.
  * The solution then depends on the workspace's history within the Newton tolerances.
  *
  * A step that fails climbs a ladder, each rung at most max_iterations linear solves: a warm
@@ -164,6 +165,7 @@ typedef struct {
     double residual_tol;    /* default 1e-8; units of F */
     int warm_start;         /* default 1; continue from the previous solutions */
     int reuse_jacobian;     /* default 2; one of the JACOBIAN_* modes */
+    double energy_tol;      /* default 0.01; vi, midpoint: a step with |H_1 - H_0 - W + D| > energy_tol (T_0 + T_1) is refused and split; 0: no check */
     double rtol;            /* default 0.0; adaptive steps: relative local error, 0 or >= 1e-14; 0 with atol 0: fixed steps of dt */
     double atol;            /* default 0.0; adaptive steps: absolute local error (rad, rad/s), 0 or >= 1e-14 */
 } four_link_actuated_es_options;

@@ -10,5 +10,6 @@ int three_link_gravity_vi_model_outputs(const double** arg, double** res, long l
 int three_link_gravity_vi_model_initial_state(const double** arg, double** res, long long int* iw, double* w, int mem);
 int three_link_gravity_vi_model_sensitivity_rhs(const double** arg, double** res, long long int* iw, double* w, int mem);
 int three_link_gravity_vi_model_sensitivity_map(const double** arg, double** res, long long int* iw, double* w, int mem);
+int three_link_gravity_vi_model_energy_check(const double** arg, double** res, long long int* iw, double* w, int mem);
 
 #endif /* THREE_LINK_GRAVITY_VI_MODEL_H */

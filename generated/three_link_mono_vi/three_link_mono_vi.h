@@ -70,7 +70,7 @@ extern "C" {
 #define THREE_LINK_MONO_VI_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define THREE_LINK_MONO_VI_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0, every <
                                                 * 1, interval < 1, an unknown reuse_jacobian or a
-                                                * bad rtol or atol */
+                                                * bad rtol, atol or energy_tol */
 #define THREE_LINK_MONO_VI_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define THREE_LINK_MONO_VI_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                                 * geometry's size of zero length, or passed
@@ -81,6 +81,10 @@ extern "C" {
                                                 * control->stop asked to stop */
 #define THREE_LINK_MONO_VI_STEP_TOO_SMALL 8    /* adaptive steps: the error test or Newton failed
                                                 * at a step below 1e-12 dt */
+#define THREE_LINK_MONO_VI_ENERGY_JUMP 9       /* the converged step missed the energy balance by
+                                                * more than energy_tol times the kinetic energy
+                                                * at its ends: a spurious root of a step too long
+                                                * for the motion */
 
 /* Values of the option reuse_jacobian. */
 #define THREE_LINK_MONO_VI_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
@@ -115,7 +119,8 @@ extern "C" {
  *
  * Warm start (warm_start = 1): when x0 is bitwise the state the workspace's previous step
  * produced, with the same dt, the first guess extrapolates the previous steps' solutions z
- * (quadratically from three, linearly from two, constantly from one) instead of the scheme's predictor from x0 alone.
+ * (quadratically from three, linearly from two, constantly from one) or is the scheme's predictor
+ * from x0 alone: whichever of them would have been closest to the previous step's solution.
  * The solution then depends on the workspace's history within the Newton tolerances.
  *
  * A step that fails climbs a ladder, each rung at most max_iterations linear solves: a warm
@@ -124,7 +129,13 @@ extern "C" {
  * halves, each climbing the same ladder, at most 4 halvings deep (16 substeps). "es" conserves
  * energy on any sequence of steps, so a split step keeps its energy balance. The counters of
  * simulate report how often the last two rungs were needed. The step sensitivities never
- * split (their Jacobians are those of one step). */
+ * split (their Jacobians are those of one step).
+ *
+ * Energy check (energy_tol > 0): the scheme keeps the energy balance H_1 - H_0 = W - D only up
+ * to its error, small against the kinetic energy T at the step's ends. A converged step that
+ * misses it by more than energy_tol (T_0 + T_1), beyond the round-off of H, is a spurious root of
+ * a step too long for the motion: it fails with THREE_LINK_MONO_VI_ENERGY_JUMP, and step() and simulate() split it like a
+ * step Newton failed. */
 typedef struct {
     int max_iterations;     /* default 20; bounds the work of one step */
     double update_rtol;     /* default 1e-10 */
@@ -132,6 +143,7 @@ typedef struct {
     double residual_tol;    /* default 1e-8; units of F */
     int warm_start;         /* default 1; continue from the previous solutions */
     int reuse_jacobian;     /* default 1; one of the JACOBIAN_* modes */
+    double energy_tol;      /* default 0.01; vi, midpoint: a step with |H_1 - H_0 - W + D| > energy_tol (T_0 + T_1) is refused and split; 0: no check */
     double rtol;            /* default 0.0; adaptive steps: relative local error, 0 or >= 1e-14; 0 with atol 0: fixed steps of dt */
     double atol;            /* default 0.0; adaptive steps: absolute local error (rad, rad/s), 0 or >= 1e-14 */
 } three_link_mono_vi_options;

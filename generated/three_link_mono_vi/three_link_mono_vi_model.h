@@ -11,5 +11,6 @@ int three_link_mono_vi_model_initial_state(const double** arg, double** res, lon
 int three_link_mono_vi_model_sensitivity_rhs(const double** arg, double** res, long long int* iw, double* w, int mem);
 int three_link_mono_vi_model_sensitivity_map(const double** arg, double** res, long long int* iw, double* w, int mem);
 int three_link_mono_vi_model_segment_margins(const double** arg, double** res, long long int* iw, double* w, int mem);
+int three_link_mono_vi_model_energy_check(const double** arg, double** res, long long int* iw, double* w, int mem);
 
 #endif /* THREE_LINK_MONO_VI_MODEL_H */

@@ -40,6 +40,7 @@ void three_link_multi_es_default_options(three_link_multi_es_options *options)
     options->residual_tol = 1e-8;
     options->warm_start = 1;
     options->reuse_jacobian = 2;
+    options->energy_tol = 0.01;
     options->rtol = 0.0;
     options->atol = 0.0;
 }
@@ -377,7 +378,7 @@ static int solve_step(const double *x0, double dt, const three_link_multi_es_opt
         options = &defaults;
     }
     if (options->reuse_jacobian < THREE_LINK_MULTI_ES_JACOBIAN_EVERY_ITERATE
-        || options->reuse_jacobian > THREE_LINK_MULTI_ES_JACOBIAN_PER_STEP) {
+        || options->reuse_jacobian > THREE_LINK_MULTI_ES_JACOBIAN_PER_STEP || !(options->energy_tol >= 0.0)) {
         return THREE_LINK_MULTI_ES_BAD_ARGUMENT;
     }
     status = newton(x0, dt, options, options->warm_start, workspace, &spent);
@@ -404,8 +405,8 @@ static int solve_step(const double *x0, double dt, const three_link_multi_es_opt
 }
 
 /* x1 (and the energy flows) from the converged z in the workspace. The candidate is checked
- * (finite, no spring segment collapsed) before it is copied out: a failed step leaves x1
- * untouched. */
+ * (finite, no spring segment collapsed) before it is copied out: a
+ * failed step leaves x1 untouched. */
 static int finish_step(const double *x0, double dt, double *x1,
                        three_link_multi_es_workspace *workspace)
 {
@@ -454,10 +455,10 @@ static int finish_step(const double *x0, double dt, double *x1,
 
 /* One step, climbing the ladder of solve_step; when Newton fails on the whole step, or its
  * solution fails the segment test (a spurious root of a step too long for the motion turns a
- * segment through 90 degrees; a segment that really collapses fails every half too), two
- * half steps, each climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy
- * on any sequence of steps: the halves keep its energy balance. The energy flows are the halves'
- * sum; iterations counts every linear solve. */
+ * segment through 90 degrees; a segment that really collapses fails every half too), two half steps, each
+ * climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy on any
+ * sequence of steps: the halves keep its energy balance. The energy flows are the halves' sum;
+ * iterations counts every linear solve. */
 static int advance(const double *x0, double dt, double *x1,
                    const three_link_multi_es_options *options,
                    three_link_multi_es_workspace *workspace, int *iterations, int depth)

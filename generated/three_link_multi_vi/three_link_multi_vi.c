@@ -40,6 +40,7 @@ void three_link_multi_vi_default_options(three_link_multi_vi_options *options)
     options->residual_tol = 1e-8;
     options->warm_start = 1;
     options->reuse_jacobian = 1;
+    options->energy_tol = 0.01;
     options->rtol = 0.0;
     options->atol = 0.0;
 }
@@ -377,7 +378,7 @@ static int solve_step(const double *x0, double dt, const three_link_multi_vi_opt
         options = &defaults;
     }
     if (options->reuse_jacobian < THREE_LINK_MULTI_VI_JACOBIAN_EVERY_ITERATE
-        || options->reuse_jacobian > THREE_LINK_MULTI_VI_JACOBIAN_PER_STEP) {
+        || options->reuse_jacobian > THREE_LINK_MULTI_VI_JACOBIAN_PER_STEP || !(options->energy_tol >= 0.0)) {
         return THREE_LINK_MULTI_VI_BAD_ARGUMENT;
     }
     status = newton(x0, dt, options, options->warm_start, workspace, &spent);
@@ -404,9 +405,10 @@ static int solve_step(const double *x0, double dt, const three_link_multi_vi_opt
 }
 
 /* x1 (and the energy flows) from the converged z in the workspace. The candidate is checked
- * (finite, no spring segment collapsed) before it is copied out: a failed step leaves x1
- * untouched. */
+ * (finite, no spring segment collapsed, the energy balance kept within energy_tol) before it is copied out: a
+ * failed step leaves x1 untouched. */
 static int finish_step(const double *x0, double dt, double *x1,
+                       const three_link_multi_vi_options *options,
                        three_link_multi_vi_workspace *workspace)
 {
     double *candidate = workspace->candidate;
@@ -436,6 +438,26 @@ static int finish_step(const double *x0, double dt, double *x1,
             return THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED;
         }
     }
+    /* The scheme keeps the energy balance H_1 - H_0 = W - D only up to its error, small against
+     * the kinetic energy at the step's ends; a root that misses it by energy_tol (T_0 + T_1) or
+     * more is spurious: Newton converged to another solution of a step too long for the
+     * motion (docs/model.md, section 13). Within round-off of H it passes (a chain held
+     * still has T = 0). options NULL: the package's default. */
+    {
+        const double tolerance = options ? options->energy_tol : 0.01;
+        double ends[3];
+        if (tolerance > 0.0) {
+            workspace->arg[0] = x0;
+            workspace->arg[1] = candidate;
+            workspace->res[0] = ends;
+            if (evaluate(three_link_multi_vi_model_energy_check, workspace)) {
+                return THREE_LINK_MULTI_VI_EVALUATION_FAILED;
+            }
+            if (!(fabs(ends[0]) <= tolerance * ends[1] + ROUNDOFF_RESIDUAL * ends[2])) {
+                return THREE_LINK_MULTI_VI_ENERGY_JUMP;
+            }
+        }
+    }
     memcpy(x1, candidate, sizeof(double) * NX);
     /* Remember the solution for a warm start of the next step. */
     if (workspace->chained && workspace->history > 0) {
@@ -454,10 +476,11 @@ static int finish_step(const double *x0, double dt, double *x1,
 
 /* One step, climbing the ladder of solve_step; when Newton fails on the whole step, or its
  * solution fails the segment test (a spurious root of a step too long for the motion turns a
- * segment through 90 degrees; a segment that really collapses fails every half too), two
- * half steps, each climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy
- * on any sequence of steps: the halves keep its energy balance. The energy flows are the halves'
- * sum; iterations counts every linear solve. */
+ * segment through 90 degrees; a segment that really collapses fails every half too),
+ * or the energy check (a spurious root that jumps in energy), two half steps, each
+ * climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy on any
+ * sequence of steps: the halves keep its energy balance. The energy flows are the halves' sum;
+ * iterations counts every linear solve. */
 static int advance(const double *x0, double dt, double *x1,
                    const three_link_multi_vi_options *options,
                    three_link_multi_vi_workspace *workspace, int *iterations, int depth)
@@ -465,11 +488,12 @@ static int advance(const double *x0, double dt, double *x1,
     int status, spent = 0;
     status = solve_step(x0, dt, options, workspace, &spent);
     if (status == THREE_LINK_MULTI_VI_OK) {
-        status = finish_step(x0, dt, x1, workspace);
+        status = finish_step(x0, dt, x1, options, workspace);
     }
     *iterations += spent;
     if ((status == THREE_LINK_MULTI_VI_NOT_CONVERGED || status == THREE_LINK_MULTI_VI_SINGULAR_JACOBIAN
-         || status == THREE_LINK_MULTI_VI_NONFINITE || status == THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED)
+         || status == THREE_LINK_MULTI_VI_NONFINITE || status == THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED
+         || status == THREE_LINK_MULTI_VI_ENERGY_JUMP)
         && depth < MAX_SPLIT) {
         double *middle = workspace->split_state[depth];
         ++workspace->step_splits;
@@ -512,7 +536,7 @@ int three_link_multi_vi_step_sensitivities(const double *x0, double dt, double *
     }
     status = solve_step(x0, dt, options, workspace, iterations);
     if (status == THREE_LINK_MULTI_VI_OK) {
-        status = finish_step(x0, dt, x1, workspace);
+        status = finish_step(x0, dt, x1, options, workspace);
     }
     if (status != THREE_LINK_MULTI_VI_OK) {
         return status;
@@ -661,7 +685,8 @@ static int adaptive_interval(const double *x0, double dt, double *x1,
             }
         }
         if (status == THREE_LINK_MULTI_VI_NOT_CONVERGED || status == THREE_LINK_MULTI_VI_SINGULAR_JACOBIAN
-            || status == THREE_LINK_MULTI_VI_NONFINITE || status == THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED) {
+            || status == THREE_LINK_MULTI_VI_NONFINITE || status == THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED
+            || status == THREE_LINK_MULTI_VI_ENERGY_JUMP) {
             /* Newton or the step failed: refuse it and try a much shorter one. */
             failure = status;
             status = THREE_LINK_MULTI_VI_OK;

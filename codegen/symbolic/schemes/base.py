@@ -130,6 +130,9 @@ class DiscreteScheme:
     # are the chain rule of its stages' in joint space. es's x carries a normal velocity
     # component s does not see.
     state_from_joint_space: bool = True
+    # T(x), for the check of a converged step against the energy balance (docs/model.md,
+    # section 13) of a scheme that does not keep it exactly (vi, midpoint); None: no check.
+    kinetic_energy: sp.Expr | None = None
 
     @property
     def step_inputs(self) -> list[sp.Symbol]:

@@ -67,8 +67,8 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     rates0 = recursion.absolute_rates(at_state, w0)
     velocities, _ = recursion.velocities(scene, frames0, rates0, at_state)
     _, spring_energy = recursion.spring_gradient(scene, frames0, at_state)
-    energy = (recursion.kinetic_energy(scene, rates0, velocities)
-              + recursion.gravity_potential(scene, frames0, at_state) + spring_energy)
+    kinetic = recursion.kinetic_energy(scene, rates0, velocities)
+    energy = kinetic + recursion.gravity_potential(scene, frames0, at_state) + spring_energy
 
     return DiscreteScheme(
         method="midpoint", quadrature=None, scene=scene, summary=SUMMARY, dt=dt, unknowns=dw,
@@ -86,5 +86,5 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         dissipated=dt * sp.Add(*(number(link.damping) * w ** 2
                                  for link, w in zip(scene.links, wm) if link.damping)),
         flow_description=FLOWS if has_energy_flows(scene) else None,
-        jacobian_reuse=JACOBIAN_PER_STEP,
+        jacobian_reuse=JACOBIAN_PER_STEP, kinetic_energy=kinetic,
     )

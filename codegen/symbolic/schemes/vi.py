@@ -90,8 +90,8 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     frames0 = recursion.link_frames(scene, recursion.attitude_directions(at_state, attitudes))
     rates0 = recursion.rates_from_momenta(scene, frames0, p0, at_state)
     _, spring_energy = recursion.spring_gradient(scene, frames0, at_state)
-    energy = (sp.Add(*(rate * p for rate, p in zip(rates0, p0))) / 2
-              + recursion.gravity_potential(scene, frames0, at_state) + spring_energy)
+    kinetic = sp.Add(*(rate * p for rate, p in zip(rates0, p0))) / 2
+    energy = kinetic + recursion.gravity_potential(scene, frames0, at_state) + spring_energy
 
     state = ImmutableMatrix(list(cs) + list(ss) + list(p0))
     phi = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
@@ -135,5 +135,6 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         flow_description=FLOWS if has_energy_flows(scene) else None,
         # Simplified Newton: the Jacobian costs six residuals, and the scheme's energy error
         # (O(dt^2)) hides the linear convergence (docs/benchmarks.md, speed knobs).
-        jacobian_reuse=JACOBIAN_ACROSS_STEPS, **common_fields(scene, phi),
+        jacobian_reuse=JACOBIAN_ACROSS_STEPS, kinetic_energy=kinetic,
+        **common_fields(scene, phi),
     )
