@@ -105,6 +105,24 @@ def test_parameters_equal_baked_numbers(name, method):
 
 
 @pytest.mark.compile
+@pytest.mark.parametrize("method", ["vi", "midpoint"])
+def test_the_energy_check_takes_the_energy_of_the_new_parameters(method):
+    """The energy check keeps (H, T) of the state the last step ended in; new parameters change
+    H there, so a step that continues with them must not be checked against the old H (a
+    spring 100 times stiffer would put its energy change into the balance and refuse the
+    step)."""
+    scene = load("three_link_mono")
+    solver = parameterised("three_link_mono", method)
+    path = "springs[0].stiffness"
+    moving = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=DT,
+                             n_steps=100, every=100)
+    x0 = solver.initial_state(moving.phi[-1], moving.omega[-1])
+    x1 = solver.step(x0, DT).x1
+    stiffer = {path: 100 * scene.springs[0].stiffness}
+    assert np.all(np.isfinite(solver.step(x1, DT, parameters=stiffer).x1))
+
+
+@pytest.mark.compile
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", SCENES)
 def test_parameter_sensitivities_match_central_differences(name, method):

@@ -187,6 +187,10 @@ typedef struct {
     double previous_z[3][THREE_LINK_MONO_VI_NZ]; /* solutions of the last 3 chained steps */
     double previous_x1[THREE_LINK_MONO_VI_NX];   /* the state the last step produced */
     double previous_dt;
+    /* The energy check: (H, T) at energy_x, the state the last checked step ended in. */
+    double energy_x[THREE_LINK_MONO_VI_NX];
+    double energy_ends[2];
+    int energy_valid;
     double factors_dt;                 /* dt of the factorised Jacobian in jacobian/pivot */
     int history;                       /* solutions in previous_z: 0 to 3 */
     int warm_choice;                   /* first guess of a chained step: 0 extrapolate from all of

@@ -29,7 +29,6 @@
 #define casadi_f7 CASADI_PREFIX(f7)
 #define casadi_f8 CASADI_PREFIX(f8)
 #define casadi_f9 CASADI_PREFIX(f9)
-#define casadi_fabs CASADI_PREFIX(fabs)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
@@ -38,19 +37,10 @@
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
 #define casadi_s7 CASADI_PREFIX(s7)
+#define casadi_s8 CASADI_PREFIX(s8)
 #define casadi_sq CASADI_PREFIX(sq)
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
-
-casadi_real casadi_fabs(casadi_real x) {
-  (void)x;
-/* Pre-c99 compatibility */
-#if __STDC_VERSION__ < 199901L
-  return x>0 ? x : -x;
-#else
-  return fabs(x);
-#endif
-}
 
 /* Configuration this file was compiled with */
 void three_link_multi_midpoint__casadi_version(int* major, int* minor, int* patch) {
@@ -70,6 +60,7 @@ static const casadi_int casadi_s4[3] = {0, 1, 1};
 static const casadi_int casadi_s5[3] = {3, 6, 1};
 static const casadi_int casadi_s6[3] = {6, 3, 1};
 static const casadi_int casadi_s7[3] = {6, 6, 1};
+static const casadi_int casadi_s8[3] = {2, 1, 1};
 
 /* three_link_multi_midpoint_model_residual:(z[3],x0[6],dt)->(F[3]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -2746,26 +2737,25 @@ int three_link_multi_midpoint_model_segment_margins_work_bytes(casadi_int *sz_ar
   return 0;
 }
 
-/* three_link_multi_midpoint_model_energy_check:(x0[6],x1[6])->(balance[3]) */
+/* three_link_multi_midpoint_model_energy_check:(x[6])->(H_T[2]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)res; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
-  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24, a25, a26, a27, a28, a29, a30;
-  a00=arg[1]? arg[1][0] : 0;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19;
+  a00=arg[0]? arg[0][0] : 0;
   a01=sin(a00);
-  a02=arg[1]? arg[1][1] : 0;
+  a02=arg[0]? arg[0][1] : 0;
   a02=(a00+a02);
   a03=sin(a02);
   a04=(a01+a03);
   a05=5.0000000000000000e-01;
-  a06=arg[1]? arg[1][3] : 0;
-  a07=arg[1]? arg[1][4] : 0;
+  a06=arg[0]? arg[0][3] : 0;
+  a07=arg[0]? arg[0][4] : 0;
   a07=(a06+a07);
   a08=casadi_sq(a07);
   a08=(a05*a08);
   a04=(a04+a08);
-  a09=arg[1]? arg[1][5] : 0;
+  a09=arg[0]? arg[0][5] : 0;
   a09=(a07+a09);
   a10=casadi_sq(a09);
   a10=(a05*a10);
@@ -2783,75 +2773,75 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a14=casadi_sq(a14);
   a13=(a13+a14);
   a13=sqrt(a13);
-  a13=(a11+a13);
-  a14=cos(a02);
-  a16=(a15*a01);
-  a16=(a14+a16);
-  a17=(a12*a03);
+  a11=(a11+a13);
+  a13=cos(a02);
+  a14=(a15*a01);
+  a14=(a13+a14);
+  a16=(a12*a03);
+  a14=(a14+a16);
+  a14=casadi_sq(a14);
+  a16=(a15*a13);
+  a16=(a03+a16);
+  a17=(a12*a00);
   a16=(a16+a17);
   a16=casadi_sq(a16);
-  a17=(a15*a14);
-  a17=(a03+a17);
-  a18=(a12*a00);
-  a17=(a17+a18);
-  a17=casadi_sq(a17);
+  a14=(a14+a16);
+  a14=sqrt(a14);
+  a11=(a11+a14);
+  a14=arg[0]? arg[0][2] : 0;
+  a14=(a14+a02);
+  a02=cos(a14);
+  a16=(a15*a03);
+  a16=(a02+a16);
+  a14=sin(a14);
+  a17=(a12*a14);
   a16=(a16+a17);
+  a16=casadi_sq(a16);
+  a15=(a15*a02);
+  a15=(a14+a15);
+  a12=(a12*a13);
+  a15=(a15+a12);
+  a15=casadi_sq(a15);
+  a16=(a16+a15);
   a16=sqrt(a16);
-  a13=(a13+a16);
-  a16=arg[1]? arg[1][2] : 0;
-  a16=(a16+a02);
-  a02=cos(a16);
-  a17=(a15*a03);
-  a17=(a02+a17);
-  a16=sin(a16);
-  a18=(a12*a16);
-  a17=(a17+a18);
-  a17=casadi_sq(a17);
-  a18=(a15*a02);
-  a18=(a16+a18);
-  a19=(a12*a14);
-  a18=(a18+a19);
-  a18=casadi_sq(a18);
-  a17=(a17+a18);
-  a17=sqrt(a17);
-  a13=(a13+a17);
-  a13=casadi_sq(a13);
-  a13=(a05*a13);
-  a04=(a04+a13);
-  a13=-5.0000000000000000e-01;
-  a17=(a13*a01);
-  a17=(a17*a06);
-  a17=casadi_sq(a17);
-  a17=(a05*a17);
-  a04=(a04+a17);
-  a18=(a05*a00);
-  a18=(a18*a06);
+  a11=(a11+a16);
+  a11=casadi_sq(a11);
+  a11=(a05*a11);
+  a04=(a04+a11);
+  a11=-5.0000000000000000e-01;
+  a16=(a11*a01);
+  a16=(a16*a06);
+  a16=casadi_sq(a16);
+  a16=(a05*a16);
+  a04=(a04+a16);
+  a15=(a05*a00);
+  a15=(a15*a06);
+  a15=casadi_sq(a15);
+  a15=(a05*a15);
+  a04=(a04+a15);
+  a12=(a11*a07);
+  a12=(a12*a03);
+  a17=(a01*a06);
+  a12=(a12-a17);
+  a12=casadi_sq(a12);
+  a12=(a05*a12);
+  a04=(a04+a12);
+  a00=(a00*a06);
+  a18=(a05*a07);
+  a18=(a18*a13);
+  a18=(a00+a18);
   a18=casadi_sq(a18);
   a18=(a05*a18);
   a04=(a04+a18);
-  a19=(a13*a07);
-  a19=(a19*a03);
-  a20=(a01*a06);
-  a19=(a19-a20);
-  a19=casadi_sq(a19);
-  a19=(a05*a19);
-  a04=(a04+a19);
-  a00=(a00*a06);
-  a21=(a05*a07);
-  a21=(a21*a14);
-  a21=(a00+a21);
-  a21=casadi_sq(a21);
-  a21=(a05*a21);
-  a04=(a04+a21);
-  a22=(a13*a09);
-  a22=(a22*a16);
-  a23=(a07*a03);
-  a20=(a20+a23);
-  a22=(a22-a20);
-  a22=casadi_sq(a22);
-  a22=(a05*a22);
-  a04=(a04+a22);
-  a07=(a07*a14);
+  a11=(a11*a09);
+  a11=(a11*a14);
+  a19=(a07*a03);
+  a17=(a17+a19);
+  a11=(a11-a17);
+  a11=casadi_sq(a11);
+  a11=(a05*a11);
+  a04=(a04+a11);
+  a07=(a07*a13);
   a00=(a00+a07);
   a09=(a05*a09);
   a09=(a09*a02);
@@ -2864,146 +2854,21 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a04=(a04+a06);
   a03=(a05*a03);
   a04=(a04+a03);
-  a16=(a05*a16);
-  a04=(a04+a16);
-  a16=1.5000000000000000e+00;
-  a01=(a16*a01);
-  a04=(a04+a01);
-  a01=arg[0]? arg[0][0] : 0;
-  a03=sin(a01);
-  a09=arg[0]? arg[0][1] : 0;
-  a09=(a01+a09);
-  a02=sin(a09);
-  a07=(a03+a02);
-  a14=arg[0]? arg[0][3] : 0;
-  a20=arg[0]? arg[0][4] : 0;
-  a20=(a14+a20);
-  a23=casadi_sq(a20);
-  a23=(a05*a23);
-  a07=(a07+a23);
-  a24=arg[0]? arg[0][5] : 0;
-  a24=(a20+a24);
-  a25=casadi_sq(a24);
-  a25=(a05*a25);
-  a07=(a07+a25);
-  a01=cos(a01);
-  a26=(a12*a03);
-  a26=(a01+a26);
-  a26=casadi_sq(a26);
-  a27=(a12+a03);
-  a28=(a15*a01);
-  a27=(a27+a28);
-  a27=casadi_sq(a27);
-  a26=(a26+a27);
-  a26=sqrt(a26);
-  a11=(a11+a26);
-  a26=cos(a09);
-  a27=(a15*a03);
-  a27=(a26+a27);
-  a28=(a12*a02);
-  a27=(a27+a28);
-  a27=casadi_sq(a27);
-  a28=(a15*a26);
-  a28=(a02+a28);
-  a29=(a12*a01);
-  a28=(a28+a29);
-  a28=casadi_sq(a28);
-  a27=(a27+a28);
-  a27=sqrt(a27);
-  a11=(a11+a27);
-  a27=arg[0]? arg[0][2] : 0;
-  a27=(a27+a09);
-  a09=cos(a27);
-  a28=(a15*a02);
-  a28=(a09+a28);
-  a27=sin(a27);
-  a29=(a12*a27);
-  a28=(a28+a29);
-  a28=casadi_sq(a28);
-  a15=(a15*a09);
-  a15=(a27+a15);
-  a12=(a12*a26);
-  a15=(a15+a12);
-  a15=casadi_sq(a15);
-  a28=(a28+a15);
-  a28=sqrt(a28);
-  a11=(a11+a28);
-  a11=casadi_sq(a11);
-  a11=(a05*a11);
-  a07=(a07+a11);
-  a11=(a13*a03);
-  a11=(a11*a14);
-  a11=casadi_sq(a11);
-  a11=(a05*a11);
-  a07=(a07+a11);
-  a28=(a05*a01);
-  a28=(a28*a14);
-  a28=casadi_sq(a28);
-  a28=(a05*a28);
-  a07=(a07+a28);
-  a15=(a13*a20);
-  a15=(a15*a02);
-  a12=(a03*a14);
-  a15=(a15-a12);
-  a15=casadi_sq(a15);
-  a15=(a05*a15);
-  a07=(a07+a15);
-  a01=(a01*a14);
-  a29=(a05*a20);
-  a29=(a29*a26);
-  a29=(a01+a29);
-  a29=casadi_sq(a29);
-  a29=(a05*a29);
-  a07=(a07+a29);
-  a13=(a13*a24);
-  a13=(a13*a27);
-  a30=(a20*a02);
-  a12=(a12+a30);
-  a13=(a13-a12);
-  a13=casadi_sq(a13);
-  a13=(a05*a13);
-  a07=(a07+a13);
-  a20=(a20*a26);
-  a01=(a01+a20);
-  a24=(a05*a24);
-  a24=(a24*a09);
-  a01=(a01+a24);
-  a01=casadi_sq(a01);
-  a01=(a05*a01);
-  a07=(a07+a01);
-  a14=casadi_sq(a14);
-  a14=(a05*a14);
-  a07=(a07+a14);
-  a02=(a05*a02);
-  a07=(a07+a02);
-  a05=(a05*a27);
-  a07=(a07+a05);
-  a16=(a16*a03);
-  a07=(a07+a16);
-  a16=(a04-a07);
-  if (res[0]!=0) res[0][0]=a16;
-  a23=(a23+a25);
-  a23=(a23+a11);
-  a23=(a23+a28);
-  a23=(a23+a15);
-  a23=(a23+a29);
-  a23=(a23+a13);
-  a23=(a23+a01);
-  a23=(a23+a14);
+  a05=(a05*a14);
+  a04=(a04+a05);
+  a05=1.5000000000000000e+00;
+  a05=(a05*a01);
+  a04=(a04+a05);
+  if (res[0]!=0) res[0][0]=a04;
   a08=(a08+a10);
-  a08=(a08+a17);
+  a08=(a08+a16);
+  a08=(a08+a15);
+  a08=(a08+a12);
   a08=(a08+a18);
-  a08=(a08+a19);
-  a08=(a08+a21);
-  a08=(a08+a22);
+  a08=(a08+a11);
   a08=(a08+a00);
   a08=(a08+a06);
-  a23=(a23+a08);
-  if (res[0]!=0) res[0][1]=a23;
-  a07=casadi_fabs(a07);
-  a04=casadi_fabs(a04);
-  a07=(a07+a04);
-  if (res[0]!=0) res[0][2]=a07;
+  if (res[0]!=0) res[0][1]=a08;
   return 0;
 }
 
@@ -3026,7 +2891,7 @@ void three_link_multi_midpoint_model_energy_check_incref(void) {
 void three_link_multi_midpoint_model_energy_check_decref(void) {
 }
 
-casadi_int three_link_multi_midpoint_model_energy_check_n_in(void) { return 2;}
+casadi_int three_link_multi_midpoint_model_energy_check_n_in(void) { return 1;}
 
 casadi_int three_link_multi_midpoint_model_energy_check_n_out(void) { return 1;}
 
@@ -3040,8 +2905,7 @@ casadi_real three_link_multi_midpoint_model_energy_check_default_in(casadi_int i
 const char* three_link_multi_midpoint_model_energy_check_name_in(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return "x0";
-    case 1: return "x1";
+    case 0: return "x";
     default: return 0;
   }
 }
@@ -3049,7 +2913,7 @@ const char* three_link_multi_midpoint_model_energy_check_name_in(casadi_int i) {
 const char* three_link_multi_midpoint_model_energy_check_name_out(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return "balance";
+    case 0: return "H_T";
     default: return 0;
   }
 }
@@ -3058,7 +2922,6 @@ const casadi_int* three_link_multi_midpoint_model_energy_check_sparsity_in(casad
   (void)i;
   switch (i) {
     case 0: return casadi_s1;
-    case 1: return casadi_s1;
     default: return 0;
   }
 }
@@ -3066,14 +2929,14 @@ const casadi_int* three_link_multi_midpoint_model_energy_check_sparsity_in(casad
 const casadi_int* three_link_multi_midpoint_model_energy_check_sparsity_out(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s8;
     default: return 0;
   }
 }
 
 int three_link_multi_midpoint_model_energy_check_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
-  if (sz_arg) *sz_arg = 2;
+  if (sz_arg) *sz_arg = 1;
   if (sz_res) *sz_res = 1;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 0;
@@ -3082,7 +2945,7 @@ int three_link_multi_midpoint_model_energy_check_work(casadi_int *sz_arg, casadi
 
 int three_link_multi_midpoint_model_energy_check_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
-  if (sz_arg) *sz_arg = 2*sizeof(const casadi_real*);
+  if (sz_arg) *sz_arg = 1*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 1*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);

@@ -29,7 +29,6 @@
 #define casadi_f7 CASADI_PREFIX(f7)
 #define casadi_f8 CASADI_PREFIX(f8)
 #define casadi_f9 CASADI_PREFIX(f9)
-#define casadi_fabs CASADI_PREFIX(fabs)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
@@ -38,19 +37,10 @@
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
 #define casadi_s7 CASADI_PREFIX(s7)
+#define casadi_s8 CASADI_PREFIX(s8)
 #define casadi_sq CASADI_PREFIX(sq)
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
-
-casadi_real casadi_fabs(casadi_real x) {
-  (void)x;
-/* Pre-c99 compatibility */
-#if __STDC_VERSION__ < 199901L
-  return x>0 ? x : -x;
-#else
-  return fabs(x);
-#endif
-}
 
 /* Configuration this file was compiled with */
 void three_link_multi_vi__casadi_version(int* major, int* minor, int* patch) {
@@ -70,6 +60,7 @@ static const casadi_int casadi_s4[3] = {3, 6, 1};
 static const casadi_int casadi_s5[3] = {6, 3, 1};
 static const casadi_int casadi_s6[3] = {6, 6, 1};
 static const casadi_int casadi_s7[3] = {6, 1, 1};
+static const casadi_int casadi_s8[3] = {2, 1, 1};
 
 /* three_link_multi_vi_model_residual:(z[3],x0[9],dt)->(F[3]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -6175,17 +6166,17 @@ int three_link_multi_vi_model_segment_margins_work_bytes(casadi_int *sz_arg, cas
   return 0;
 }
 
-/* three_link_multi_vi_model_energy_check:(x0[9],x1[9])->(balance[3]) */
+/* three_link_multi_vi_model_energy_check:(x[9])->(H_T[2]) */
 static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)res; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33;
-  a00=arg[1]? arg[1][3] : 0;
-  a01=arg[1]? arg[1][0] : 0;
-  a02=arg[1]? arg[1][4] : 0;
+  casadi_real a24, a25, a26, a27, a28;
+  a00=arg[0]? arg[0][3] : 0;
+  a01=arg[0]? arg[0][0] : 0;
+  a02=arg[0]? arg[0][4] : 0;
   a03=(a01*a02);
-  a04=arg[1]? arg[1][1] : 0;
+  a04=arg[0]? arg[0][1] : 0;
   a05=(a04*a00);
   a03=(a03+a05);
   a05=(a00+a03);
@@ -6202,382 +6193,186 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a10=casadi_sq(a10);
   a09=(a09+a10);
   a09=sqrt(a09);
-  a09=(a07+a09);
+  a07=(a07+a09);
   a04=(a01*a04);
   a02=(a00*a02);
   a04=(a04-a02);
   a02=(a11*a00);
   a02=(a04+a02);
-  a10=(a08*a03);
-  a02=(a02+a10);
+  a09=(a08*a03);
+  a02=(a02+a09);
   a02=casadi_sq(a02);
-  a10=(a11*a04);
-  a10=(a03+a10);
-  a12=(a08*a01);
-  a10=(a10+a12);
-  a10=casadi_sq(a10);
-  a02=(a02+a10);
-  a02=sqrt(a02);
-  a09=(a09+a02);
-  a02=arg[1]? arg[1][2] : 0;
-  a10=(a02*a04);
-  a12=arg[1]? arg[1][5] : 0;
-  a13=(a12*a03);
-  a10=(a10-a13);
-  a13=(a11*a03);
-  a13=(a10+a13);
-  a02=(a02*a03);
-  a12=(a12*a04);
-  a02=(a02+a12);
-  a12=(a08*a02);
-  a13=(a13+a12);
-  a13=casadi_sq(a13);
-  a12=(a11*a10);
-  a12=(a02+a12);
-  a14=(a08*a04);
-  a12=(a12+a14);
-  a12=casadi_sq(a12);
-  a13=(a13+a12);
-  a13=sqrt(a13);
-  a09=(a09+a13);
+  a09=(a11*a04);
+  a09=(a03+a09);
+  a10=(a08*a01);
+  a09=(a09+a10);
   a09=casadi_sq(a09);
-  a09=(a06*a09);
-  a05=(a05+a09);
-  a09=(a06*a03);
-  a05=(a05+a09);
-  a09=(a06*a02);
-  a05=(a05+a09);
-  a09=1.5000000000000000e+00;
-  a13=(a09*a00);
-  a05=(a05+a13);
-  a13=arg[1]? arg[1][6] : 0;
-  a12=(a06*a13);
-  a14=arg[1]? arg[1][8] : 0;
-  a15=(a06*a10);
-  a16=(a15*a04);
-  a17=1.;
-  a18=2.5000000000000000e-01;
-  a10=casadi_sq(a10);
-  a10=(a18*a10);
-  a10=(a17+a10);
-  a19=casadi_sq(a02);
-  a19=(a18*a19);
-  a10=(a10+a19);
-  a19=(a14/a10);
-  a16=(a16*a19);
-  a16=(a14+a16);
-  a20=-5.0000000000000000e-01;
-  a02=(a20*a02);
-  a21=(a02*a03);
-  a21=(a21*a19);
-  a16=(a16-a21);
-  a21=(a15*a19);
-  a22=(a06*a04);
-  a23=casadi_sq(a15);
-  a23=(a23/a10);
-  a24=(a17-a23);
-  a24=(a04*a24);
-  a22=(a22+a24);
-  a25=(a02*a15);
-  a26=(a25*a03);
-  a26=(a26/a10);
-  a22=(a22+a26);
-  a27=arg[1]? arg[1][7] : 0;
-  a28=(a27-a16);
-  a29=casadi_sq(a04);
-  a29=(a18*a29);
-  a29=(a17+a29);
-  a30=casadi_sq(a03);
-  a30=(a18*a30);
-  a29=(a29+a30);
-  a24=(a24+a26);
-  a24=(a04*a24);
-  a29=(a29+a24);
-  a24=casadi_sq(a02);
-  a24=(a24/a10);
-  a26=(a17-a24);
-  a26=(a03*a26);
-  a30=(a25*a04);
-  a30=(a30/a10);
-  a31=(a26+a30);
-  a31=(a03*a31);
-  a29=(a29+a31);
-  a31=(a28/a29);
-  a32=(a22*a31);
-  a21=(a21+a32);
-  a21=(a01*a21);
-  a16=(a16+a21);
-  a16=(a16+a28);
-  a19=(a02*a19);
-  a21=(a20*a03);
-  a21=(a21-a26);
-  a21=(a21-a30);
-  a31=(a21*a31);
-  a19=(a19+a31);
-  a19=(a00*a19);
-  a16=(a16-a19);
-  a13=(a13-a16);
-  a16=casadi_sq(a01);
-  a16=(a18*a16);
-  a16=(a17+a16);
-  a19=casadi_sq(a00);
-  a19=(a18*a19);
-  a16=(a16+a19);
-  a19=2.;
-  a23=(a19-a23);
-  a31=casadi_sq(a22);
-  a31=(a31/a29);
-  a23=(a23-a31);
-  a23=(a01*a23);
-  a25=(a25/a10);
-  a31=(a21*a22);
-  a31=(a31/a29);
-  a25=(a25+a31);
-  a31=(a00*a25);
-  a23=(a23+a31);
-  a23=(a01*a23);
-  a16=(a16+a23);
-  a25=(a01*a25);
-  a24=(a19-a24);
-  a23=casadi_sq(a21);
-  a23=(a23/a29);
-  a24=(a24-a23);
-  a24=(a00*a24);
-  a25=(a25+a24);
-  a25=(a00*a25);
-  a16=(a16+a25);
-  a13=(a13/a16);
-  a12=(a12*a13);
-  a05=(a05+a12);
-  a27=(a06*a27);
-  a16=(a29*a13);
-  a28=(a28-a16);
-  a21=(a00*a21);
-  a21=(a21*a13);
-  a28=(a28+a21);
-  a22=(a01*a22);
-  a22=(a22*a13);
-  a28=(a28-a22);
-  a28=(a28/a29);
-  a27=(a27*a28);
-  a05=(a05+a27);
-  a29=(a06*a14);
-  a28=(a13+a28);
-  a22=(a10*a28);
-  a14=(a14-a22);
-  a00=(a00*a13);
-  a03=(a03*a28);
-  a00=(a00+a03);
-  a02=(a02*a00);
-  a14=(a14+a02);
-  a01=(a01*a13);
-  a04=(a04*a28);
-  a01=(a01+a04);
-  a15=(a15*a01);
-  a14=(a14-a15);
-  a14=(a14/a10);
-  a29=(a29*a14);
-  a05=(a05+a29);
-  a14=arg[0]? arg[0][3] : 0;
-  a10=arg[0]? arg[0][0] : 0;
-  a15=arg[0]? arg[0][4] : 0;
-  a01=(a10*a15);
-  a04=arg[0]? arg[0][1] : 0;
-  a28=(a04*a14);
-  a01=(a01+a28);
-  a28=(a14+a01);
-  a13=(a08*a14);
-  a13=(a10+a13);
-  a13=casadi_sq(a13);
-  a02=(a08+a14);
-  a00=(a11*a10);
-  a02=(a02+a00);
-  a02=casadi_sq(a02);
-  a13=(a13+a02);
-  a13=sqrt(a13);
-  a07=(a07+a13);
-  a04=(a10*a04);
-  a15=(a14*a15);
-  a04=(a04-a15);
-  a15=(a11*a14);
-  a15=(a04+a15);
-  a13=(a08*a01);
-  a15=(a15+a13);
-  a15=casadi_sq(a15);
-  a13=(a11*a04);
-  a13=(a01+a13);
-  a02=(a08*a10);
-  a13=(a13+a02);
-  a13=casadi_sq(a13);
-  a15=(a15+a13);
-  a15=sqrt(a15);
-  a07=(a07+a15);
-  a15=arg[0]? arg[0][2] : 0;
-  a13=(a15*a04);
-  a02=arg[0]? arg[0][5] : 0;
-  a00=(a02*a01);
-  a13=(a13-a00);
-  a00=(a11*a01);
-  a00=(a13+a00);
-  a15=(a15*a01);
-  a02=(a02*a04);
-  a15=(a15+a02);
-  a02=(a08*a15);
-  a00=(a00+a02);
-  a00=casadi_sq(a00);
-  a11=(a11*a13);
-  a11=(a15+a11);
+  a02=(a02+a09);
+  a02=sqrt(a02);
+  a07=(a07+a02);
+  a02=arg[0]? arg[0][2] : 0;
+  a09=(a02*a04);
+  a10=arg[0]? arg[0][5] : 0;
+  a12=(a10*a03);
+  a09=(a09-a12);
+  a12=(a11*a03);
+  a12=(a09+a12);
+  a02=(a02*a03);
+  a10=(a10*a04);
+  a02=(a02+a10);
+  a10=(a08*a02);
+  a12=(a12+a10);
+  a12=casadi_sq(a12);
+  a11=(a11*a09);
+  a11=(a02+a11);
   a08=(a08*a04);
   a11=(a11+a08);
   a11=casadi_sq(a11);
-  a00=(a00+a11);
-  a00=sqrt(a00);
-  a07=(a07+a00);
+  a12=(a12+a11);
+  a12=sqrt(a12);
+  a07=(a07+a12);
   a07=casadi_sq(a07);
   a07=(a06*a07);
-  a28=(a28+a07);
-  a07=(a06*a01);
-  a28=(a28+a07);
-  a07=(a06*a15);
-  a28=(a28+a07);
-  a09=(a09*a14);
-  a28=(a28+a09);
-  a09=arg[0]? arg[0][6] : 0;
-  a07=(a06*a09);
-  a00=arg[0]? arg[0][8] : 0;
-  a11=(a06*a13);
-  a08=(a11*a04);
-  a13=casadi_sq(a13);
-  a13=(a18*a13);
-  a13=(a17+a13);
-  a02=casadi_sq(a15);
-  a02=(a18*a02);
-  a13=(a13+a02);
-  a02=(a00/a13);
-  a08=(a08*a02);
-  a08=(a00+a08);
-  a15=(a20*a15);
-  a03=(a15*a01);
-  a03=(a03*a02);
-  a08=(a08-a03);
-  a03=(a11*a02);
-  a22=(a06*a04);
-  a21=casadi_sq(a11);
-  a21=(a21/a13);
-  a16=(a17-a21);
-  a16=(a04*a16);
-  a22=(a22+a16);
-  a25=(a15*a11);
-  a24=(a25*a01);
-  a24=(a24/a13);
-  a22=(a22+a24);
+  a05=(a05+a07);
+  a07=(a06*a03);
+  a05=(a05+a07);
+  a07=(a06*a02);
+  a05=(a05+a07);
+  a07=1.5000000000000000e+00;
+  a07=(a07*a00);
+  a05=(a05+a07);
+  a07=arg[0]? arg[0][6] : 0;
+  a12=(a06*a07);
+  a11=arg[0]? arg[0][8] : 0;
+  a08=(a06*a09);
+  a10=(a08*a04);
+  a13=1.;
+  a14=2.5000000000000000e-01;
+  a09=casadi_sq(a09);
+  a09=(a14*a09);
+  a09=(a13+a09);
+  a15=casadi_sq(a02);
+  a15=(a14*a15);
+  a09=(a09+a15);
+  a15=(a11/a09);
+  a10=(a10*a15);
+  a10=(a11+a10);
+  a16=-5.0000000000000000e-01;
+  a02=(a16*a02);
+  a17=(a02*a03);
+  a17=(a17*a15);
+  a10=(a10-a17);
+  a17=(a08*a15);
+  a18=(a06*a04);
+  a19=casadi_sq(a08);
+  a19=(a19/a09);
+  a20=(a13-a19);
+  a20=(a04*a20);
+  a18=(a18+a20);
+  a21=(a02*a08);
+  a22=(a21*a03);
+  a22=(a22/a09);
+  a18=(a18+a22);
   a23=arg[0]? arg[0][7] : 0;
-  a31=(a23-a08);
-  a30=casadi_sq(a04);
-  a30=(a18*a30);
-  a30=(a17+a30);
-  a26=casadi_sq(a01);
-  a26=(a18*a26);
-  a30=(a30+a26);
-  a16=(a16+a24);
-  a16=(a04*a16);
-  a30=(a30+a16);
-  a16=casadi_sq(a15);
-  a16=(a16/a13);
-  a24=(a17-a16);
-  a24=(a01*a24);
-  a26=(a25*a04);
-  a26=(a26/a13);
-  a32=(a24+a26);
-  a32=(a01*a32);
-  a30=(a30+a32);
-  a32=(a31/a30);
-  a33=(a22*a32);
-  a03=(a03+a33);
-  a03=(a10*a03);
-  a08=(a08+a03);
-  a08=(a08+a31);
-  a02=(a15*a02);
-  a20=(a20*a01);
-  a20=(a20-a24);
-  a20=(a20-a26);
-  a32=(a20*a32);
-  a02=(a02+a32);
-  a02=(a14*a02);
-  a08=(a08-a02);
-  a09=(a09-a08);
-  a08=casadi_sq(a10);
-  a08=(a18*a08);
-  a17=(a17+a08);
-  a08=casadi_sq(a14);
-  a18=(a18*a08);
-  a17=(a17+a18);
-  a21=(a19-a21);
-  a18=casadi_sq(a22);
-  a18=(a18/a30);
-  a21=(a21-a18);
-  a21=(a10*a21);
-  a25=(a25/a13);
-  a18=(a20*a22);
-  a18=(a18/a30);
-  a25=(a25+a18);
-  a18=(a14*a25);
-  a21=(a21+a18);
-  a21=(a10*a21);
-  a17=(a17+a21);
-  a25=(a10*a25);
-  a19=(a19-a16);
-  a16=casadi_sq(a20);
-  a16=(a16/a30);
-  a19=(a19-a16);
-  a19=(a14*a19);
-  a25=(a25+a19);
+  a24=(a23-a10);
+  a25=casadi_sq(a04);
   a25=(a14*a25);
-  a17=(a17+a25);
-  a09=(a09/a17);
-  a07=(a07*a09);
-  a28=(a28+a07);
+  a25=(a13+a25);
+  a26=casadi_sq(a03);
+  a26=(a14*a26);
+  a25=(a25+a26);
+  a20=(a20+a22);
+  a20=(a04*a20);
+  a25=(a25+a20);
+  a20=casadi_sq(a02);
+  a20=(a20/a09);
+  a22=(a13-a20);
+  a22=(a03*a22);
+  a26=(a21*a04);
+  a26=(a26/a09);
+  a27=(a22+a26);
+  a27=(a03*a27);
+  a25=(a25+a27);
+  a27=(a24/a25);
+  a28=(a18*a27);
+  a17=(a17+a28);
+  a17=(a01*a17);
+  a10=(a10+a17);
+  a10=(a10+a24);
+  a15=(a02*a15);
+  a16=(a16*a03);
+  a16=(a16-a22);
+  a16=(a16-a26);
+  a27=(a16*a27);
+  a15=(a15+a27);
+  a15=(a00*a15);
+  a10=(a10-a15);
+  a07=(a07-a10);
+  a10=casadi_sq(a01);
+  a10=(a14*a10);
+  a13=(a13+a10);
+  a10=casadi_sq(a00);
+  a14=(a14*a10);
+  a13=(a13+a14);
+  a14=2.;
+  a19=(a14-a19);
+  a10=casadi_sq(a18);
+  a10=(a10/a25);
+  a19=(a19-a10);
+  a19=(a01*a19);
+  a21=(a21/a09);
+  a10=(a16*a18);
+  a10=(a10/a25);
+  a21=(a21+a10);
+  a10=(a00*a21);
+  a19=(a19+a10);
+  a19=(a01*a19);
+  a13=(a13+a19);
+  a21=(a01*a21);
+  a14=(a14-a20);
+  a20=casadi_sq(a16);
+  a20=(a20/a25);
+  a14=(a14-a20);
+  a14=(a00*a14);
+  a21=(a21+a14);
+  a21=(a00*a21);
+  a13=(a13+a21);
+  a07=(a07/a13);
+  a12=(a12*a07);
+  a05=(a05+a12);
   a23=(a06*a23);
-  a17=(a30*a09);
-  a31=(a31-a17);
-  a20=(a14*a20);
-  a20=(a20*a09);
-  a31=(a31+a20);
-  a22=(a10*a22);
-  a22=(a22*a09);
-  a31=(a31-a22);
-  a31=(a31/a30);
-  a23=(a23*a31);
-  a28=(a28+a23);
-  a06=(a06*a00);
-  a31=(a09+a31);
-  a30=(a13*a31);
-  a00=(a00-a30);
-  a14=(a14*a09);
-  a01=(a01*a31);
-  a14=(a14+a01);
-  a15=(a15*a14);
-  a00=(a00+a15);
-  a10=(a10*a09);
-  a04=(a04*a31);
-  a10=(a10+a04);
-  a11=(a11*a10);
-  a00=(a00-a11);
-  a00=(a00/a13);
-  a06=(a06*a00);
-  a28=(a28+a06);
-  a00=(a05-a28);
-  if (res[0]!=0) res[0][0]=a00;
-  a07=(a07+a23);
-  a07=(a07+a06);
-  a12=(a12+a27);
-  a12=(a12+a29);
-  a07=(a07+a12);
-  if (res[0]!=0) res[0][1]=a07;
-  a28=casadi_fabs(a28);
-  a05=casadi_fabs(a05);
-  a28=(a28+a05);
-  if (res[0]!=0) res[0][2]=a28;
+  a13=(a25*a07);
+  a24=(a24-a13);
+  a16=(a00*a16);
+  a16=(a16*a07);
+  a24=(a24+a16);
+  a18=(a01*a18);
+  a18=(a18*a07);
+  a24=(a24-a18);
+  a24=(a24/a25);
+  a23=(a23*a24);
+  a05=(a05+a23);
+  a06=(a06*a11);
+  a24=(a07+a24);
+  a25=(a09*a24);
+  a11=(a11-a25);
+  a00=(a00*a07);
+  a03=(a03*a24);
+  a00=(a00+a03);
+  a02=(a02*a00);
+  a11=(a11+a02);
+  a01=(a01*a07);
+  a04=(a04*a24);
+  a01=(a01+a04);
+  a08=(a08*a01);
+  a11=(a11-a08);
+  a11=(a11/a09);
+  a06=(a06*a11);
+  a05=(a05+a06);
+  if (res[0]!=0) res[0][0]=a05;
+  a12=(a12+a23);
+  a12=(a12+a06);
+  if (res[0]!=0) res[0][1]=a12;
   return 0;
 }
 
@@ -6600,7 +6395,7 @@ void three_link_multi_vi_model_energy_check_incref(void) {
 void three_link_multi_vi_model_energy_check_decref(void) {
 }
 
-casadi_int three_link_multi_vi_model_energy_check_n_in(void) { return 2;}
+casadi_int three_link_multi_vi_model_energy_check_n_in(void) { return 1;}
 
 casadi_int three_link_multi_vi_model_energy_check_n_out(void) { return 1;}
 
@@ -6614,8 +6409,7 @@ casadi_real three_link_multi_vi_model_energy_check_default_in(casadi_int i) {
 const char* three_link_multi_vi_model_energy_check_name_in(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return "x0";
-    case 1: return "x1";
+    case 0: return "x";
     default: return 0;
   }
 }
@@ -6623,7 +6417,7 @@ const char* three_link_multi_vi_model_energy_check_name_in(casadi_int i) {
 const char* three_link_multi_vi_model_energy_check_name_out(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return "balance";
+    case 0: return "H_T";
     default: return 0;
   }
 }
@@ -6632,7 +6426,6 @@ const casadi_int* three_link_multi_vi_model_energy_check_sparsity_in(casadi_int 
   (void)i;
   switch (i) {
     case 0: return casadi_s1;
-    case 1: return casadi_s1;
     default: return 0;
   }
 }
@@ -6640,14 +6433,14 @@ const casadi_int* three_link_multi_vi_model_energy_check_sparsity_in(casadi_int 
 const casadi_int* three_link_multi_vi_model_energy_check_sparsity_out(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s8;
     default: return 0;
   }
 }
 
 int three_link_multi_vi_model_energy_check_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
-  if (sz_arg) *sz_arg = 2;
+  if (sz_arg) *sz_arg = 1;
   if (sz_res) *sz_res = 1;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 0;
@@ -6656,7 +6449,7 @@ int three_link_multi_vi_model_energy_check_work(casadi_int *sz_arg, casadi_int* 
 
 int three_link_multi_vi_model_energy_check_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   (void)sz_arg; (void)sz_res; (void)sz_iw; (void)sz_w;
-  if (sz_arg) *sz_arg = 2*sizeof(const casadi_real*);
+  if (sz_arg) *sz_arg = 1*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 1*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
