@@ -475,6 +475,15 @@ static int finish_step(const double *x0, const double *u, double dt, double *x1,
     return FOUR_LINK_ACTUATED_ES_OK;
 }
 
+/* Whether a step that failed with `status` may pass when shorter: Newton failed on it, or its
+ * solution was not finite, turned a spring segment through 90 degrees. (A bad
+ * argument or a failed evaluation fails at any length.) */
+static int shorter_may_pass(int status)
+{
+    return status == FOUR_LINK_ACTUATED_ES_NOT_CONVERGED || status == FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN
+           || status == FOUR_LINK_ACTUATED_ES_NONFINITE || status == FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED;
+}
+
 /* One step, climbing the ladder of solve_step; when Newton fails on the whole step, or its
  * solution fails the segment test (a spurious root of a step too long for the motion turns a
  * segment through 90 degrees; a segment that really collapses fails every half too), two half steps, each
@@ -491,9 +500,7 @@ static int advance(const double *x0, const double *u, double dt, double *x1, dou
         status = finish_step(x0, u, dt, x1, flows, workspace);
     }
     *iterations += spent;
-    if ((status == FOUR_LINK_ACTUATED_ES_NOT_CONVERGED || status == FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN
-         || status == FOUR_LINK_ACTUATED_ES_NONFINITE || status == FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED)
-        && depth < MAX_SPLIT) {
+    if (shorter_may_pass(status) && depth < MAX_SPLIT) {
         double *middle = workspace->split_state[depth];
         double halves[2][2] = {{0.0, 0.0}, {0.0, 0.0}};
         ++workspace->step_splits;
@@ -703,8 +710,7 @@ static int adaptive_interval(const double *x0, const double *u, double dt, doubl
                 status = FOUR_LINK_ACTUATED_ES_NONFINITE;
             }
         }
-        if (status == FOUR_LINK_ACTUATED_ES_NOT_CONVERGED || status == FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN
-            || status == FOUR_LINK_ACTUATED_ES_NONFINITE || status == FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED) {
+        if (shorter_may_pass(status)) {
             /* Newton or the step failed: refuse it and try a much shorter one. */
             failure = status;
             status = FOUR_LINK_ACTUATED_ES_OK;

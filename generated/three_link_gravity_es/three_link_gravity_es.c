@@ -439,6 +439,15 @@ static int finish_step(const double *x0, double dt, double *x1,
     return THREE_LINK_GRAVITY_ES_OK;
 }
 
+/* Whether a step that failed with `status` may pass when shorter: Newton failed on it, or its
+ * solution was not finite. (A bad
+ * argument or a failed evaluation fails at any length.) */
+static int shorter_may_pass(int status)
+{
+    return status == THREE_LINK_GRAVITY_ES_NOT_CONVERGED || status == THREE_LINK_GRAVITY_ES_SINGULAR_JACOBIAN
+           || status == THREE_LINK_GRAVITY_ES_NONFINITE;
+}
+
 /* One step, climbing the ladder of solve_step; when Newton fails on the whole step, two half steps, each
  * climbing the same ladder, at most MAX_SPLIT halvings deep. "es" conserves energy on any
  * sequence of steps: the halves keep its energy balance. The energy flows are the halves' sum;
@@ -453,9 +462,7 @@ static int advance(const double *x0, double dt, double *x1,
         status = finish_step(x0, dt, x1, workspace);
     }
     *iterations += spent;
-    if ((status == THREE_LINK_GRAVITY_ES_NOT_CONVERGED || status == THREE_LINK_GRAVITY_ES_SINGULAR_JACOBIAN
-         || status == THREE_LINK_GRAVITY_ES_NONFINITE)
-        && depth < MAX_SPLIT) {
+    if (shorter_may_pass(status) && depth < MAX_SPLIT) {
         double *middle = workspace->split_state[depth];
         ++workspace->step_splits;
         status = advance(x0, 0.5 * dt, middle, options, workspace, iterations, depth + 1);
@@ -649,8 +656,7 @@ static int adaptive_interval(const double *x0, double dt, double *x1,
                 status = THREE_LINK_GRAVITY_ES_NONFINITE;
             }
         }
-        if (status == THREE_LINK_GRAVITY_ES_NOT_CONVERGED || status == THREE_LINK_GRAVITY_ES_SINGULAR_JACOBIAN
-            || status == THREE_LINK_GRAVITY_ES_NONFINITE) {
+        if (shorter_may_pass(status)) {
             /* Newton or the step failed: refuse it and try a much shorter one. */
             failure = status;
             status = THREE_LINK_GRAVITY_ES_OK;

@@ -134,8 +134,8 @@ extern "C" {
  * Energy check (energy_tol > 0): the scheme keeps the energy balance H_1 - H_0 = W - D only up
  * to its error, small against the kinetic energy T at the step's ends. A converged step that
  * misses it by more than energy_tol (T_0 + T_1), beyond the round-off of H, is a spurious root of
- * a step too long for the motion: it fails with THREE_LINK_MONO_VI_ENERGY_JUMP, and step() and simulate() split it like a
- * step Newton failed. */
+ * a step too long for the motion: it fails with THREE_LINK_MONO_VI_ENERGY_JUMP, and step() and
+ * simulate() split it like a step Newton failed. */
 typedef struct {
     int max_iterations;     /* default 20; bounds the work of one step */
     double update_rtol;     /* default 1e-10 */

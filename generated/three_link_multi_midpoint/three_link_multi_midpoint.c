@@ -494,6 +494,16 @@ static int finish_step(const double *x0, double dt, double *x1,
     return THREE_LINK_MULTI_MIDPOINT_OK;
 }
 
+/* Whether a step that failed with `status` may pass when shorter: Newton failed on it, or its
+ * solution was not finite, turned a spring segment through 90 degrees or jumped in energy. (A bad
+ * argument or a failed evaluation fails at any length.) */
+static int shorter_may_pass(int status)
+{
+    return status == THREE_LINK_MULTI_MIDPOINT_NOT_CONVERGED || status == THREE_LINK_MULTI_MIDPOINT_SINGULAR_JACOBIAN
+           || status == THREE_LINK_MULTI_MIDPOINT_NONFINITE || status == THREE_LINK_MULTI_MIDPOINT_SEGMENT_COLLAPSED
+           || status == THREE_LINK_MULTI_MIDPOINT_ENERGY_JUMP;
+}
+
 /* One step, climbing the ladder of solve_step; when Newton fails on the whole step, or its
  * solution fails the segment test (a spurious root of a step too long for the motion turns a
  * segment through 90 degrees; a segment that really collapses fails every half too),
@@ -511,10 +521,7 @@ static int advance(const double *x0, double dt, double *x1,
         status = finish_step(x0, dt, x1, options, workspace);
     }
     *iterations += spent;
-    if ((status == THREE_LINK_MULTI_MIDPOINT_NOT_CONVERGED || status == THREE_LINK_MULTI_MIDPOINT_SINGULAR_JACOBIAN
-         || status == THREE_LINK_MULTI_MIDPOINT_NONFINITE || status == THREE_LINK_MULTI_MIDPOINT_SEGMENT_COLLAPSED
-         || status == THREE_LINK_MULTI_MIDPOINT_ENERGY_JUMP)
-        && depth < MAX_SPLIT) {
+    if (shorter_may_pass(status) && depth < MAX_SPLIT) {
         double *middle = workspace->split_state[depth];
         ++workspace->step_splits;
         status = advance(x0, 0.5 * dt, middle, options, workspace, iterations, depth + 1);
@@ -705,9 +712,7 @@ static int adaptive_interval(const double *x0, double dt, double *x1,
                 status = THREE_LINK_MULTI_MIDPOINT_NONFINITE;
             }
         }
-        if (status == THREE_LINK_MULTI_MIDPOINT_NOT_CONVERGED || status == THREE_LINK_MULTI_MIDPOINT_SINGULAR_JACOBIAN
-            || status == THREE_LINK_MULTI_MIDPOINT_NONFINITE || status == THREE_LINK_MULTI_MIDPOINT_SEGMENT_COLLAPSED
-            || status == THREE_LINK_MULTI_MIDPOINT_ENERGY_JUMP) {
+        if (shorter_may_pass(status)) {
             /* Newton or the step failed: refuse it and try a much shorter one. */
             failure = status;
             status = THREE_LINK_MULTI_MIDPOINT_OK;
