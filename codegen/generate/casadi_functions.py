@@ -150,12 +150,18 @@ class SchemeFunctions:
                                              # only
     parameters: ca.Function | None = None  # p -> q, the derived parameters every other
                                            # function takes in p's place (packages with p)
+    # es's Newton matrix by its factors (DiscreteScheme.arm_space): -> (F, factors), factors =
+    # (H's nonzeros, G_mu, G_c, m, A) as runtime/c/chaingen_arm_solve.h reads them; and H's
+    # pattern, (rows, columns) of its nonzeros in that order. None: dense LU of dF/dz.
+    newton_factors: ca.Function | None = None
+    arm_pattern: tuple[tuple[int, ...], tuple[int, ...]] | None = None
 
     def all(self) -> tuple[ca.Function, ...]:
         functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
                      self.outputs, self.initial_state, self.sensitivity_rhs,
                      self.sensitivity_map, self.joint_maps, self.holding_torques,
-                     self.segment_margins, self.energy_check, self.parameters)
+                     self.segment_margins, self.energy_check, self.newton_factors,
+                     self.parameters)
         return tuple(function for function in functions if function is not None)
 
 
@@ -368,6 +374,11 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
                           scheme.holding_torques)
         holding = fn("holding_torques", [phi] + with_p[0], ["phi"] + with_p[1], [torques],
                      ["tau"])
+    factors, pattern = None, None
+    if scheme.arm_space is not None:
+        arm_factors, pattern = _arm_factors(scheme, bindings, parameters, step, z)
+        factors = fn("newton_factors", step_args, step_names, [residual, arm_factors],
+                     ["F", "factors"])
     names = dict(
         residual=fn("residual", step_args, step_names, [residual], ["F"]),
         residual_jacobian=fn("residual_jacobian", step_args, step_names,
@@ -383,11 +394,50 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
                          ["phi", "phidot"] + with_p[1], [initial_state], ["x"]),
         sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map, joint_maps=joint_maps,
         holding_torques=holding, segment_margins=margins, energy_check=check,
+        newton_factors=factors,
     )
     built = _build(specs, prefix, p, options, directions)
     return SchemeFunctions(**{field: None if name is None else built[name]
                               for field, name in names.items()},
-                           parameters=built.get(PARAMETERS_FUNCTION))
+                           parameters=built.get(PARAMETERS_FUNCTION), arm_pattern=pattern)
+
+
+def _arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
+                 step: SympyToCasadi, z: ca.SX) -> tuple[ca.SX, tuple]:
+    """The factors of es's Newton matrix (ArmSpace) as one vector in the step's inputs, and
+    H's pattern. h and c are translated with the arm increments w as free symbols, so that
+    dh/dw and dc/dw are CasADi's sparse symbolic Jacobians (a few entries per link), then w is
+    put back as the function of z it is. Raises ValueError if h or c depend on dv other than
+    through w, or the blocks of G_mu and G_c are not one 2-vector per link."""
+    arms = scheme.arm_space
+    n = scheme.scene.n
+    w = ca.SX.sym("w", 2 * n)
+    free = dict(zip(arms.arm_increments, ca.vertsplit(w)))
+    local = SympyToCasadi(dict(bindings), parameters)
+    for symbol, expression in scheme.definitions:
+        if symbol in free:
+            local.bind(symbol, free[symbol])
+        else:
+            local.bind(symbol, local(expression), local.is_parametric(expression))
+    forces = _vector(local, arms.forces)
+    rows = _vector(local, scheme.residual[2 * n:, :])
+    if ca.jacobian(ca.vertcat(forces, rows), z[:2 * n]).nnz():
+        raise ValueError("es: the arm forces depend on dv other than through w = B dv")
+    H = ca.jacobian(forces, w)
+    g_mu = ca.jacobian(forces, z[2 * n:])
+    g_c = ca.jacobian(rows, w)
+    for name, block, shape in (("G_mu", g_mu, lambda r, c: r // 2 == c),
+                               ("G_c", g_c, lambda r, c: c // 2 == r)):
+        if not all(shape(r, c) for r, c in zip(*block.sparsity().get_triplet())):
+            raise ValueError(f"es: {name} is not one 2-vector per link")
+    g_mu = ca.vertcat(*[g_mu[r, r // 2] for r in range(2 * n)])
+    g_c = ca.vertcat(*[g_c[c // 2, c] for c in range(2 * n)])
+    local_values = ca.vertcat(*H.nonzeros(), g_mu, g_c)
+    local_values = ca.substitute(local_values, w,
+                                 ca.vertcat(*[step(symbol) for symbol in arms.arm_increments]))
+    factors = ca.vertcat(local_values, _vector(step, arms.masses), _vector(step, arms.maps))
+    rows_h, columns_h = H.sparsity().get_triplet()
+    return factors, (tuple(rows_h), tuple(columns_h))
 
 
 #: The name of the generated function that computes the derived parameters q from p.

@@ -27,6 +27,9 @@ INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
     EntryPoint("step_arguments", "static void", _parameters(
         f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, "
         "const double *dt, {prefix}_workspace *workspace")),
+    EntryPoint("newton_factors", "static int", _parameters(
+        f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
+        "double *residual, double *jacobian, {prefix}_workspace *workspace")),
     EntryPoint("first_guess", "static int", _parameters(
         f"const double *x0, {P_ARGUMENT}, double dt, int warm, {{prefix}}_workspace *workspace")),
     EntryPoint("predict", "static int", _parameters(

@@ -12,6 +12,7 @@ import hashlib
 import importlib.resources
 import json
 import os
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,6 +42,8 @@ TEMPLATES = {
     "README.md.j2": "README.md",
 }
 LU_HEADER = "chaingen_lu.h"
+#: es's Newton solve by the Jacobian's factors (packages whose scheme has an arm_space).
+ARM_SOLVE_HEADER = "chaingen_arm_solve.h"
 
 #: A generated model source larger than this is compiled with LARGE_MODEL_FLAGS in place of the
 #: optimisation level: on a single function of some 10^5 lines gcc's -O2 takes minutes (n = 20:
@@ -67,6 +70,12 @@ class GeneratedPackage:
     @property
     def sources(self) -> tuple[str, ...]:
         return tuple(name for name in sorted(self.files) if name.endswith(".c"))
+
+
+def c_list(values) -> str:
+    """Integers as the body of a C array initialiser, wrapped within the generated width."""
+    return textwrap.fill(", ".join(map(str, values)), width=96, subsequent_indent="    ",
+                         break_on_hyphens=False)
 
 
 def package_prefix(scene: Scene, method: str) -> str:
@@ -227,14 +236,19 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "source_flags": {name: " ".join(flags) for name, flags in source_flags.items()},
         "model_flags": " ".join(model_flags), "large_model_bytes": LARGE_MODEL_BYTES,
         "sources": [f"{prefix}.c", f"{prefix}_model.c"],
+        "arm_solve": functions.arm_pattern is not None,
+        "arm_nh": len(functions.arm_pattern[0]) if functions.arm_pattern else 0,
+        "arm_rows": c_list(functions.arm_pattern[0]) if functions.arm_pattern else "",
+        "arm_cols": c_list(functions.arm_pattern[1]) if functions.arm_pattern else "",
     }
     environment = template_environment(interface)
     files = {output.format(prefix=prefix): environment.get_template(template).render(context)
              for template, output in TEMPLATES.items()}
     files[f"{prefix}_model.c"] = f"{c_banner}\n{model_source}"
     files[f"{prefix}_model.h"] = f"{c_banner}\n{model_header}"
-    files[LU_HEADER] = (importlib.resources.files("chaingen.runtime")
-                        .joinpath("c", LU_HEADER).read_text())
+    for header in (LU_HEADER, ARM_SOLVE_HEADER) if functions.arm_pattern else (LU_HEADER,):
+        files[header] = importlib.resources.files("chaingen.runtime").joinpath(
+            "c", header).read_text()
     manifest = {
         "chaingen_version": VERSION, "input_hash": digest, "prefix": prefix,
         "scene": scene.name, "method": scheme.method, "quadrature": scheme.quadrature,

@@ -15,6 +15,8 @@ sweep from the tip back to the base that pulls point forces on the joints back t
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import sympy as sp
 
 from ..scene import Scene
@@ -66,22 +68,29 @@ class ComChain:
             out.append(joint)
         return out
 
-    def normal(self, k: int, coms, joints) -> tuple:
-        """n_k = S R_k (x_k - X_k) (1-based k >= 1; linear in q)."""
-        return perp(apply(self.maps[k - 1], sub(coms[k - 1], joints[k - 1])))
+    def segment(self, j: int, r0, r1, arms, increments: bool) -> tuple:
+        """P_{j+1} - P_j, the segment of a spring across joint j, in the arms d_k = x_k - X_k
+        (or their increments): L_j R_j d_j + r1 S R_j d_j - r0 S R_{j-1} d_{j-1}, local in
+        d_{j-1} and d_j (P_1 = (0, r0) on the base: constant, so no increment)."""
+        direction = apply(self.maps[j - 1], arms[j - 1])
+        out = add(scale(self.lengths[j - 1], direction), scale(number(r1), perp(direction)))
+        if j > 1:
+            return sub(out, scale(number(r0), perp(apply(self.maps[j - 2], arms[j - 2]))))
+        return out if increments else sub(out, (sp.Integer(0), number(r0)))
 
-    def fastening(self, j: int, r, coms, joints, increments: bool) -> tuple:
-        """P_j = X_j + r n_{j-1} (n_0 = (0, 1), the base: constant, so no increment)."""
-        if j == 1:
-            return ZERO if increments else (sp.Integer(0), number(r))
-        return add(joints[j - 1], scale(number(r), self.normal(j - 1, coms, joints)))
+    def segment_transpose(self, j: int, r0, r1, force) -> list:
+        """The arms' share of a force on segment j (the transpose of segment()): pairs
+        (k, (d P_{j+1} - d P_j / d d_k)^T F), 1-based k."""
+        turned = (force[1], -force[0])   # S^T F
+        out = [(j, apply_transpose(self.maps[j - 1], add(scale(self.lengths[j - 1], force),
+                                                         scale(number(r1), turned))))]
+        if j > 1:
+            out.append((j - 1, apply_transpose(self.maps[j - 2], scale(-number(r0), turned))))
+        return out
 
-    def sweep(self, direct, through, points, name: str) -> list:
-        """The q-gradient sum_k E_k^T direct_k + B_k^T through_k + sum_j (dP_j/dq)^T points_j.
-
-        direct, through: one vector per link (None for none); B_k q = x_k - X_k. points:
-        {j: (F, r F)}, the force on the fastening P_j and its offset times it (summed over the
-        springs fastened there). Returns one (x, y) gradient per link."""
+    def sweep(self, direct, through, name: str) -> list:
+        """The q-gradient sum_k E_k^T direct_k + B_k^T through_k (B_k q = x_k - X_k): one
+        vector per link each (None for none). Returns one (x, y) gradient per link."""
         n = self.scene.n
         on_com = [list(d) if d is not None else [0, 0] for d in direct]
         on_joint = [[sp.Integer(0), sp.Integer(0)] for _ in range(n + 2)]
@@ -89,15 +98,6 @@ class ComChain:
             if t is not None:
                 on_com[k - 1] = [on_com[k - 1][0] + t[0], on_com[k - 1][1] + t[1]]
                 on_joint[k] = [on_joint[k][0] - t[0], on_joint[k][1] - t[1]]
-        for j, (force, moment) in points.items():
-            if j == 1:
-                continue
-            # P_j = X_j + r S R_{j-1} (x_{j-1} - X_{j-1}): the joint takes the force F, the arm
-            # (r S R_{j-1})^T F; with several springs at P_j, F = sum F_i and r F = sum r_i F_i.
-            on_joint[j] = [on_joint[j][0] + force[0], on_joint[j][1] + force[1]]
-            pulled = apply_transpose(self.maps[j - 2], (moment[1], -moment[0]))
-            on_com[j - 2] = [on_com[j - 2][0] + pulled[0], on_com[j - 2][1] + pulled[1]]
-            on_joint[j - 1] = [on_joint[j - 1][0] - pulled[0], on_joint[j - 1][1] - pulled[1]]
         carried = ZERO
         gradient = [None] * n
         for k in range(n, 0, -1):
@@ -110,10 +110,30 @@ class ComChain:
         return gradient
 
 
-def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of, defs: Definitions):
-    """The es residual (model.md 4.4) by recursions: (momentum balance, 2n entries in q's
-    order; constraint increments, n; joint rates at the mid-point, n).
+class EsStep(NamedTuple):
+    """The es residual's parts (model.md 4.4 and 17): F = (momentum, constraint_increments)."""
 
+    momentum: list               # M dv + dt m g + B^T h, 2n entries in q's order
+    constraint_increments: list  # c_k = C_k(q_m) (q_1 - q_0), n entries
+    rates: list                  # joint rates at the mid-point, n
+    arm_increments: list         # w = B dv, one defined (x, y) pair per link
+    forces: list                 # h(w, mu), one (x, y) pair per link, on the arms
+
+
+def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
+            defs: Definitions) -> EsStep:
+    """The es residual (model.md 4.4) by recursions.
+
+    Everything but the COM masses and gravity acts on the arms d_k = x_k - X_k = (B q)_k and is
+    local in them: the inertias, the constraint impulses, the joint torques and every spring
+    segment P_{j+1} - P_j (a function of d_{j-1} and d_j). So with w = B dv (the arms'
+    velocity increments, defined here as symbols), the momentum balance is
+
+        M dv + dt m g + B^T h(w, mu),
+
+    h_k a function of w_{k-1}, w_k, w_{k+1} and of the w_k over each spring's span: the
+    Newton Jacobian's factors dh/dw (banded), dh/dmu and dc/dw (block diagonal) are local,
+    and the dense matrix M + B^T (dh/dw) B needs never be formed (chaingen_schur.h).
     torques_of(rates): the joint torques tau_i (inputs and damping) at the mid-point rates."""
     n = scene.n
     chain = ComChain(scene, defs)
@@ -122,39 +142,42 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of, defs:
         return [(values[k], values[n + k]) for k in range(n)]
 
     q0v, v0v, dvv = vectors(q0), vectors(v0), vectors(dv)
-    dq = [defs.vector(f"dq{k}", scale(dt, add(v, scale(sp.Rational(1, 2), d))))
-          for k, (v, d) in enumerate(zip(v0v, dvv), start=1)]
     joints0 = chain.joints(q0v, "X")
-    joint_steps = chain.joints(dq, "dX")
-    # The arms at the mid-point, a_k = x_k - X_k at q_m = q_0 + dq/2.
-    arms = [defs.vector(f"arm_m{k}", sub(add(x, scale(sp.Rational(1, 2), d)),
-                                         add(X, scale(sp.Rational(1, 2), dX))))
-            for k, (x, d, X, dX) in enumerate(zip(q0v, dq, joints0, joint_steps), start=1)]
-    constraint_increments = [2 * (a[0] * (d[0] - dX[0]) + a[1] * (d[1] - dX[1]))
-                             for a, d, dX in zip(arms, dq, joint_steps)]
-
-    direct = []
-    through = []
+    joint_rates0 = chain.joints(v0v, "V")
     velocity_steps = chain.joints(dvv, "dV")
+    arms0 = [defs.vector(f"arm{k}", sub(x, X))
+             for k, (x, X) in enumerate(zip(q0v, joints0), start=1)]
+    arm_rates0 = [defs.vector(f"arm_rate{k}", sub(v, V))
+                  for k, (v, V) in enumerate(zip(v0v, joint_rates0), start=1)]
+    # Named even where B dv is dv itself (link 1): the Newton factors differentiate by w.
+    w = []
+    for k, (d, dV) in enumerate(zip(dvv, velocity_steps), start=1):
+        pair = tuple(sp.Symbol(f"{defs.prefix}w{k}_{axis}", real=True) for axis in "xy")
+        defs.items += list(zip(pair, sub(d, dV)))
+        w.append(pair)
+    half = sp.Rational(1, 2)
+    # B dq = dt (B v_0 + w / 2); the arms at the mid-point a_k = B q_0 + B dq / 2; the arms'
+    # rates there B v_m = B v_0 + w / 2.
+    arm_rates_mid = [defs.vector(f"arm_rate_m{k}", add(r, scale(half, wk)))
+                     for k, (r, wk) in enumerate(zip(arm_rates0, w), start=1)]
+    arm_steps = [defs.vector(f"darm{k}", scale(dt, r))
+                 for k, r in enumerate(arm_rates_mid, start=1)]
+    arms = [defs.vector(f"arm_m{k}", add(a, scale(half, d)))
+            for k, (a, d) in enumerate(zip(arms0, arm_steps), start=1)]
+    constraint_increments = [2 * (a[0] * d[0] + a[1] * d[1]) for a, d in zip(arms, arm_steps)]
+
+    forces = []
     for k, link in enumerate(scene.links):
-        m = number(link.mass)
-        term = scale(m, dvv[k])
-        if scene.gravity:
-            term = add(term, (sp.Integer(0), dt * m * number(scene.gravity)))
-        direct.append(term)
         c2 = number(link.com ** 2 + link.com_normal ** 2)
         item = scale(-2 * mu[k], arms[k])
         if link.inertia:
-            item = add(item, scale(number(link.inertia) / c2, sub(dvv[k], velocity_steps[k])))
-        through.append(item)
+            item = add(item, scale(number(link.inertia) / c2, w[k]))
+        forces.append(item)
 
-    # Joint rates at the mid-point: thetadot_k = a_k x (v_k - V_k) / |c_k|^2 at v_m.
-    vm = [add(v, scale(sp.Rational(1, 2), d)) for v, d in zip(v0v, dvv)]
-    joint_velocities = chain.joints(vm, "Vm")
-    absolute = [defs.define(f"thetadot_m{k}", cross(a, sub(v, V))
+    # Joint rates at the mid-point: thetadot_k = a_k x (B v_m)_k / |c_k|^2.
+    absolute = [defs.define(f"thetadot_m{k}", cross(a, r)
                             / number(link.com ** 2 + link.com_normal ** 2))
-                for k, (a, v, V, link) in enumerate(zip(arms, vm, joint_velocities,
-                                                        scene.links), start=1)]
+                for k, (a, r, link) in enumerate(zip(arms, arm_rates_mid, scene.links), start=1)]
     rates = [after - before for before, after in zip([sp.Integer(0)] + absolute[:-1], absolute)]
     torques = torques_of(rates)
     if any(t != 0 for t in torques):
@@ -163,22 +186,17 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of, defs:
             weight = torques[k] - following[k]
             if weight != 0:
                 c2 = number(link.com ** 2 + link.com_normal ** 2)
-                through[k] = add(through[k], scale(-dt * weight / c2, perp(arms[k])))
+                forces[k] = add(forces[k], scale(-dt * weight / c2, perp(arms[k])))
 
-    points = {}
     if scene.springs:
         nodes, weights = gauss_legendre_nodes(quadrature)
         for i, spring in enumerate(scene.springs):
             offsets = scene.spring_fastenings(spring)
             js = list(range(spring.first, spring.last + 1))
-            starts, changes = [], []
-            for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:])):
-                start = sub(chain.fastening(j + 1, r1, q0v, joints0, False),
-                            chain.fastening(j, r0, q0v, joints0, False))
-                change = sub(chain.fastening(j + 1, r1, dq, joint_steps, True),
-                             chain.fastening(j, r0, dq, joint_steps, True))
-                starts.append(defs.vector(f"spring{i}_d{j}", start))
-                changes.append(defs.vector(f"spring{i}_dd{j}", change))
+            starts = [defs.vector(f"spring{i}_d{j}", chain.segment(j, r0, r1, arms0, False))
+                      for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
+            changes = [defs.vector(f"spring{i}_dd{j}", chain.segment(j, r0, r1, arm_steps, True))
+                       for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
             totals = [ZERO for _ in js]
             for g, (tau, weight) in enumerate(zip(nodes, weights)):
                 lengths, node_vectors = [], []
@@ -196,15 +214,19 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of, defs:
                     totals[s] = add(totals[s], scale(share, point))
             for j, total, r0, r1 in zip(js, totals, offsets[:-1], offsets[1:]):
                 total = defs.vector(f"spring{i}_f{j}", scale(dt, total))
-                # dt F_j on d_j = P_{j+1} - P_j: +F_j on P_{j+1}, -F_j on P_j
-                for point, sign, r in ((j + 1, 1, r1), (j, -1, r0)):
-                    force, moment = points.get(point, (ZERO, ZERO))
-                    points[point] = (add(force, scale(sign, total)),
-                                     add(moment, scale(sign * number(r), total)))
-    gradient = chain.sweep(direct, through, points, "sweep_")
-    momentum = [g[0] for g in gradient] + [g[1] for g in gradient]
-    return momentum, constraint_increments, rates
+                for k, pulled in chain.segment_transpose(j, r0, r1, total):
+                    forces[k - 1] = add(forces[k - 1], pulled)
 
+    direct = []
+    for k, link in enumerate(scene.links):
+        m = number(link.mass)
+        term = scale(m, dvv[k])
+        if scene.gravity:
+            term = add(term, (sp.Integer(0), dt * m * number(scene.gravity)))
+        direct.append(term)
+    gradient = chain.sweep(direct, forces, "sweep_")
+    momentum = [g[0] for g in gradient] + [g[1] for g in gradient]
+    return EsStep(momentum, constraint_increments, rates, w, forces)
 
 
 def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:
@@ -248,8 +270,7 @@ def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:
         lengths = []
         for j, (r0, r1) in zip(range(spring.first, spring.last + 1),
                                zip(offsets[:-1], offsets[1:])):
-            d = defs.vector(f"spring{i}_d{j}", sub(chain.fastening(j + 1, r1, coms, joints, False),
-                                                   chain.fastening(j, r0, coms, joints, False)))
+            d = defs.vector(f"spring{i}_d{j}", chain.segment(j, r0, r1, arms, False))
             segments += list(d)
             lengths.append(sp.sqrt(d[0] ** 2 + d[1] ** 2))
         stretch = sp.Add(*lengths) - number(spring.rest_length)

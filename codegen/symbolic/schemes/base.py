@@ -45,6 +45,23 @@ class LinearSolve:
 
 
 @dataclass(frozen=True)
+class ArmSpace:
+    """The factors of es's Newton matrix (docs/model.md, section 18).
+
+    es's momentum balance is M dv + dt m g + B^T h(w, mu) and its constraint rows are c(w),
+    with M the COM masses, B the constant map q -> arms d_k = x_k - X_k and w = B dv. h and c
+    are local in the arms, so the Jacobian [[M + B^T H B, B^T G_mu], [G_c B, 0]] is known from
+    H = dh/dw (banded), G_mu = dh/dmu and G_c = dc/dw (2 entries per link each), the masses
+    and the maps A_k = L_k R_k of the recursion X_{k+1} = X_k + A_k d_k; the C code solves it
+    in O(n^2) (chaingen_arm_solve.h) instead of forming and factorising it densely."""
+
+    arm_increments: ImmutableMatrix   # w: 2n symbols defined in `definitions`, link by link
+    forces: ImmutableMatrix           # h: 2n entries, link by link
+    masses: ImmutableMatrix           # m_k
+    maps: ImmutableMatrix             # A_k = L_k R_k, row-major, 4 entries per link
+
+
+@dataclass(frozen=True)
 class FlowDescription:
     """How a scheme measures the energy flows of a step, and the balance they satisfy
     (docs/model.md, section 7); written into the generated header."""
@@ -133,6 +150,9 @@ class DiscreteScheme:
     # T(x), for the check of a converged step against the energy balance (docs/model.md,
     # section 13) of a scheme that does not keep it exactly (vi, midpoint); None: no check.
     kinetic_energy: sp.Expr | None = None
+    # The factors of the Newton matrix where the package solves it by them (es at large n),
+    # else None: dense LU of dF/dz.
+    arm_space: ArmSpace | None = None
 
     @property
     def step_inputs(self) -> list[sp.Symbol]:

@@ -20,11 +20,12 @@ from sympy import ImmutableMatrix
 from ...errors import SettingsError
 from ...runtime.contract import JACOBIAN_PER_STEP
 from ...scene import Scene, quadrature_used
-from ..com_model import com_model, coordinates, number
+from ..com_model import com_frame_map, com_model, coordinates, number
 from ..com_recursion import es_step, joint_space_start, state_quantities
 from ..composition import order_error
 from ..recursion import Definitions
 from .base import (
+    ArmSpace,
     DiscreteScheme,
     FlowDescription,
     Layout,
@@ -40,6 +41,10 @@ from .base import (
 #: tolerance, and at the contract's 1e-10 the energy balance of four_link_actuated drifts by
 #: 6.4e-12 J over 400 steps of 0.01 s; at 1e-12, 1.5e-13 J for 8 % more iterations.
 COMPOSED_UPDATE_RTOL = 1e-12
+
+#: es solves its Newton systems by the Jacobian's factors (ArmSpace, O(n^2)) from this many
+#: links on, by dense LU of the 3n x 3n Jacobian below (docs/benchmarks.md, the switch).
+ARM_SOLVE_MIN_LINKS = 4
 
 SUMMARY = ("Energy-stable discrete gradient scheme in COM coordinates with constraints "
            "(docs/model.md, section 4).")
@@ -72,9 +77,12 @@ def tangent_velocity_solve(model) -> tuple[LinearSolve, ImmutableMatrix]:
                         rhs=rhs), tangent)
 
 
-def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
+def build(scene: Scene, quadrature: int, order: int = 2,
+          arm_solve: bool | None = None) -> DiscreteScheme:
     """The es step; for order > 2 (a composition of steps) the joint rates come from the
-    velocity projected onto C(q) v = 0 (tangent_velocity_solve)."""
+    velocity projected onto C(q) v = 0 (tangent_velocity_solve). arm_solve: whether the
+    package solves the Newton systems by the factors of the Jacobian (ArmSpace) instead of
+    dense LU; None: from ARM_SOLVE_MIN_LINKS links on."""
     refused = order_error("es", order)
     if refused:
         raise SettingsError(f"--order {order}: {refused}")
@@ -82,6 +90,8 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         raise ValueError("es composes its own step to order 4 at most: order 6 is "
                          "chaingen.symbolic.schemes.galerkin's")
     n = scene.n
+    if arm_solve is None:
+        arm_solve = n >= ARM_SOLVE_MIN_LINKS
     dt = sp.Symbol("dt", positive=True)
     q0, v0 = coordinates(scene)
     # The unknown is the velocity increment dv = v_1 - v_0 (then dq = dt (v_0 + dv/2), the
@@ -105,13 +115,22 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
                 for u, link, rate in zip(applied, scene.links, rates)]
 
     step = Definitions("step_")
-    momentum_balance, constraint_increment, rates_mid = es_step(
-        scene, q0, v0, dv, mu, dt, quadrature if scene.springs else 1, torques_of, step)
+    parts = es_step(scene, q0, v0, dv, mu, dt, quadrature if scene.springs else 1, torques_of,
+                    step)
+    rates_mid = parts.rates
     definitions = tuple(step.items)
     input_work = dt * sp.Add(*(u * rate for u, rate in zip(applied, rates_mid)))
     dissipated = dt * sp.Add(*(number(link.damping) * rate ** 2
                                for link, rate in zip(scene.links, rates_mid) if link.damping))
-    residual = ImmutableMatrix(list(momentum_balance) + list(constraint_increment))
+    residual = ImmutableMatrix(list(parts.momentum) + list(parts.constraint_increments))
+    arm_space = None
+    if arm_solve:
+        arm_space = ArmSpace(
+            arm_increments=ImmutableMatrix([c for w in parts.arm_increments for c in w]),
+            forces=ImmutableMatrix([c for h in parts.forces for c in h]),
+            masses=ImmutableMatrix([number(link.mass) for link in scene.links]),
+            maps=ImmutableMatrix([number(link.length) * entry for link in scene.links
+                                  for entry in com_frame_map(link)]))
 
     # Joint space: phi_i is the angle from e_{i-1} to e_i, wrapped to (-pi, pi] by atan2; the
     # state's quantities by the same recursions (com_recursion.state_quantities).
@@ -168,5 +187,6 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         # full Newton (docs/benchmarks.md, speed knobs).
         jacobian_reuse=JACOBIAN_PER_STEP, state_from_joint_space=False,
         newton_overrides=(("update_rtol", COMPOSED_UPDATE_RTOL),) if order > 2 else (),
+        arm_space=arm_space,
         **common_fields(scene, phi),
     )
