@@ -157,7 +157,10 @@ class SchemeFunctions:
     arm_pattern: tuple[tuple[int, ...], tuple[int, ...]] | None = None
 
     def all(self) -> tuple[ca.Function, ...]:
-        functions = (self.residual, self.residual_jacobian, self.predictor, self.next_state,
+        """The functions of the generated C. A package with newton_factors forms its
+        residual_jacobian from them (chaingen_arm_solve.h): CasADi's stays in Python."""
+        dense = self.residual_jacobian if self.newton_factors is None else None
+        functions = (self.residual, dense, self.predictor, self.next_state,
                      self.outputs, self.initial_state, self.sensitivity_rhs,
                      self.sensitivity_map, self.joint_maps, self.holding_torques,
                      self.segment_margins, self.energy_check, self.newton_factors,

@@ -186,6 +186,57 @@ static void chaingen_arm_solve(const chaingen_arm_system *s, double *b)
     chaingen_arm_to_q(s, dw, b);
 }
 
+/* The dense Jacobian J (3n x 3n, column-major) from the factors, O(n^2): column by column, the
+ * arms' w = B e by the recursion w_k = x_k - X_k, X_{k+1} = X_k + A_k w_k, then
+ * M e + B^T (H w) and G_c w (a dv column), or B^T G_mu e and 0 (a dmu column); B^T y by the
+ * sweep g_k = y_k + A_k^T L_{k+1}, L_k = -y_k + (I - A_k)^T L_{k+1}. For verification
+ * (residual_jacobian): the Newton loop never forms J. Uses scratch[0, 4n). */
+static void chaingen_arm_jacobian(const chaingen_arm_system *s, double *J)
+{
+    const int n = s->n, nz = 3 * n;
+    const double *gmu = CHAINGEN_ARM_GMU(s), *gc = CHAINGEN_ARM_GC(s);
+    const double *m = CHAINGEN_ARM_MASS(s), *A = CHAINGEN_ARM_MAP(s);
+    double *w = s->scratch, *y = w + 2 * n;
+    int c, k;
+    for (c = 0; c < nz; ++c) {
+        double *column = J + c * nz, X0 = 0.0, X1 = 0.0, L0 = 0.0, L1 = 0.0;
+        for (k = 0; k < 2 * n; ++k) {
+            y[k] = 0.0;
+        }
+        if (c < 2 * n) {
+            for (k = 0; k < n; ++k) {
+                const double *a = A + 4 * k;
+                w[2 * k] = (c == k) - X0;
+                w[2 * k + 1] = (c == n + k) - X1;
+                X0 += a[0] * w[2 * k] + a[1] * w[2 * k + 1];
+                X1 += a[2] * w[2 * k] + a[3] * w[2 * k + 1];
+                column[2 * n + k] = gc[2 * k] * w[2 * k] + gc[2 * k + 1] * w[2 * k + 1];
+            }
+            for (k = 0; k < s->nh; ++k) {
+                y[s->h_row[k]] += s->h[k] * w[s->h_col[k]];
+            }
+        } else {
+            k = c - 2 * n;
+            y[2 * k] = gmu[2 * k];
+            y[2 * k + 1] = gmu[2 * k + 1];
+            for (k = 0; k < n; ++k) {
+                column[2 * n + k] = 0.0;
+            }
+        }
+        for (k = n - 1; k >= 0; --k) {
+            const double *a = A + 4 * k, y0 = y[2 * k], y1 = y[2 * k + 1];
+            column[k] = (c == k ? m[k] : 0.0) + y0 + a[0] * L0 + a[2] * L1;
+            column[n + k] = (c == n + k ? m[k] : 0.0) + y1 + a[1] * L0 + a[3] * L1;
+            {
+                const double next0 = -y0 + (1.0 - a[0]) * L0 - a[2] * L1;
+                const double next1 = -y1 - a[1] * L0 + (1.0 - a[3]) * L1;
+                L0 = next0;
+                L1 = next1;
+            }
+        }
+    }
+}
+
 /* The residual's scale 1 + sum_j |J_ij| |z_j| of the Newton test, bounded from above by the
  * factors: |M| |dv| + |B|^T (|H| |B| |dv| + |G_mu| |dmu|) and |G_c| |B| |dv|, with |B| bounded
  * by the recursion w_k = x_k - X_k, X_{k+1} = (I - A_k) X_k + A_k x_k taken entrywise in
