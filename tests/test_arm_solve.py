@@ -89,6 +89,7 @@ def test_short_chains_keep_dense_lu_and_long_ones_solve_by_the_factors():
     assert build_scheme(scaling_scene(es.ARM_SOLVE_MIN_LINKS), "vi", 3).arm_space is None
 
 
+@pytest.mark.heavy
 def test_h_has_a_few_entries_per_link():
     """dh/dw is banded: each link's arm couples to its neighbours' and, through a
     multi-articular spring, to those over its span; not to the whole chain."""

@@ -6,10 +6,12 @@
 #include "four_link_actuated_es.h"
 #include "four_link_actuated_es_model.h"
 #include "chaingen_lu.h"
+#include "chaingen_arm_solve.h"
 
 #define NX FOUR_LINK_ACTUATED_ES_NX
 #define NZ FOUR_LINK_ACTUATED_ES_NZ
 #define N_JOINTS FOUR_LINK_ACTUATED_ES_N_JOINTS
+#define ARM_NH 40   /* structural nonzeros of the Newton factor H */
 #define NCONSTRAINT 4
 #define NSEGMENT 3   /* spring segments watched for collapse */
 
@@ -123,6 +125,57 @@ static void step_arguments(const double *z, const double *x0, const double *u, c
     workspace->arg[3] = dt;
 }
 
+/* The structural nonzeros of H = dh/dw (chaingen_arm_solve.h), on the arms: row, column. */
+static const int arm_h_row[ARM_NH] = { 0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 0, 1,
+    2, 3, 4, 5, 6, 7, 6, 7 };
+static const int arm_h_col[ARM_NH] = { 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 5, 5,
+    5, 5, 5, 5, 6, 6, 7, 7 };
+
+/* The Newton matrix's factors in the workspace, as chaingen_arm_solve.h reads them. */
+static chaingen_arm_system arm_system(four_link_actuated_es_workspace *workspace)
+{
+    chaingen_arm_system system;
+    system.n = N_JOINTS;
+    system.nh = ARM_NH;
+    system.h_row = arm_h_row;
+    system.h_col = arm_h_col;
+    system.h = workspace->arm_factors;
+    system.derived = workspace->arm_derived;
+    system.reduced = workspace->jacobian;
+    system.pivot = workspace->pivot;
+    system.scratch = workspace->arm_scratch;
+    return system;
+}
+
+/* F and the factors of dF/dz at z (the jacobian argument is unused: the factors go to the
+ * workspace). */
+static int newton_factors(const double *z, const double *x0, const double *u, double dt,
+                          double *residual, double *jacobian,
+                          four_link_actuated_es_workspace *workspace)
+{
+    (void)jacobian;
+    step_arguments(z, x0, u, &dt, workspace);
+    workspace->res[0] = residual;
+    workspace->res[1] = workspace->arm_factors;
+    return evaluate(four_link_actuated_es_model_newton_factors, workspace);
+}
+
+/* Factorise the Newton matrix whose factors newton_factors left in the workspace: the reduced
+ * n x n system of chaingen_arm_solve.h. Nonzero: singular. */
+static int factorise(four_link_actuated_es_workspace *workspace)
+{
+    const chaingen_arm_system system = arm_system(workspace);
+    return chaingen_arm_factor(&system);
+}
+
+/* Solve dF/dz x = b in place of b, with the factors of factorise(). */
+static void solve_newton(four_link_actuated_es_workspace *workspace, double *b)
+{
+    const chaingen_arm_system system = arm_system(workspace);
+    chaingen_arm_solve(&system, b);
+}
+
+
 int four_link_actuated_es_residual(const double *z, const double *x0, const double *u, double dt,
                                    double *residual, four_link_actuated_es_workspace *workspace)
 {
@@ -141,10 +194,16 @@ int four_link_actuated_es_residual_jacobian(const double *z, const double *x0, c
     if (!z || !x0 || !u || !residual || !jacobian || !workspace) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
     }
-    step_arguments(z, x0, u, &dt, workspace);
-    workspace->res[0] = residual;
-    workspace->res[1] = jacobian;
-    return evaluate(four_link_actuated_es_model_residual_jacobian, workspace);
+    /* From the factors, which replace the workspace's: its kept factorisation is no more. */
+    workspace->factors_valid = 0;
+    if (newton_factors(z, x0, u, dt, residual, jacobian, workspace)) {
+        return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
+    }
+    {
+        const chaingen_arm_system system = arm_system(workspace);
+        chaingen_arm_jacobian(&system, jacobian);
+    }
+    return FOUR_LINK_ACTUATED_ES_OK;
 }
 
 /* Solutions of chained steps kept for the warm start: extrapolation of degree HISTORY - 1. */
@@ -256,9 +315,10 @@ static int choose_warm_start(const double *x0, double dt,
     return FOUR_LINK_ACTUATED_ES_OK;
 }
 
+
 /* Newton's method on F(z, x0, u, dt) = 0 from the first guess, full, simplified or chord (see
- * the options in the header), dense LU with partial pivoting, at most options->max_iterations
- * linear solves. Leaves z in workspace->z. */
+ * the options in the header), with the linear solves of factorise() and solve_newton(), at most
+ * options->max_iterations of them. Leaves z in workspace->z. */
 static int newton(const double *x0, const double *u, double dt,
                   const four_link_actuated_es_options *options, int warm,
                   four_link_actuated_es_workspace *workspace, int *iterations)
@@ -279,18 +339,15 @@ static int newton(const double *x0, const double *u, double dt,
     }
     while (status == FOUR_LINK_ACTUATED_ES_NOT_CONVERGED && iteration < options->max_iterations) {
         double residual_norm = 0.0, update_norm = 0.0;
-        int evaluated, j;
+        int evaluated;
         ++iteration;
         if (!workspace->factors_valid) {
-            evaluated = four_link_actuated_es_residual_jacobian(z, x0, u, dt, residual, jacobian, workspace);
-            /* The residual's scale at this Jacobian: 1 + sum_j |dF_i/dz_j| |z_j|. */
-            for (i = 0; i < NZ; ++i) {
-                workspace->residual_scale[i] = 1.0;
-            }
-            for (j = 0; j < NZ; ++j) {
-                for (i = 0; i < NZ; ++i) {
-                    workspace->residual_scale[i] += fabs(jacobian[i + j * NZ]) * fabs(z[j]);
-                }
+            chaingen_arm_system system = arm_system(workspace);
+            evaluated = newton_factors(z, x0, u, dt, residual, jacobian, workspace);
+            /* The residual's scale at this Jacobian, 1 + sum_j |dF_i/dz_j| |z_j|, bounded by
+             * its factors. */
+            if (!evaluated) {
+                chaingen_arm_scale(&system, z, workspace->residual_scale);
             }
         } else {
             evaluated = four_link_actuated_es_residual(z, x0, u, dt, residual, workspace);
@@ -313,7 +370,7 @@ static int newton(const double *x0, const double *u, double dt,
             break;
         }
         if (!workspace->factors_valid) {
-            if (chaingen_lu_factor(NZ, jacobian, workspace->pivot)) {
+            if (factorise(workspace)) {
                 status = FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN;
                 break;
             }
@@ -322,7 +379,7 @@ static int newton(const double *x0, const double *u, double dt,
             fresh = 1;
             previous_update = -1.0;   /* a new Jacobian: contraction is measured afresh */
         }
-        chaingen_lu_solve(NZ, jacobian, workspace->pivot, dz);
+        solve_newton(workspace, dz);
         for (i = 0; i < NZ; ++i) {
             double ratio = fabs(dz[i]) / (options->update_atol + options->update_rtol * fabs(z[i]));
             if (!(ratio <= update_norm)) {
@@ -554,10 +611,10 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
         return status;
     }
     /* dF/dz at the converged z, factorised once. */
-    if (four_link_actuated_es_residual_jacobian(workspace->z, x0, u, dt, workspace->residual, workspace->jacobian, workspace)) {
+    if (newton_factors(workspace->z, x0, u, dt, workspace->residual, workspace->jacobian, workspace)) {
         return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
     }
-    if (chaingen_lu_factor(NZ, workspace->jacobian, workspace->pivot)) {
+    if (factorise(workspace)) {
         workspace->factors_valid = 0;
         return FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN;
     }
@@ -571,7 +628,7 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
         return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
     }
     for (j = 0; j < NSENS; ++j) {
-        chaingen_lu_solve(NZ, workspace->jacobian, workspace->pivot, rhs + j * NZ);
+        solve_newton(workspace, rhs + j * NZ);
     }
     /* ds1 = S_z Z + [S_s0, S_u, S_p]. */
     step_arguments(workspace->z, x0, u, &dt, workspace);

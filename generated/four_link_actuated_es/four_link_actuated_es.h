@@ -197,11 +197,17 @@ typedef struct {
     const double *arg[4];
     double *res[4];
     long long int iw[1];
-    double w[419];
+    double w[407];
     double z[FOUR_LINK_ACTUATED_ES_NZ];
     double dz[FOUR_LINK_ACTUATED_ES_NZ];
     double residual[FOUR_LINK_ACTUATED_ES_NZ];
-    double jacobian[FOUR_LINK_ACTUATED_ES_NZ * FOUR_LINK_ACTUATED_ES_NZ];
+    /* The Newton matrix by its factors (chaingen_arm_solve.h): H's nonzeros, G_mu, G_c, the
+     * masses and maps A_k; what factorise() derives from them; the reduced n x n matrix and its
+     * LU factors; the solve's scratch. */
+    double arm_factors[76];
+    double arm_derived[60];
+    double jacobian[FOUR_LINK_ACTUATED_ES_N_JOINTS * FOUR_LINK_ACTUATED_ES_N_JOINTS];
+    double arm_scratch[24];
     int pivot[FOUR_LINK_ACTUATED_ES_NZ];
     double state[2][FOUR_LINK_ACTUATED_ES_NX];
     double candidate[FOUR_LINK_ACTUATED_ES_NX];

@@ -3,7 +3,6 @@
 #define FOUR_LINK_ACTUATED_ES_MODEL_H
 
 int four_link_actuated_es_model_residual(const double** arg, double** res, long long int* iw, double* w, int mem);
-int four_link_actuated_es_model_residual_jacobian(const double** arg, double** res, long long int* iw, double* w, int mem);
 int four_link_actuated_es_model_predictor(const double** arg, double** res, long long int* iw, double* w, int mem);
 int four_link_actuated_es_model_next_state(const double** arg, double** res, long long int* iw, double* w, int mem);
 int four_link_actuated_es_model_outputs(const double** arg, double** res, long long int* iw, double* w, int mem);
@@ -12,5 +11,6 @@ int four_link_actuated_es_model_sensitivity_rhs(const double** arg, double** res
 int four_link_actuated_es_model_sensitivity_map(const double** arg, double** res, long long int* iw, double* w, int mem);
 int four_link_actuated_es_model_holding_torques(const double** arg, double** res, long long int* iw, double* w, int mem);
 int four_link_actuated_es_model_segment_margins(const double** arg, double** res, long long int* iw, double* w, int mem);
+int four_link_actuated_es_model_newton_factors(const double** arg, double** res, long long int* iw, double* w, int mem);
 
 #endif /* FOUR_LINK_ACTUATED_ES_MODEL_H */

@@ -41,7 +41,21 @@ static int chaingen_lu_factor(int n, double *a, int *pivot)
         for (i = k + 1; i < n; ++i) {
             a[i + k * n] *= reciprocal;
         }
-        for (j = k + 1; j < n; ++j) {
+        /* The trailing update, four columns at a time: each entry of column k is loaded once
+         * for the four (the update is bound by loads at these sizes). */
+        for (j = k + 1; j + 3 < n; j += 4) {
+            const double *l = a + k * n;
+            double *c0 = a + j * n, *c1 = c0 + n, *c2 = c1 + n, *c3 = c2 + n;
+            const double u0 = c0[k], u1 = c1[k], u2 = c2[k], u3 = c3[k];
+            for (i = k + 1; i < n; ++i) {
+                const double li = l[i];
+                c0[i] -= li * u0;
+                c1[i] -= li * u1;
+                c2[i] -= li * u2;
+                c3[i] -= li * u3;
+            }
+        }
+        for (; j < n; ++j) {
             double ukj = a[k + j * n];
             for (i = k + 1; i < n; ++i) {
                 a[i + j * n] -= a[i + k * n] * ukj;

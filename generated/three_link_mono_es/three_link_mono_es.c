@@ -109,6 +109,20 @@ static void step_arguments(const double *z, const double *x0, const double *dt,
     workspace->arg[2] = dt;
 }
 
+/* Factorise dF/dz in workspace->jacobian in place: dense LU with partial pivoting. Nonzero:
+ * singular. */
+static int factorise(three_link_mono_es_workspace *workspace)
+{
+    return chaingen_lu_factor(NZ, workspace->jacobian, workspace->pivot);
+}
+
+/* Solve dF/dz x = b in place of b, with the factors of factorise(). */
+static void solve_newton(three_link_mono_es_workspace *workspace, double *b)
+{
+    chaingen_lu_solve(NZ, workspace->jacobian, workspace->pivot, b);
+}
+
+
 int three_link_mono_es_residual(const double *z, const double *x0, double dt, double *residual,
                                 three_link_mono_es_workspace *workspace)
 {
@@ -241,9 +255,10 @@ static int choose_warm_start(const double *x0, double dt, const three_link_mono_
     return THREE_LINK_MONO_ES_OK;
 }
 
+
 /* Newton's method on F(z, x0, dt) = 0 from the first guess, full, simplified or chord (see
- * the options in the header), dense LU with partial pivoting, at most options->max_iterations
- * linear solves. Leaves z in workspace->z. */
+ * the options in the header), with the linear solves of factorise() and solve_newton(), at most
+ * options->max_iterations of them. Leaves z in workspace->z. */
 static int newton(const double *x0, double dt, const three_link_mono_es_options *options, int warm,
                   three_link_mono_es_workspace *workspace, int *iterations)
 {
@@ -297,7 +312,7 @@ static int newton(const double *x0, double dt, const three_link_mono_es_options 
             break;
         }
         if (!workspace->factors_valid) {
-            if (chaingen_lu_factor(NZ, jacobian, workspace->pivot)) {
+            if (factorise(workspace)) {
                 status = THREE_LINK_MONO_ES_SINGULAR_JACOBIAN;
                 break;
             }
@@ -306,7 +321,7 @@ static int newton(const double *x0, double dt, const three_link_mono_es_options 
             fresh = 1;
             previous_update = -1.0;   /* a new Jacobian: contraction is measured afresh */
         }
-        chaingen_lu_solve(NZ, jacobian, workspace->pivot, dz);
+        solve_newton(workspace, dz);
         for (i = 0; i < NZ; ++i) {
             double ratio = fabs(dz[i]) / (options->update_atol + options->update_rtol * fabs(z[i]));
             if (!(ratio <= update_norm)) {
@@ -527,7 +542,7 @@ int three_link_mono_es_step_sensitivities(const double *x0, double dt, double *x
     if (three_link_mono_es_residual_jacobian(workspace->z, x0, dt, workspace->residual, workspace->jacobian, workspace)) {
         return THREE_LINK_MONO_ES_EVALUATION_FAILED;
     }
-    if (chaingen_lu_factor(NZ, workspace->jacobian, workspace->pivot)) {
+    if (factorise(workspace)) {
         workspace->factors_valid = 0;
         return THREE_LINK_MONO_ES_SINGULAR_JACOBIAN;
     }
@@ -541,7 +556,7 @@ int three_link_mono_es_step_sensitivities(const double *x0, double dt, double *x
         return THREE_LINK_MONO_ES_EVALUATION_FAILED;
     }
     for (j = 0; j < NSENS; ++j) {
-        chaingen_lu_solve(NZ, workspace->jacobian, workspace->pivot, rhs + j * NZ);
+        solve_newton(workspace, rhs + j * NZ);
     }
     /* ds1 = S_z Z + [S_s0, S_u, S_p]. */
     step_arguments(workspace->z, x0, &dt, workspace);

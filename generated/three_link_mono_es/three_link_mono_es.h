@@ -174,7 +174,7 @@ typedef struct {
     const double *arg[3];
     double *res[4];
     long long int iw[1];
-    double w[242];
+    double w[241];
     double z[THREE_LINK_MONO_ES_NZ];
     double dz[THREE_LINK_MONO_ES_NZ];
     double residual[THREE_LINK_MONO_ES_NZ];
