@@ -183,27 +183,46 @@ def test_step_sensitivities_by_the_factors_equal_dense_lus(arm_solve, order):
 
 @pytest.mark.tools
 def test_a_factored_package_is_clean_under_valgrind_and_the_sanitizers(arm_solve, tmp_path):
-    """Off-axis COMs (general 2 x 2 maps), damping and actuation, with step sensitivities:
-    the example program under memcheck and under ASan/UBSan with the strict flags."""
+    """COMs off the links' axes (general 2 x 2 maps A_k), multi-articular springs: the example
+    program and a call of step_sensitivities (the factored solve with many right-hand sides)
+    under memcheck and under ASan/UBSan with the strict flags."""
     require_tools("gcc", "valgrind")
-    from chaingen.generate.package import generate_package, write_package
-
     from test_standalone_package import SANITIZE, STRICT, valgrind_clean
+
+    from chaingen.generate.package import generate_package, write_package
 
     arm_solve(True)
     package = write_package(generate_package(load("five_link_biarticular"), "es", 3),
                             tmp_path / "package")
-    sources = json.loads((package / "chaingen.json").read_text())["sources"]
-    assert (package / "chaingen_arm_solve.h").exists()
-    for name, flags, runner in (("memcheck", ["-g", "-O1"],
-                                 ["valgrind", "--error-exitcode=99", "--track-origins=yes"]),
-                                ("sanitized", SANITIZE, [])):
-        binary = tmp_path / f"example.{name}"
-        subprocess.run(["gcc", *flags, *STRICT, f"-I{package}",
-                        *(str(package / s) for s in sources), str(package / "example.c"),
-                        "-lm", "-o", str(binary)], check=True, capture_output=True)
-        result = subprocess.run([*runner, str(binary), "0.5"], capture_output=True, text=True)
-        if runner:
-            valgrind_clean(result)
-        else:
-            assert result.returncode == 0, result.stderr
+    manifest = json.loads((package / "chaingen.json").read_text())
+    prefix, sources = manifest["prefix"], manifest["sources"]
+    assert (package / "chaingen_arm_solve.h").exists() and manifest["sensitivities"]
+    (package / "sensitivities.c").write_text(f"""#include "{prefix}.h"
+int main(void)
+{{
+    static {prefix}_workspace ws;
+    double phi[5] = {{0.3, -0.2, 0.1, 0.4, -0.3}}, phidot[5] = {{0.5, 0.0, -0.3, 0.2, 0.1}};
+    double x[{prefix.upper()}_NX], x1[{prefix.upper()}_NX], ds_ds[100];
+    int iterations, status;
+    {prefix}_workspace_init(&ws);
+    status = {prefix}_initial_state(phi, phidot, x, &ws);
+    if (status == 0) {{
+        status = {prefix}_step_sensitivities(x, 0.01, x1, ds_ds, NULL, &ws, &iterations);
+    }}
+    return status;
+}}
+""")
+    for program, arguments in (("example.c", ["0.5"]), ("sensitivities.c", [])):
+        for name, flags, runner in (("memcheck", ["-g", "-O1"],
+                                     ["valgrind", "--error-exitcode=99", "--track-origins=yes"]),
+                                    ("sanitized", SANITIZE, [])):
+            binary = tmp_path / f"{program}.{name}"
+            subprocess.run(["gcc", *flags, *STRICT, f"-I{package}",
+                            *(str(package / s) for s in sources), str(package / program),
+                            "-lm", "-o", str(binary)], check=True, capture_output=True)
+            result = subprocess.run([*runner, str(binary), *arguments], capture_output=True,
+                                    text=True)
+            if runner:
+                valgrind_clean(result)
+            else:
+                assert result.returncode == 0, result.stderr

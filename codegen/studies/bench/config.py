@@ -95,7 +95,12 @@ TARGET_RATIO_VI = 0.15         # b: vi step / MuJoCo RK4 step
 TARGET_EQUAL_ERROR = 1e-10     # c: the energy error (J) at which CPU times are compared
 TARGET_SCIPY_OVER_ES = 100.0   # c: DOP853 CPU / es CPU at that error
 TARGET_BUILD_SECONDS = 20.0    # d: generate + build at n = 20
-TARGET_SCALING_RATIO = 5.0     # d: es step / MuJoCo RK4 step at n = 20
+#: d, long chains: generate + build seconds of each scheme at n (the scaling chain).
+TARGET_SCALING_BUILD = ((20, TARGET_BUILD_SECONDS), (50, 60.0))
+#: d, long chains: step / MuJoCo RK4 step on the scaling chain at dt = 0.01 s, (scheme, n,
+#: target): es at most half of RK4's at n = 20 and 50, vi and midpoint at most RK4's at n = 20.
+TARGET_SCALING_RATIOS = (("es K=3", 20, 0.5), ("es K=3", 50, 0.5), ("vi", 20, 1.0),
+                         ("midpoint", 20, 1.0))
 TARGET_STEP_OVER_EVALUATION = 2.5   # e: es K=3 step / one residual-and-Jacobian evaluation
 HEADLINE_DT = 0.01
 #: f, g: (trajectory error at EARLY_T [rad], energy error [J]) that a run must hold both of;

@@ -6,7 +6,7 @@ start against the scheme's predictor), full against simplified Newton, the Newto
 and the compiler flags of the solver source. Each row also has the energy error of the standard
 run with the same options, so a knob's speed is always read next to what it costs in accuracy.
 On the largest scaling chain the compiler knobs are measured again, where they matter: the
-optimisation level of the solver (its dense LU) and of the large generated model.
+optimisation level of the solver (its LU) and of the large generated model.
 """
 from __future__ import annotations
 

@@ -258,8 +258,9 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
 KNOBS_TEXT = """\
 One knob changed at a time against the package defaults, on {scene} at dt = {dt} s (step time
 of the C loop, median of repeats; energy error over the standard run with the same options), and
-the compiler knobs again on the largest chain of the scaling series, where the dense LU and the
-size of the generated model dominate. The package defaults are warm start, Newton-chord (the
+the compiler knobs again on the largest chain of the scaling series (up to 20 links), where the
+LU (es: of the n x n reduced system, docs/model.md section 18) and the size of the generated
+model dominate. The package defaults are warm start, Newton-chord (the
 Jacobian evaluated and factorised once a step, reused within it) for "es" and "midpoint" and
 simplified Newton (reused across steps) for "vi", tolerances {tolerances}, the solver
 source at -O3 and a generated model larger than 1 MB at -O1. "step / (F, dF/dz)" is the step's
