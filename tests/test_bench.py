@@ -345,7 +345,7 @@ def test_scaling_point_measures_time_and_memory():
     """One point of the scaling series as its child process computes it (n = 2, cheap)."""
     from chaingen.studies.bench.scaling import measure_scaling_point
 
-    point = measure_scaling_point("midpoint", 3, 2, n_steps=50, repeats=1)
+    point = measure_scaling_point("midpoint", 3, 2, n_steps=50, repeats=2)
     assert point["generate_seconds"] > 0 and point["build_seconds"] > 0
     assert point["generate_peak_kb"] > 0 and point["model_c_bytes"] > 0
     if Path("/usr/bin/time").exists():
@@ -354,3 +354,4 @@ def test_scaling_point_measures_time_and_memory():
     for variant in VARIANTS:
         timing = point["timings"][variant.label]
         assert timing["dt"] == 0.01 and timing["step_ns"] > 0 and not timing["failures"]
+        assert timing["mujoco_step_seconds"] > 0      # MuJoCo timed beside it, in the child

@@ -238,7 +238,9 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
                   "with the passes it runs (GNU time). "
                   f"Per step: {config.scaling_steps} steps from the initial state "
                   f"({config.scaling_steps} x 20 / n, at least 100, and at most 3 repeats "
-                  "beyond n = 20, so that timing stays within its own allowance of 300 s).",
+                  "beyond n = 20, so that timing stays within its own allowance of 300 s), "
+                  "median of the repeats; each repeat is followed by one of MuJoCo RK4 on the "
+                  "same model, dt and steps, and the ratio is of the two medians.",
                   "",
                   f"![scaling]({_link(figures['scaling'], config.out)})", "",
                   scaling_table(scaling), ""]

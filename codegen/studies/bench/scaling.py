@@ -102,7 +102,9 @@ def measure_scaling_point(method: str, quadrature: int, n: int, *, n_steps: int,
     done as build_scheme + render_package to keep the scheme for the initial state).
     generate_peak_kb: this process's peak RSS after generating (Python, SymPy, CasADi and the
     expressions); compile_peak_kb: the compiler's peak RSS (via _compiler_with_peak; None if
-    it cannot be measured). Per-step time at the first of SCALING_DTS at which no step fails.
+    it cannot be measured). Per-step time at the first of SCALING_DTS at which no step fails,
+    median of `repeats` rounds, each followed by a round of MuJoCo RK4 on the same model (the
+    same dt and number of steps from the same state).
     """
     from ...symbolic.schemes import build_scheme
 
@@ -135,14 +137,23 @@ def measure_scaling_point(method: str, quadrature: int, n: int, *, n_steps: int,
             failures = []
             for dt in SCALING_DTS:
                 try:
-                    measured = harness.time(x0, dt, n_steps=n_steps, repeats=repeats,
-                                            options=variant.options)
+                    rounds = [harness.time(x0, dt, n_steps=n_steps, repeats=1,
+                                           options=variant.options)]
                 except HarnessError as error:
                     failures.append(f"dt = {dt:g} s: {error}")
                     continue
-                timings[variant.label] = {"dt": dt, "step_ns": measured.step_ns,
-                                          "iterations": measured.mean_iterations,
-                                          "failures": failures}
+                # MuJoCo RK4 on the same model, dt and steps from the same state, round by
+                # round with ours: side by side, on a machine whose speed drifts.
+                mujoco = [mujoco_step_seconds(scene, "RK4", dt, n_steps, 1)]
+                for _ in range(repeats - 1):
+                    rounds.append(harness.time(x0, dt, n_steps=n_steps, repeats=1,
+                                               options=variant.options))
+                    mujoco.append(mujoco_step_seconds(scene, "RK4", dt, n_steps, 1))
+                timings[variant.label] = {
+                    "dt": dt, "step_ns": float(np.median([r.step_ns for r in rounds])),
+                    "iterations": rounds[-1].mean_iterations,
+                    "mujoco_step_seconds": float(np.median(mujoco)),
+                    "failures": failures}
                 break
             else:
                 timings[variant.label] = {"failures": failures}
@@ -216,14 +227,6 @@ def scaling_study(config: BenchConfig, progress) -> list[ScalingRow]:
     """Part 2: each scheme at each n, with MuJoCo RK4 at the same n and dt. A scheme that runs
     over the time limit at some n is not run at larger n."""
     rows = []
-    mujoco_cache: dict[tuple[int, float], float] = {}
-
-    def mujoco_step(n: int, dt: float) -> float:
-        if (n, dt) not in mujoco_cache:
-            mujoco_cache[(n, dt)] = mujoco_step_seconds(
-                scaling_scene(n), "RK4", dt, config.scaling_steps, config.repeats)
-        return mujoco_cache[(n, dt)]
-
     for method, quadrature in config.scaling_methods:
         skip_reason = None
         for n in config.scaling_ns:
@@ -262,7 +265,7 @@ def scaling_study(config: BenchConfig, progress) -> list[ScalingRow]:
                     label, n, variant.label, **common, dt=timing["dt"],
                     step_seconds=timing["step_ns"] * 1e-9,
                     newton_iterations=timing["iterations"],
-                    mujoco_step_seconds=mujoco_step(n, timing["dt"]), failure=note))
+                    mujoco_step_seconds=timing["mujoco_step_seconds"], failure=note))
             progress(f"scaling {label} n={n}: generate {point['generate_seconds']:.1f} s, "
                      f"build {point['build_seconds']:.1f} s "
                      f"({time.perf_counter() - started:.0f} s in all)")
