@@ -146,7 +146,7 @@ def parser() -> argparse.ArgumentParser:
     bench.add_argument("--dts", metavar="DT,DT,...",
                        help="our schemes' steps in s (default 0.04,0.02,0.01,0.005,0.0025)")
     bench.add_argument("--scaling-n", metavar="N,N,...",
-                       help="chain lengths of the scaling series (default 2,3,5,10,20)")
+                       help="chain lengths of the scaling series (default 2,3,5,10,20,50,100)")
     bench.add_argument("--skip-scaling", action="store_true", help="leave out the scaling series")
     bench.add_argument("--skip-reference", action="store_true",
                        help="leave out the reference scenes")
