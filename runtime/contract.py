@@ -93,7 +93,8 @@ STATUSES = (
            "a spring segment came within {segment_tolerance} of the geometry's size of zero "
            "length or passed through it (turned by 90 degrees or more in one step), where its "
            "direction is undefined", when="segments"),
-    Status("INTERRUPTED", 7, "simulate_observed: the observer or control->stop asked to stop",
+    Status("INTERRUPTED", 7, "simulate_observed or simulate_controlled: the observer, the "
+                             "controller or control->stop asked to stop",
            "interrupted"),
     Status("STEP_TOO_SMALL", 8, "adaptive steps: the error test or Newton failed at a step "
                                 "below 1e-12 dt", "the adaptive step fell below 1e-12 of the "
@@ -350,6 +351,11 @@ ENTRY_POINTS = (
         f"const double *u [inputs], {P_ARGUMENT}, {_OPTIONS}, {_WORKSPACE}, double *samples, "
         "double *x_final, {prefix}_stats *stats, {prefix}_observer observer, void *context, "
         "long interval, {prefix}_control *control")),
+    EntryPoint("simulate_controlled", "int", _parameters(
+        "const double *x0, double t0, double dt, long n_steps, long every, "
+        "{prefix}_controller controller, void *context, long hold, "
+        f"{P_ARGUMENT}, {_OPTIONS}, {_WORKSPACE}, double *samples, double *torques, "
+        "double *x_final, {prefix}_stats *stats, {prefix}_control *control"), when="inputs"),
     EntryPoint("build_hash", "const char *", ()),
 )
 ENTRY_POINTS_BY_NAME = {entry.name: entry for entry in ENTRY_POINTS}
@@ -358,6 +364,13 @@ ENTRY_POINTS_BY_NAME = {entry.name: entry for entry in ENTRY_POINTS}
 #: caller's context; a nonzero return stops the run.
 OBSERVER_RETURNS = "int"
 OBSERVER_PARAMETERS = _parameters("long steps, void *context")
+
+#: The controller type of simulate_controlled: called before step k (k = 0, hold, 2 hold, ...)
+#: with the time and the joint-space state at its start and the caller's context; writes the NU
+#: torques held over the next `hold` steps into u. A nonzero return stops the run.
+CONTROLLER_RETURNS = "int"
+CONTROLLER_PARAMETERS = _parameters(
+    "long step, double t, const double *phi, const double *omega, double *u, void *context")
 
 
 def resolved(c_type: str, prefix: str) -> str:

@@ -47,8 +47,10 @@ def ctypes_type(c_type: str, prefix: str):
     if c_type == f"{prefix}_control *":
         return ctypes.POINTER(ControlStruct)
     # The observer is for C callers; Python passes NULL and follows a run through its control
-    # block instead (no Python callback inside the C loop).
-    if c_type in (f"{prefix}_workspace *", "void *", f"{prefix}_observer"):
+    # block instead. A controller is passed as the address of a C function (Solver.simulate
+    # makes one of a Python callable).
+    if c_type in (f"{prefix}_workspace *", "void *", f"{prefix}_observer",
+                  f"{prefix}_controller"):
         return ctypes.c_void_p
     raise ValueError(f"no ctypes type for the C type {c_type!r}")
 

@@ -75,6 +75,10 @@ def example_results(result: subprocess.CompletedProcess) -> tuple[float, int, in
     worst = re.search(r"^worst-case Newton iterations (\d+) \(limit (\d+)\)$", result.stdout,
                       re.MULTILINE)
     assert error and worst, output(result)
+    # the same controller closed inside simulate_controlled takes the same steps
+    closed = re.search(r"^simulate_controlled: final posture within (\S+) rad of the loop's$",
+                       result.stdout, re.MULTILINE)
+    assert closed and float(closed.group(1)) == 0.0, output(result)
     return float(error.group(1)), int(worst.group(1)), int(worst.group(2))
 
 

@@ -66,6 +66,13 @@ INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
     EntryPoint("stage_sensitivities", "static int",
                contract.ENTRY_POINTS_BY_NAME["step_sensitivities"].parameters,
                when="sensitivities"),
+    EntryPoint("run", "static int", _parameters(
+        "const double *x0, double t0, double dt, long n_steps, long every, "
+        f"const double *u [inputs], {P_ARGUMENT}, const {{prefix}}_options *options, "
+        "{prefix}_workspace *workspace, double *samples, double *x_final, "
+        "{prefix}_stats *stats, {prefix}_observer observer, void *context, long interval, "
+        "{prefix}_control *control, {prefix}_controller controller [inputs], "
+        "void *controller_context [inputs], long hold [inputs], double *torques [inputs]")),
     EntryPoint("write_sample", "static int", _parameters(
         f"const double *x, {P_ARGUMENT}, double t, const compensated_sum *totals [flows], "
         "double *row, {prefix}_workspace *workspace")),
@@ -196,6 +203,11 @@ class CInterface:
         parameters = ", ".join(_declaration(p.c_type, p.name)
                                for p in contract.OBSERVER_PARAMETERS)
         return f"typedef {contract.OBSERVER_RETURNS} (*{self.prefix}_observer)({parameters});"
+
+    def controller_typedef(self) -> str:
+        parameters = [_declaration(p.c_type, p.name) for p in contract.CONTROLLER_PARAMETERS]
+        return _wrap(f"typedef {contract.CONTROLLER_RETURNS} (*{self.prefix}_controller)(",
+                     parameters, ");")
 
 
 def _declaration(c_type: str, name: str) -> str:

@@ -13,6 +13,8 @@
  * Usage: example [t_end [phi*_1 ... phi*_4]]   (s, rad; default 10.0 s and the target below)
  * Prints the tracking error (largest |phi*_j - phi_j| over the actuated joints) and the Newton
  * iterations of the step every 500 steps, then the final error and the worst case.
+ * Then runs the same controller closed inside four_link_actuated_es_simulate_controlled and prints how far
+ * its final posture is from the loop's (the same steps: zero).
  * All state lives in one struct owned by main; nothing is allocated. Exit status: 0, 1 when a
  * step fails, 2 on bad arguments. */
 #include <math.h>
@@ -37,6 +39,7 @@ static const double kd[NU] = { 82.9788867592672, 29.50897979516892, 6.1826543422
 /* Everything the example keeps: the solver's workspace, the plant state and the controller. */
 typedef struct {
     four_link_actuated_es_workspace workspace;
+    four_link_actuated_es_workspace control_workspace;   /* the controller's own (holding torques) */
     four_link_actuated_es_options options;
     double x[NX], next[NX];
     double target[N_JOINTS];
@@ -53,7 +56,7 @@ static double angle_difference(double a, double b)
 /* The control law: sets e->u and the tracking error over the actuated joints. */
 static int control(example *e, const double *phi, const double *omega, double *error)
 {
-    int j, status = four_link_actuated_es_holding_torques(phi, e->holding, &e->workspace);
+    int j, status = four_link_actuated_es_holding_torques(phi, e->holding, &e->control_workspace);
     *error = 0.0;
     for (j = 0; j < NU; ++j) {
         int i = actuated[j];
@@ -66,6 +69,24 @@ static int control(example *e, const double *phi, const double *omega, double *e
     return status;
 }
 
+/* The control law as a four_link_actuated_es_controller of simulate_controlled (context: the example). */
+static int controller(long step, double t, const double *phi, const double *omega, double *u,
+                      void *context)
+{
+    example *e = (example *)context;
+    double error;
+    int j;
+    (void)step;
+    (void)t;
+    if (control(e, phi, omega, &error) != FOUR_LINK_ACTUATED_ES_OK) {
+        return 1;
+    }
+    for (j = 0; j < NU; ++j) {
+        u[j] = e->u[j];
+    }
+    return 0;
+}
+
 static int parse(const char *text, double *value)
 {
     char *end;
@@ -76,7 +97,8 @@ static int parse(const char *text, double *value)
 int main(int argc, char **argv)
 {
     example e;
-    double phi[N_JOINTS], omega[N_JOINTS], error = 0.0;
+    double phi[N_JOINTS], omega[N_JOINTS], error = 0.0, difference = 0.0;
+    double samples[2 * FOUR_LINK_ACTUATED_ES_NSAMPLE];   /* simulate_controlled: the first and last rows */
     double t_end = 10.0;
     long k, n_steps;
     int i, status, iterations = 0, worst_iterations = 0;
@@ -99,6 +121,7 @@ int main(int argc, char **argv)
     n_steps = (long)(t_end / dt + 0.5);
     four_link_actuated_es_default_options(&e.options);
     four_link_actuated_es_workspace_init(&e.workspace);   /* before the first step: no Newton history */
+    four_link_actuated_es_workspace_init(&e.control_workspace);
     status = four_link_actuated_es_initial_state(initial_angles, initial_velocities, e.x, &e.workspace);
     printf("# PD control of %s to phi* = (", "four-link-actuated");
     for (i = 0; i < N_JOINTS; ++i) {
@@ -146,6 +169,23 @@ int main(int argc, char **argv)
     }
     printf(") rad\n");
     printf("final tracking error %.3e rad\n", error);
+    /* The same controller closed inside the solver's run: called before every step, it must
+     * reach the loop's final posture. */
+    status = four_link_actuated_es_initial_state(initial_angles, initial_velocities, e.next, &e.workspace);
+    if (status == FOUR_LINK_ACTUATED_ES_OK) {
+        status = four_link_actuated_es_simulate_controlled(e.next, 0.0, dt, n_steps, n_steps > 0 ? n_steps : 1, controller, &e, 1, &e.options, &e.workspace, samples, NULL, NULL, NULL, NULL);
+    }
+    if (status != FOUR_LINK_ACTUATED_ES_OK) {
+        fprintf(stderr, "%s: simulate_controlled failed with status %d\n", argv[0], status);
+        return 1;
+    }
+    for (i = 0; i < N_JOINTS; ++i) {
+        double d = fabs(samples[(n_steps > 0 ? 1 : 0) * FOUR_LINK_ACTUATED_ES_NSAMPLE + 1 + i] - phi[i]);
+        if (d > difference) {
+            difference = d;
+        }
+    }
+    printf("simulate_controlled: final posture within %.3e rad of the loop's\n", difference);
     printf("worst-case Newton iterations %d (limit %d)\n", worst_iterations,
            e.options.max_iterations);
     return 0;

@@ -868,22 +868,26 @@ int four_link_actuated_es_simulate(const double *x0, double t0, double dt, long 
     return four_link_actuated_es_simulate_observed(x0, t0, dt, n_steps, every, u, options, workspace, samples, x_final, stats, NULL, NULL, 1, NULL);
 }
 
-int four_link_actuated_es_simulate_observed(const double *x0, double t0, double dt, long n_steps,
-                                            long every, const double *u,
-                                            const four_link_actuated_es_options *options,
-                                            four_link_actuated_es_workspace *workspace,
-                                            double *samples, double *x_final,
-                                            four_link_actuated_es_stats *stats,
-                                            four_link_actuated_es_observer observer, void *context,
-                                            long interval, four_link_actuated_es_control *control)
+/* The loop of simulate_observed and simulate_controlled: the inputs of step k from u, or, with
+ * u NULL, from the controller, called every `hold` steps with the joint state (the outputs of the
+ * state the step starts from) and held in between; recorded into torques (may be NULL). */
+
+static int run(const double *x0, double t0, double dt, long n_steps, long every, const double *u,
+               const four_link_actuated_es_options *options,
+               four_link_actuated_es_workspace *workspace, double *samples, double *x_final,
+               four_link_actuated_es_stats *stats, four_link_actuated_es_observer observer,
+               void *context, long interval, four_link_actuated_es_control *control,
+               four_link_actuated_es_controller controller, void *controller_context, long hold,
+               double *torques)
 {
     four_link_actuated_es_options defaults;
     four_link_actuated_es_stats counters;
     compensated_sum totals[2] = {{0.0, 0.0}, {0.0, 0.0}};
+    double phi[N_JOINTS], omega[N_JOINTS], held[NU];   /* the controller's arguments */
     double *current, *next;
     long k;
     int status, adaptive;
-    if (!x0 || !u || !workspace || !samples
+    if (!x0 || !workspace || !samples
         || n_steps < 0 || every < 1 || !(dt > 0.0)
         || !isfinite(dt) || !isfinite(t0) || interval < 1) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
@@ -898,6 +902,7 @@ int four_link_actuated_es_simulate_observed(const double *x0, double t0, double 
     }
     adaptive = options->rtol > 0.0 || options->atol > 0.0;
     memset(&counters, 0, sizeof counters);
+    memset(held, 0, sizeof held);
     if (!adaptive && n_steps > 0) {
         counters.smallest_dt = dt;
         counters.largest_dt = dt;
@@ -913,12 +918,27 @@ int four_link_actuated_es_simulate_observed(const double *x0, double t0, double 
     for (k = 1; k <= n_steps && status == FOUR_LINK_ACTUATED_ES_OK; ++k) {
         int iterations = 0;
         double flows[2] = {0.0, 0.0};   /* written by a completed interval */
+        const double *inputs = u ? u + (k - 1) * NU : held;
+        if (controller && (k - 1) % hold == 0) {
+            double energy, error;
+            status = four_link_actuated_es_outputs(current, phi, omega, &energy, &error, workspace);
+            if (status == FOUR_LINK_ACTUATED_ES_OK
+                && controller(k - 1, t0 + (double)(k - 1) * dt, phi, omega, held, controller_context)) {
+                status = FOUR_LINK_ACTUATED_ES_INTERRUPTED;
+            }
+            if (status != FOUR_LINK_ACTUATED_ES_OK) {
+                break;
+            }
+        }
+        if (torques) {
+            memcpy(torques + (k - 1) * NU, inputs, sizeof(double) * NU);
+        }
         workspace->step_fallbacks = 0;
         workspace->step_splits = 0;
         if (adaptive) {
-            status = adaptive_interval(current, u + (k - 1) * NU, dt, next, flows, options, workspace, &iterations, &counters);
+            status = adaptive_interval(current, inputs, dt, next, flows, options, workspace, &iterations, &counters);
         } else {
-            status = advance(current, u + (k - 1) * NU, dt, next, flows, options, workspace, &iterations, 0);
+            status = advance(current, inputs, dt, next, flows, options, workspace, &iterations, 0);
             counters.accepted_steps = k;
         }
         counters.full_newton_fallbacks += workspace->step_fallbacks;
@@ -959,4 +979,35 @@ int four_link_actuated_es_simulate_observed(const double *x0, double t0, double 
         *stats = counters;
     }
     return status;
+}
+
+int four_link_actuated_es_simulate_observed(const double *x0, double t0, double dt, long n_steps,
+                                            long every, const double *u,
+                                            const four_link_actuated_es_options *options,
+                                            four_link_actuated_es_workspace *workspace,
+                                            double *samples, double *x_final,
+                                            four_link_actuated_es_stats *stats,
+                                            four_link_actuated_es_observer observer, void *context,
+                                            long interval, four_link_actuated_es_control *control)
+{
+    if (!u) {
+        return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
+    }
+    return run(x0, t0, dt, n_steps, every, u, options, workspace, samples, x_final, stats, observer, context, interval, control, NULL, NULL, 1, NULL);
+}
+
+int four_link_actuated_es_simulate_controlled(const double *x0, double t0, double dt, long n_steps,
+                                              long every,
+                                              four_link_actuated_es_controller controller,
+                                              void *context, long hold,
+                                              const four_link_actuated_es_options *options,
+                                              four_link_actuated_es_workspace *workspace,
+                                              double *samples, double *torques, double *x_final,
+                                              four_link_actuated_es_stats *stats,
+                                              four_link_actuated_es_control *control)
+{
+    if (!controller || hold < 1) {
+        return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
+    }
+    return run(x0, t0, dt, n_steps, every, NULL, options, workspace, samples, x_final, stats, NULL, NULL, 1, control, controller, context, hold, torques);
 }

@@ -109,7 +109,8 @@ extern "C" {
                                                    * through it (turned by 90 degrees or more in
                                                    * one step): its direction is undefined there
                                                    * (docs/model.md, section 2) */
-#define FOUR_LINK_ACTUATED_ES_INTERRUPTED 7       /* simulate_observed: the observer or
+#define FOUR_LINK_ACTUATED_ES_INTERRUPTED 7       /* simulate_observed or simulate_controlled:
+                                                   * the observer, the controller or
                                                    * control->stop asked to stop */
 #define FOUR_LINK_ACTUATED_ES_STEP_TOO_SMALL 8    /* adaptive steps: the error test or Newton
                                                    * failed at a step below 1e-12 dt */
@@ -344,6 +345,30 @@ int four_link_actuated_es_simulate_observed(const double *x0, double t0, double 
                                             four_link_actuated_es_stats *stats,
                                             four_link_actuated_es_observer observer, void *context,
                                             long interval, four_link_actuated_es_control *control);
+
+/* A controller of simulate_controlled: called before step k (k = 0, hold, 2 hold, ...; from time
+ * t = t0 + k dt) with the joint state there, phi[N_JOINTS] and omega[N_JOINTS] (as in a sample
+ * row), and the caller's context. It writes the NU torques of the next `hold` steps into u[NU]
+ * (u holds its previous values, zeros before the first call). A nonzero return stops the run
+ * (status FOUR_LINK_ACTUATED_ES_INTERRUPTED) before step k. */
+typedef int (*four_link_actuated_es_controller)(long step, double t, const double *phi,
+                                                const double *omega, double *u, void *context);
+
+/* simulate_observed in closed loop: the inputs come from controller(..., context) every `hold`
+ * steps (hold >= 1) instead of from an array, and are recorded into torques[n_steps * NU] (may be
+ * NULL; row k is the input of step k). The controller runs in the caller's thread, inside the
+ * loop: a C controller costs a function call a step. Samples, x_final, stats and control as in
+ * simulate_observed. */
+FOUR_LINK_ACTUATED_ES_API
+int four_link_actuated_es_simulate_controlled(const double *x0, double t0, double dt, long n_steps,
+                                              long every,
+                                              four_link_actuated_es_controller controller,
+                                              void *context, long hold,
+                                              const four_link_actuated_es_options *options,
+                                              four_link_actuated_es_workspace *workspace,
+                                              double *samples, double *torques, double *x_final,
+                                              four_link_actuated_es_stats *stats,
+                                              four_link_actuated_es_control *control);
 
 /* The hash chaingen's build gave this library (-DFOUR_LINK_ACTUATED_ES_BUILD_HASH), so a loader can check
  * that a cached library is the one it asked for; "" when built otherwise (make, CMake). */

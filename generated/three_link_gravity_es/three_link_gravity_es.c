@@ -747,14 +747,13 @@ int three_link_gravity_es_simulate(const double *x0, double t0, double dt, long 
     return three_link_gravity_es_simulate_observed(x0, t0, dt, n_steps, every, options, workspace, samples, x_final, stats, NULL, NULL, 1, NULL);
 }
 
-int three_link_gravity_es_simulate_observed(const double *x0, double t0, double dt, long n_steps,
-                                            long every,
-                                            const three_link_gravity_es_options *options,
-                                            three_link_gravity_es_workspace *workspace,
-                                            double *samples, double *x_final,
-                                            three_link_gravity_es_stats *stats,
-                                            three_link_gravity_es_observer observer, void *context,
-                                            long interval, three_link_gravity_es_control *control)
+/* The loop of simulate_observed. */
+
+static int run(const double *x0, double t0, double dt, long n_steps, long every,
+               const three_link_gravity_es_options *options,
+               three_link_gravity_es_workspace *workspace, double *samples, double *x_final,
+               three_link_gravity_es_stats *stats, three_link_gravity_es_observer observer,
+               void *context, long interval, three_link_gravity_es_control *control)
 {
     three_link_gravity_es_options defaults;
     three_link_gravity_es_stats counters;
@@ -835,3 +834,16 @@ int three_link_gravity_es_simulate_observed(const double *x0, double t0, double 
     }
     return status;
 }
+
+int three_link_gravity_es_simulate_observed(const double *x0, double t0, double dt, long n_steps,
+                                            long every,
+                                            const three_link_gravity_es_options *options,
+                                            three_link_gravity_es_workspace *workspace,
+                                            double *samples, double *x_final,
+                                            three_link_gravity_es_stats *stats,
+                                            three_link_gravity_es_observer observer, void *context,
+                                            long interval, three_link_gravity_es_control *control)
+{
+    return run(x0, t0, dt, n_steps, every, options, workspace, samples, x_final, stats, observer, context, interval, control);
+}
+

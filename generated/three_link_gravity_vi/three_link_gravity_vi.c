@@ -784,14 +784,13 @@ int three_link_gravity_vi_simulate(const double *x0, double t0, double dt, long 
     return three_link_gravity_vi_simulate_observed(x0, t0, dt, n_steps, every, options, workspace, samples, x_final, stats, NULL, NULL, 1, NULL);
 }
 
-int three_link_gravity_vi_simulate_observed(const double *x0, double t0, double dt, long n_steps,
-                                            long every,
-                                            const three_link_gravity_vi_options *options,
-                                            three_link_gravity_vi_workspace *workspace,
-                                            double *samples, double *x_final,
-                                            three_link_gravity_vi_stats *stats,
-                                            three_link_gravity_vi_observer observer, void *context,
-                                            long interval, three_link_gravity_vi_control *control)
+/* The loop of simulate_observed. */
+
+static int run(const double *x0, double t0, double dt, long n_steps, long every,
+               const three_link_gravity_vi_options *options,
+               three_link_gravity_vi_workspace *workspace, double *samples, double *x_final,
+               three_link_gravity_vi_stats *stats, three_link_gravity_vi_observer observer,
+               void *context, long interval, three_link_gravity_vi_control *control)
 {
     three_link_gravity_vi_options defaults;
     three_link_gravity_vi_stats counters;
@@ -872,3 +871,16 @@ int three_link_gravity_vi_simulate_observed(const double *x0, double t0, double 
     }
     return status;
 }
+
+int three_link_gravity_vi_simulate_observed(const double *x0, double t0, double dt, long n_steps,
+                                            long every,
+                                            const three_link_gravity_vi_options *options,
+                                            three_link_gravity_vi_workspace *workspace,
+                                            double *samples, double *x_final,
+                                            three_link_gravity_vi_stats *stats,
+                                            three_link_gravity_vi_observer observer, void *context,
+                                            long interval, three_link_gravity_vi_control *control)
+{
+    return run(x0, t0, dt, n_steps, every, options, workspace, samples, x_final, stats, observer, context, interval, control);
+}
+

@@ -73,7 +73,8 @@ extern "C" {
                                                    * < 1, interval < 1, an unknown reuse_jacobian
                                                    * or a bad rtol, atol or energy_tol */
 #define THREE_LINK_GRAVITY_VI_EVALUATION_FAILED 5 /* a generated function reported an error */
-#define THREE_LINK_GRAVITY_VI_INTERRUPTED 7       /* simulate_observed: the observer or
+#define THREE_LINK_GRAVITY_VI_INTERRUPTED 7       /* simulate_observed or simulate_controlled:
+                                                   * the observer, the controller or
                                                    * control->stop asked to stop */
 #define THREE_LINK_GRAVITY_VI_STEP_TOO_SMALL 8    /* adaptive steps: the error test or Newton
                                                    * failed at a step below 1e-12 dt */

@@ -761,12 +761,13 @@ int three_link_mono_es_simulate(const double *x0, double t0, double dt, long n_s
     return three_link_mono_es_simulate_observed(x0, t0, dt, n_steps, every, options, workspace, samples, x_final, stats, NULL, NULL, 1, NULL);
 }
 
-int three_link_mono_es_simulate_observed(const double *x0, double t0, double dt, long n_steps,
-                                         long every, const three_link_mono_es_options *options,
-                                         three_link_mono_es_workspace *workspace, double *samples,
-                                         double *x_final, three_link_mono_es_stats *stats,
-                                         three_link_mono_es_observer observer, void *context,
-                                         long interval, three_link_mono_es_control *control)
+/* The loop of simulate_observed. */
+
+static int run(const double *x0, double t0, double dt, long n_steps, long every,
+               const three_link_mono_es_options *options, three_link_mono_es_workspace *workspace,
+               double *samples, double *x_final, three_link_mono_es_stats *stats,
+               three_link_mono_es_observer observer, void *context, long interval,
+               three_link_mono_es_control *control)
 {
     three_link_mono_es_options defaults;
     three_link_mono_es_stats counters;
@@ -847,3 +848,14 @@ int three_link_mono_es_simulate_observed(const double *x0, double t0, double dt,
     }
     return status;
 }
+
+int three_link_mono_es_simulate_observed(const double *x0, double t0, double dt, long n_steps,
+                                         long every, const three_link_mono_es_options *options,
+                                         three_link_mono_es_workspace *workspace, double *samples,
+                                         double *x_final, three_link_mono_es_stats *stats,
+                                         three_link_mono_es_observer observer, void *context,
+                                         long interval, three_link_mono_es_control *control)
+{
+    return run(x0, t0, dt, n_steps, every, options, workspace, samples, x_final, stats, observer, context, interval, control);
+}
+

@@ -86,8 +86,9 @@ extern "C" {
                                                 * through it (turned by 90 degrees or more in one
                                                 * step): its direction is undefined there
                                                 * (docs/model.md, section 2) */
-#define THREE_LINK_MONO_ES_INTERRUPTED 7       /* simulate_observed: the observer or
-                                                * control->stop asked to stop */
+#define THREE_LINK_MONO_ES_INTERRUPTED 7       /* simulate_observed or simulate_controlled: the
+                                                * observer, the controller or control->stop asked
+                                                * to stop */
 #define THREE_LINK_MONO_ES_STEP_TOO_SMALL 8    /* adaptive steps: the error test or Newton failed
                                                 * at a step below 1e-12 dt */
 

@@ -76,7 +76,8 @@ extern "C" {
                                                       * through it (turned by 90 degrees or more
                                                       * in one step): its direction is undefined
                                                       * there (docs/model.md, section 2) */
-#define THREE_LINK_MONO_MIDPOINT_INTERRUPTED 7       /* simulate_observed: the observer or
+#define THREE_LINK_MONO_MIDPOINT_INTERRUPTED 7       /* simulate_observed or simulate_controlled:
+                                                      * the observer, the controller or
                                                       * control->stop asked to stop */
 #define THREE_LINK_MONO_MIDPOINT_STEP_TOO_SMALL 8    /* adaptive steps: the error test or Newton
                                                       * failed at a step below 1e-12 dt */

@@ -78,8 +78,10 @@ extern "C" {
                                                        * or more in one step): its direction is
                                                        * undefined there (docs/model.md, section
                                                        * 2) */
-#define THREE_LINK_MULTI_MIDPOINT_INTERRUPTED 7       /* simulate_observed: the observer or
-                                                       * control->stop asked to stop */
+#define THREE_LINK_MULTI_MIDPOINT_INTERRUPTED 7       /* simulate_observed or
+                                                       * simulate_controlled: the observer, the
+                                                       * controller or control->stop asked to
+                                                       * stop */
 #define THREE_LINK_MULTI_MIDPOINT_STEP_TOO_SMALL 8    /* adaptive steps: the error test or Newton
                                                        * failed at a step below 1e-12 dt */
 #define THREE_LINK_MULTI_MIDPOINT_ENERGY_JUMP 9       /* the converged step missed the energy
