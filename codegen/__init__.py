@@ -9,8 +9,15 @@ chaingen derives its model with SymPy, generates C with CasADi, builds it, and s
     solver = chaingen.build_solver(scene, "es", 3)          # generated, compiled, cached
     result = solver.simulate(scene.initial_angles, scene.initial_velocities,
                              dt=0.01, n_steps=5000)         # one C call
-    step = solver.step(solver.initial_state(phi, omega), 0.01)
-    sens = solver.step_sensitivities(x, 0.01)               # d s1/d s0, d s1/d u
+    step = solver.step(solver.initial_state(phi, omega), u, 0.01)   # C's order: x0, u, dt
+    sens = solver.step_sensitivities(x, u, 0.01)            # d s1/d s0, d s1/d u
+
+    # a control loop in Python: joint space in place, the warm start carried
+    loop = solver.stepper(phi, omega, dt=0.01)
+    for k in range(1000):
+        loop.step(controller(loop.t, loop.phi, loop.omega))     # loop.phi, loop.omega updated
+    # or closed inside the C loop, the torques recorded in result.torques
+    result = solver.simulate(phi, omega, dt=0.01, n_steps=1000, controller=controller)
 
     # numbers of the scene as run-time parameters: one build, values per call
     solver = chaingen.build_solver(scene, "es", 3, parameters=["springs[0].stiffness"])
@@ -36,6 +43,7 @@ from .runtime import (
                      Sensitivities,
                      SimulationResult,
                      Solver,
+                     Stepper,
                      StepResult,
                      StopSignal,
                      read_trajectory,
@@ -59,6 +67,6 @@ from .version import VERSION as __version__
 __all__ = ["METHODS", "QUADRATURE_RANGE", "BuildError", "ChaingenError", "Link", "NewtonError",
            "NewtonOptions", "RunFailedError", "RunSettings", "Scene", "SceneError",
            "Sensitivities", "SettingsError", "Simulation", "SimulationResult", "Solver",
-           "Spring", "StepResult", "StopSignal", "UnsupportedSceneError", "__version__",
+           "Spring", "StepResult", "Stepper", "StopSignal", "UnsupportedSceneError", "__version__",
            "build_solver", "load_reference_scene", "load_scene", "parse_scene",
            "read_trajectory", "run_settings", "simulate_scene", "sweep", "write_trajectory"]

@@ -11,9 +11,10 @@ from .errors import BuildError, ChaingenError, NewtonError, RunFailedError
 from .interface import NewtonOptions
 from .results import Sensitivities, SimulationResult, StepResult
 from .solver import Solver, StopSignal
+from .stepper import Stepper
 from .trajectory import read_trajectory, write_trajectory
 
 __all__ = ["JACOBIAN_ACROSS_STEPS", "JACOBIAN_EVERY_ITERATE", "JACOBIAN_PER_STEP",
            "BuildError", "ChaingenError", "NewtonError", "NewtonOptions", "RunFailedError",
-           "Sensitivities", "SimulationResult", "Solver", "StepResult", "StopSignal",
+           "Sensitivities", "SimulationResult", "Solver", "StepResult", "Stepper", "StopSignal",
            "build_shared_library", "cache_directory", "read_trajectory", "write_trajectory"]

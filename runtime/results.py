@@ -32,6 +32,10 @@ class SimulationResult:
     smallest_dt: float = 0.0
     largest_dt: float = 0.0
     adaptive: bool = False
+    #: The inputs of the actuated joints, row k held over step k (n_steps, nu): those given, or
+    #: those a controller chose; None for a scene without actuation.
+    torques: np.ndarray | None = field(default=None, repr=False)
+    actuated_joints: tuple[int, ...] = ()
 
     def column(self, name: str) -> np.ndarray:
         return self.samples[:, self.columns.index(name)]
@@ -88,6 +92,67 @@ class SimulationResult:
     @property
     def mean_newton_iterations(self) -> float:
         return self.newton_iterations / self.n_steps if self.n_steps else 0.0
+
+    def _sampled_torques(self) -> np.ndarray | None:
+        """The torques at the sample times: row j is the input of the step that starts at
+        sample j (NaN on the last row of a run whose end is a sample: no step starts there)."""
+        if self.torques is None:
+            return None
+        rows = len(self.samples)
+        sampled = np.full((rows, self.torques.shape[1]), np.nan)
+        starts = np.arange(rows) * self.every
+        inside = starts < len(self.torques)
+        sampled[inside] = self.torques[starts[inside]]
+        return sampled
+
+    def to_dataframe(self):
+        """The samples as a pandas DataFrame indexed by t, one column per trajectory column
+        (docs/scene-format.md), and u<j> for the torque of actuated joint j at each sample
+        (the input of the step that starts there). Needs pandas (the sweep extra)."""
+        import pandas as pd
+
+        frame = pd.DataFrame(self.samples, columns=list(self.columns))
+        sampled = self._sampled_torques()
+        if sampled is not None:
+            for index, joint in enumerate(self.actuated_joints):
+                frame[f"u{joint}"] = sampled[:, index]
+        frame = frame.set_index("t")
+        frame.attrs.update(self._attributes())
+        return frame
+
+    def to_xarray(self):
+        """The samples as an xarray Dataset on the coordinates t and joint: phi and omega
+        (t, joint), energy, constraint_error (and the energy flows) over t, u (t, actuated
+        joint) for an actuated scene; the run's settings and counters as attributes. Needs
+        xarray (the sweep extra)."""
+        import xarray as xr
+
+        joints = np.arange(1, self.n_joints + 1)
+        variables = {"phi": (("t", "joint"), self.phi, {"units": "rad"}),
+                     "omega": (("t", "joint"), self.omega, {"units": "rad/s"}),
+                     "energy": ("t", self.energy, {"units": "J"}),
+                     "constraint_error": ("t", self.constraint_error)}
+        for name in ("input_work", "dissipated"):
+            if name in self.columns:
+                variables[name] = ("t", self.column(name), {"units": "J"})
+        coordinates = {"t": ("t", self.t, {"units": "s"}), "joint": joints}
+        sampled = self._sampled_torques()
+        if sampled is not None:
+            variables["u"] = (("t", "actuated_joint"), sampled, {"units": "N m"})
+            coordinates["actuated_joint"] = np.array(self.actuated_joints)
+        return xr.Dataset(variables, coords=coordinates, attrs=self._attributes())
+
+    def _attributes(self) -> dict:
+        attributes = {"scene": self.scene, "method": self.method, "dt": self.dt,
+                      "n_steps": self.n_steps, "every": self.every, "order": self.order,
+                      "newton_iterations": self.newton_iterations,
+                      "max_newton_iterations": self.max_newton_iterations,
+                      "wall_time": self.wall_time}
+        if self.quadrature is not None:
+            attributes["quadrature"] = self.quadrature
+        attributes.update({f"parameter {path}": value
+                           for path, value in self.parameters.items()})
+        return attributes
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,9 @@
 """Load a built chaingen package and drive it from Python with numpy arrays.
 
-Python calls C once per simulation (`simulate`), not once per step; the per-step entry points
-(`step`, `residual_jacobian`, ...) are there for verification and studies. The C signatures are
+Python calls C once per simulation (`simulate`, open loop or closed by a controller), not once
+per step; a control loop written in Python steps through a `Stepper` (runtime/stepper.py), and
+the per-step entry points (`step`, `residual_jacobian`, ...) are there for verification and
+studies, their arguments in C's order. The C signatures are
 not written here: they come from the package's manifest, which records the parameter list of
 every entry point it exports (chaingen.runtime.contract).
 
@@ -32,6 +34,7 @@ from .build import build_shared_library
 from .errors import NewtonError
 from .interface import ControlStruct, NewtonOptions, StatsStruct, ctypes_type
 from .results import Sensitivities, SimulationResult, StepResult
+from .stepper import Stepper
 
 _double_p = ctypes.POINTER(ctypes.c_double)
 #: Seconds between two looks of the waiting thread at a running simulate: progress, Ctrl-C.
@@ -66,6 +69,31 @@ class StopSignal:
 
 def _pointer(array: np.ndarray):
     return array.ctypes.data_as(_double_p)
+
+
+def _step_length(dt, what: str) -> float:
+    """dt of a step function: required, after u as in C (step(x0, u, dt)), a finite number."""
+    if dt is None:
+        raise TypeError(f"{what}() needs dt; the arguments are in C's order: {what}(x0, u, dt) "
+                        f"(u=None for an unactuated scene), e.g. {what}(x0, dt=0.01)")
+    return float(dt)
+
+
+def _address(pointer, name: str) -> int | None:
+    """A void * argument: None, an int address or a ctypes pointer or buffer."""
+    if pointer is None or isinstance(pointer, int):
+        return pointer
+    try:
+        return ctypes.cast(pointer, ctypes.c_void_p).value
+    except ctypes.ArgumentError:
+        raise ValueError(f"{name}: an address (int), a ctypes pointer or None, got "
+                         f"{type(pointer).__name__}") from None
+
+
+#: The C type of <prefix>_controller (contract.CONTROLLER_PARAMETERS), for Python controllers;
+#: the arrays as plain addresses (ints), which ctypes passes without building pointer objects.
+_CONTROLLER = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_long, ctypes.c_double, ctypes.c_void_p,
+                               ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p)
 
 
 def _vector(values, size: int, name: str) -> np.ndarray:
@@ -232,7 +260,10 @@ class Solver:
             u = np.zeros(self.nu)
         return _pointer(_vector(u, self.nu, "u"))
 
-    def residual(self, z, x0, dt: float, u=None, parameters=None) -> np.ndarray:
+    def residual(self, z, x0, u=None, dt: float | None = None, *,
+                 parameters=None) -> np.ndarray:
+        """F(z; x0, u, dt): the arguments in C's order."""
+        dt = _step_length(dt, "residual")
         out = np.empty(self.nz)
         self._check(self._call("residual", z=_pointer(_vector(z, self.nz, "z")),
                                p=self._p(parameters),
@@ -241,8 +272,10 @@ class Solver:
                     "residual")
         return out
 
-    def residual_jacobian(self, z, x0, dt: float, u=None,
+    def residual_jacobian(self, z, x0, u=None, dt: float | None = None, *,
                           parameters=None) -> tuple[np.ndarray, np.ndarray]:
+        """(F, dF/dz) at z; the arguments in C's order."""
+        dt = _step_length(dt, "residual_jacobian")
         residual, jacobian = np.empty(self.nz), np.empty(self.nz * self.nz)
         self._check(self._call("residual_jacobian", z=_pointer(_vector(z, self.nz, "z")),
                                p=self._p(parameters),
@@ -263,13 +296,22 @@ class Solver:
 
     # -- steps --------------------------------------------------------------------------------
 
+    def stepper(self, phi, omega, dt: float, *, options: NewtonOptions | dict | None = None,
+                parameters=None) -> Stepper:
+        """A Stepper from joint space (phi, omega): steps of dt in a Python control loop at
+        the least cost, phi and omega updated in place (runtime/stepper.py)."""
+        return Stepper(self, phi, omega, dt, options, parameters)
+
     def _step_failed(self, status: int, iterations: int) -> NewtonError:
         return NewtonError(f"step failed after {iterations} Newton iterations: "
                            f"{self.status_message(status)}", status=status)
 
-    def step(self, x0, dt: float, u=None, options: NewtonOptions | dict | None = None,
-             parameters=None) -> StepResult:
-        """One step from x0 with inputs u (actuated scenes). Raises NewtonError if it fails."""
+    def step(self, x0, u=None, dt: float | None = None, *,
+             options: NewtonOptions | dict | None = None, parameters=None) -> StepResult:
+        """One step from the state x0 with inputs u (actuated scenes; None: zeros), the
+        arguments in C's order. Raises NewtonError if it fails. For a control loop in joint
+        space, `stepper` costs less a step."""
+        dt = _step_length(dt, "step")
         x1, iterations, flows = np.empty(self.nx), ctypes.c_int(0), np.zeros(2)
         c_options = self.newton_options(options).as_c()
         status = self._call("step", x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
@@ -281,11 +323,12 @@ class Solver:
             raise self._step_failed(status, iterations.value)
         return StepResult(x1, iterations.value, float(flows[0]), float(flows[1]))
 
-    def step_sensitivities(self, x0, dt: float, u=None,
+    def step_sensitivities(self, x0, u=None, dt: float | None = None, *,
                            options: NewtonOptions | dict | None = None,
                            parameters=None) -> Sensitivities:
         """A step and d s_{k+1}/d s_k, d s_{k+1}/d u_k, d s_{k+1}/d p in s = (phi, omega)
         (implicit function theorem on the converged Newton system; d/dp with s_k held)."""
+        dt = _step_length(dt, "step_sensitivities")
         if not self.has_sensitivities:
             raise ValueError(f"{self.prefix} was generated without step sensitivities")
         ns, n_p = 2 * self.n, len(self.parameters)
@@ -306,11 +349,20 @@ class Solver:
     def simulate(self, phi0, omega0, *, dt: float, n_steps: int, every: int = 1,
                  torques=None, options: NewtonOptions | dict | None = None, scene: str = "",
                  progress=None, parameters=None,
-                 stop: StopSignal | None = None) -> SimulationResult:
+                 stop: StopSignal | None = None, controller=None, hold: int = 1,
+                 controller_context=None) -> SimulationResult:
         """Run n_steps steps from joint space (phi0, omega0) in one C call.
 
         torques: (n_steps, nu) inputs of the actuated joints, row k held over step k (zero if
-        None). progress: called as progress(steps_done) about 20 times a second during the run
+        None). controller (actuated scenes, instead of torques): closes the loop inside the C
+        run, called before every `hold`-th step with the state there. Either a Python callable
+        controller(t, phi, omega) -> the nu torques (phi, omega: copies, as in a sample row),
+        or a C function of the package's <prefix>_controller type (a ctypes function pointer
+        or its address, with `controller_context` its context pointer, an int or None), which
+        costs a function call a step (the header documents it). An exception raised by a
+        Python controller stops the run and propagates. result.torques records the inputs of
+        every step, given or chosen.
+        progress: called as progress(steps_done) about 20 times a second during the run
         and once at its end (the run's samples do not depend on it). Ctrl-C, or an exception
         raised by progress, stops the run within a step and propagates (KeyboardInterrupt, or
         the exception itself).
@@ -321,14 +373,24 @@ class Solver:
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
                              f"{n_steps}, {every}")
-        inputs = None
-        if self.nu:
-            u = (np.zeros((n_steps, self.nu)) if torques is None
-                 else np.ascontiguousarray(torques, dtype=np.float64))
-            if u.shape != (n_steps, self.nu):
+        inputs, recorded, errors, callback = None, None, [], None
+        if controller is not None:
+            if not self.nu:
+                raise ValueError(f"{self.prefix} has no actuated joints: nothing to control")
+            if torques is not None:
+                raise ValueError("give torques or a controller, not both")
+            if not (isinstance(hold, int) and 1 <= hold < 2 ** 63):
+                raise ValueError(f"hold must be an integer >= 1 (steps per controller call), "
+                                 f"got {hold!r}")
+            recorded = np.zeros((n_steps, self.nu))
+            address, callback = self._controller_address(controller, errors)
+        elif self.nu:
+            recorded = (np.zeros((n_steps, self.nu)) if torques is None
+                        else np.ascontiguousarray(torques, dtype=np.float64))
+            if recorded.shape != (n_steps, self.nu):
                 raise ValueError(f"torques must have shape ({n_steps}, {self.nu}) (steps, "
-                                 f"actuated joints), got {u.shape}")
-            inputs = _pointer(u)
+                                 f"actuated joints), got {recorded.shape}")
+            inputs = _pointer(recorded)
         elif torques is not None:
             raise ValueError(f"{self.prefix} has no actuated joints; torques must be None")
         self._p(parameters)    # checks them
@@ -344,11 +406,17 @@ class Solver:
                          samples=_pointer(samples), x_final=None, stats=ctypes.byref(stats),
                          observer=None, context=None, interval=1,
                          control=ctypes.byref(control))
+        entry = "simulate_observed"
+        if controller is not None:
+            entry = "simulate_controlled"
+            arguments.update(controller=address, hold=hold, torques=_pointer(recorded),
+                             context=(None if callback is not None else
+                                      _address(controller_context, "controller_context")))
         started = time.perf_counter()
         if stop is not None:
             stop._attach(control)
         try:
-            status = self._run_controlled(arguments, control, progress)
+            status = self._run_controlled(entry, arguments, control, progress)
         finally:
             if stop is not None:
                 stop._detach(control)
@@ -367,7 +435,11 @@ class Solver:
             order=int(self.manifest.get("order", 2)),
             accepted_steps=int(stats.accepted_steps), rejected_steps=int(stats.rejected_steps),
             smallest_dt=float(stats.smallest_dt), largest_dt=float(stats.largest_dt),
-            adaptive=bool(c_options.rtol > 0 or c_options.atol > 0))
+            adaptive=bool(c_options.rtol > 0 or c_options.atol > 0),
+            torques=None if recorded is None else recorded[:int(stats.steps)],
+            actuated_joints=self.actuated_joints)
+        if errors:
+            raise errors[0]
         if status:
             failed = stats.steps + 1
             raise NewtonError(
@@ -377,18 +449,57 @@ class Solver:
                 status=status, step=failed, time=stats.steps * dt, result=result)
         return result
 
-    def _run_controlled(self, arguments: dict, control, progress) -> int:
-        """simulate_observed with `arguments`: in this thread, or, from the main thread or with
+    def _controller_address(self, controller, errors: list):
+        """(address of a C controller, the ctypes callback to keep alive or None). A Python
+        callable is wrapped; an exception it raises goes to `errors` and stops the run."""
+        if isinstance(controller, ctypes._CFuncPtr):
+            return ctypes.cast(controller, ctypes.c_void_p).value, None
+        if isinstance(controller, int) and not isinstance(controller, bool):
+            if controller == 0:
+                raise ValueError("controller: the address of a C function, got 0 (NULL)")
+            return controller, None
+        if not callable(controller):
+            raise ValueError(f"controller: a callable controller(t, phi, omega) -> torques, or "
+                             f"a C function pointer, got {type(controller).__name__}")
+        n, nu = self.n, self.nu
+        views: dict[int, np.ndarray] = {}    # the C loop's arrays by address (they stay put)
+
+        def view(address: int, size: int) -> np.ndarray:
+            array = views.get(address)
+            if array is None:
+                array = views[address] = np.frombuffer(
+                    (ctypes.c_double * size).from_address(address), dtype=np.float64)
+            return array
+
+        def call(step, t, phi, omega, u, context) -> int:
+            try:
+                value = controller(t, view(phi, n).copy(), view(omega, n).copy())
+                torques = np.asarray(value, dtype=np.float64)
+                if torques.shape != (nu,) or not np.all(np.isfinite(torques)):
+                    raise ValueError(f"controller: must return {nu} finite torques, got "
+                                     f"{value!r} at t = {t:g} s")
+                view(u, nu)[:] = torques
+                return 0
+            except BaseException as error:   # raised again once the run has stopped
+                errors.append(error)
+                return 1
+
+        callback = _CONTROLLER(call)
+        return ctypes.cast(callback, ctypes.c_void_p).value, callback
+
+    def _run_controlled(self, entry: str, arguments: dict, control, progress) -> int:
+        """The run `entry` (simulate_observed or simulate_controlled) with `arguments`: in
+        this thread, or, from the main thread or with
         a progress callback, in a worker while this thread waits, reports progress and stays
         interruptible; an exception here (Ctrl-C, progress's own) stops the loop through
         `control` and propagates once the worker has returned."""
         if progress is None and threading.current_thread() is not threading.main_thread():
-            return self._call("simulate_observed", **arguments)
+            return self._call(entry, **arguments)
         outcome: list = []
 
         def run() -> None:
             try:
-                outcome.append(self._call("simulate_observed", **arguments))
+                outcome.append(self._call(entry, **arguments))
             except BaseException as error:    # raised again in the waiting thread
                 outcome.append(error)
 

@@ -134,8 +134,8 @@ def test_the_factored_solve_steps_as_dense_lu(arm_solve, name, order):
                              np.array(scene.initial_velocities) + 0.3)
     z = rng.normal(0, 0.01, dense.nz)
     u = np.full(len(scene.actuated_joints), 0.2) if scene.actuated_joints else None
-    F0, J0 = dense.residual_jacobian(z, x0, 0.01, u=u)
-    F1, J1 = factored.residual_jacobian(z, x0, 0.01, u=u)
+    F0, J0 = dense.residual_jacobian(z, x0, u, 0.01)
+    F1, J1 = factored.residual_jacobian(z, x0, u, 0.01)
     np.testing.assert_array_equal(F1, F0)
     np.testing.assert_allclose(J1, J0, rtol=0, atol=1e-12 * np.abs(J0).max())
     assert abs(runs[1].mean_newton_iterations - runs[0].mean_newton_iterations) <= 0.05
@@ -159,8 +159,8 @@ def test_a_jacobian_asked_between_kept_steps_changes_no_state(arm_solve):
         x, states = start, []
         for k in range(6):
             if interrupted and k == 3:
-                factored.residual_jacobian(rng.normal(0, 1.0, factored.nz), x + 0.5, 0.01)
-            x = factored.step(x, 0.01, options=options).x1
+                factored.residual_jacobian(rng.normal(0, 1.0, factored.nz), x + 0.5, dt=0.01)
+            x = factored.step(x, dt=0.01, options=options).x1
             states.append(x)
         runs.append(np.array(states))
     np.testing.assert_allclose(runs[1], runs[0], rtol=0, atol=1e-12)
@@ -174,7 +174,7 @@ def test_step_sensitivities_by_the_factors_equal_dense_lus(arm_solve, order):
     x0 = dense.initial_state(np.array(scene.initial_angles) + 0.2,
                              np.array(scene.initial_velocities) + 0.5)
     u = np.full(len(scene.actuated_joints), 0.4)
-    results = [solver.step_sensitivities(x0, 0.01, u) for solver in (dense, factored)]
+    results = [solver.step_sensitivities(x0, u, 0.01) for solver in (dense, factored)]
     for field in ("x1", "ds_ds", "ds_du"):
         expected, got = getattr(results[0], field), getattr(results[1], field)
         np.testing.assert_allclose(got, expected, rtol=0,

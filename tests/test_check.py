@@ -48,8 +48,8 @@ class Perturbed:
 def test_check_catches_a_wrong_jacobian_entry():
     good = solver_for("three_link_mono", "es", 3, sensitivities=True)
 
-    def residual_jacobian(z, x0, dt, u=None, parameters=None):
-        residual, jacobian = good.residual_jacobian(z, x0, dt, u=u, parameters=parameters)
+    def residual_jacobian(z, x0, u=None, dt=None, *, parameters=None):
+        residual, jacobian = good.residual_jacobian(z, x0, u, dt, parameters=parameters)
         jacobian = jacobian.copy()
         jacobian[1, 4] += 1e-4 * np.abs(jacobian).max()     # one entry off by 1e-4
         return residual, jacobian
@@ -65,8 +65,8 @@ def test_check_catches_a_wrong_jacobian_entry():
 def test_check_catches_wrong_sensitivities():
     good = solver_for("four_link_underactuated", "vi", 3, sensitivities=True)
 
-    def step_sensitivities(x0, dt, u=None, options=None, parameters=None):
-        result = good.step_sensitivities(x0, dt, u=u, options=options, parameters=parameters)
+    def step_sensitivities(x0, u=None, dt=None, *, options=None, parameters=None):
+        result = good.step_sensitivities(x0, u, dt, options=options, parameters=parameters)
         return dataclasses.replace(result, ds_du=result.ds_du * (1 + 1e-5))
 
     report = report_for("four_link_underactuated", "vi",
@@ -118,8 +118,8 @@ def test_check_catches_wrong_parameter_sensitivities():
     scheme = build_scheme(load("three_link_mono"), "midpoint", 3, paths)
     good = build_solver(load("three_link_mono"), "midpoint", 3, parameters=paths)
 
-    def step_sensitivities(x0, dt, u=None, options=None, parameters=None):
-        result = good.step_sensitivities(x0, dt, u=u, options=options, parameters=parameters)
+    def step_sensitivities(x0, u=None, dt=None, *, options=None, parameters=None):
+        result = good.step_sensitivities(x0, u, dt, options=options, parameters=parameters)
         return dataclasses.replace(result, ds_dp=result.ds_dp * (1 + 1e-5))
 
     assert report_for("three_link_mono", "midpoint", solver=good, scheme=scheme).passed

@@ -178,12 +178,11 @@ def test_composed_sensitivities_match_central_differences(name, method, order):
     dt, h = 0.02, 1e-6
 
     def s1(phi, omega, u=u):
-        x1 = built.step(built.initial_state(phi, omega), dt, u, options=TIGHT).x1
+        x1 = built.step(built.initial_state(phi, omega), u, dt, options=TIGHT).x1
         angles, rates, _, _ = built.outputs(x1)
         return np.concatenate([angles, rates])
 
-    sensitivities = built.step_sensitivities(built.initial_state(phi, omega), dt, u,
-                                             options=TIGHT)
+    sensitivities = built.step_sensitivities(built.initial_state(phi, omega), u, dt, options=TIGHT)
     for j in range(2 * n):
         e = np.zeros(2 * n)
         e[j] = h

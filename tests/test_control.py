@@ -49,7 +49,7 @@ def test_es_energy_balance_holds_on_every_step_of_a_50_s_run(mono_es):
     energy = mono_es.outputs(x)[2]
     worst, least_dissipated, total_work = 0.0, np.inf, 0.0
     for _ in range(5000):                                   # 50 s at dt = 0.01
-        step = mono_es.step(x, 0.01, u=rng.uniform(-1.0, 1.0, size=3))
+        step = mono_es.step(x, rng.uniform(-1.0, 1.0, size=3), 0.01)
         next_energy = mono_es.outputs(step.x1)[2]
         worst = max(worst, abs(next_energy - energy - step.input_work + step.dissipated))
         least_dissipated = min(least_dissipated, step.dissipated)
@@ -76,7 +76,7 @@ def test_simulate_reports_the_energy_flows_as_columns(mono_es):
     x = mono_es.initial_state(scene.initial_angles, scene.initial_velocities)
     work = 0.0
     for u in torques:
-        step = mono_es.step(x, 0.01, u=u)
+        step = mono_es.step(x, u, 0.01)
         x, work = step.x1, work + step.input_work
     np.testing.assert_array_equal(result.phi[-1], mono_es.outputs(x)[0])
     assert result.input_work[-1] == pytest.approx(work, rel=1e-12)
@@ -156,7 +156,7 @@ def test_inputs_are_refused_where_there_are_none_and_checked_where_there_are():
     solver = solver_for("three_link_mono", "es", 3)
     x = solver.initial_state([0.1, 0.2, 0.3], [0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="no actuated joints"):
-        solver.step(x, 0.01, u=[1.0])
+        solver.step(x, [1.0], 0.01)
     with pytest.raises(ValueError, match="no actuated joints"):
         solver.simulate([0.1, 0.2, 0.3], [0.0] * 3, dt=0.01, n_steps=2, torques=np.ones((2, 1)))
     actuated = solver_for(UNDERACTUATED, "es", 3)
@@ -170,7 +170,7 @@ def joint_space_step(solver, s, u, dt):
     """The step map in s = (phi, omega), as a controller sees it."""
     n = solver.n
     x = solver.initial_state(s[:n], s[n:])
-    phi, omega, _, _ = solver.outputs(solver.step(x, dt, u=u, options=TIGHT).x1)
+    phi, omega, _, _ = solver.outputs(solver.step(x, u, dt, options=TIGHT).x1)
     return np.concatenate([phi, omega])
 
 
@@ -202,9 +202,9 @@ def test_step_sensitivities_match_central_differences(name, method):
     x0 = solver.initial_state(s0[:n], s0[n:])
     # From the same workspace state (no Newton history) the two take the same step, bitwise.
     solver.reset()
-    sensitivities = solver.step_sensitivities(x0, dt, u=u)
+    sensitivities = solver.step_sensitivities(x0, u, dt)
     solver.reset()
-    np.testing.assert_array_equal(sensitivities.x1, solver.step(x0, dt, u=u).x1)
+    np.testing.assert_array_equal(sensitivities.x1, solver.step(x0, u, dt).x1)
     numeric = central_differences(lambda s: joint_space_step(solver, s, u, dt), s0, h)
     assert relative_error(sensitivities.ds_ds, numeric) <= 1e-6
     if solver.nu:
@@ -225,7 +225,7 @@ def test_sensitivities_linearise_the_step_map():
     scene = load(UNDERACTUATED)
     s0 = np.concatenate([scene.initial_angles, [0.2, -0.1, 0.4, 0.0]])
     u = np.array([1.0, -0.5, 0.25])
-    sens = solver.step_sensitivities(solver.initial_state(s0[:4], s0[4:]), 0.01, u=u)
+    sens = solver.step_sensitivities(solver.initial_state(s0[:4], s0[4:]), u, 0.01)
     base = joint_space_step(solver, s0, u, 0.01)
     direction = np.random.default_rng(3).normal(size=8)
     direction_u = np.array([0.3, 0.1, -0.2])
@@ -246,4 +246,4 @@ def test_a_package_without_sensitivities_has_no_sensitivity_path():
     solver = solver_for("three_link_mono", "vi", 3)
     assert not solver.has_sensitivities
     with pytest.raises(ValueError, match="without step sensitivities"):
-        solver.step_sensitivities(solver.initial_state([0.1] * 3, [0.0] * 3), 0.01)
+        solver.step_sensitivities(solver.initial_state([0.1] * 3, [0.0] * 3), dt=0.01)

@@ -39,4 +39,4 @@ def test_a_single_step_through_the_collapse_raises():
     solver = solver_for("collapsing_spring", "es", 3)
     x0 = solver.initial_state([1.27], [3.0])
     with pytest.raises(NewtonError, match="spring segment"):
-        solver.step(x0, 0.01)
+        solver.step(x0, dt=0.01)

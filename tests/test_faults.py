@@ -43,7 +43,7 @@ def test_one_solver_from_eight_threads_equals_the_single_threaded_results():
         solver.reset()
         x = solver.initial_state(phi, omega)
         for _ in range(50):           # chained steps: the warm start uses this thread's history
-            x = solver.step(x, 0.01).x1
+            x = solver.step(x, dt=0.01).x1
         return run.samples, x
 
     alone = [work(*start) for start in starts]

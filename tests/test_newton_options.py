@@ -34,7 +34,7 @@ def chained_steps(solver, x, dt, options, count):
     """`count` steps, each from the previous step's x1; returns the states and iterations."""
     states, iterations = [x], []
     for _ in range(count):
-        result = solver.step(states[-1], dt, options=options)
+        result = solver.step(states[-1], dt=dt, options=options)
         states.append(result.x1)
         iterations.append(result.iterations)
     return states, iterations
@@ -63,24 +63,24 @@ def test_warm_start_only_continues_its_own_trajectory():
     solver = solver_for("three_link_mono", "es")
     x0 = initial(solver)
     solver.reset()
-    cold = solver.step(x0, 0.01, options=COLD).iterations
+    cold = solver.step(x0, dt=0.01, options=COLD).iterations
     states, _ = chained_steps(solver, x0, 0.01, WARM, 5)
-    assert solver.step(x0, 0.01, options=WARM).iterations == cold   # not chained: fresh start
+    assert solver.step(x0, dt=0.01, options=WARM).iterations == cold   # not chained: fresh start
     # Same state, other dt: not chained either.
     chained_steps(solver, x0, 0.01, WARM, 5)
-    other_dt = solver.step(states[5], 0.005, options=WARM).iterations
-    assert other_dt == solver.step(states[5], 0.005, options=COLD).iterations
+    other_dt = solver.step(states[5], dt=0.005, options=WARM).iterations
+    assert other_dt == solver.step(states[5], dt=0.005, options=COLD).iterations
 
 
 def test_reset_forgets_the_history():
     solver = solver_for("three_link_mono", "es")
     x0 = initial(solver)
     states, _ = chained_steps(solver, x0, 0.01, WARM, 5)
-    warm = solver.step(states[5], 0.01, options=WARM).iterations
+    warm = solver.step(states[5], dt=0.01, options=WARM).iterations
     solver.reset()
     chained_steps(solver, x0, 0.01, WARM, 5)   # builds the same history ...
     solver.reset()                              # ... and forgets it
-    assert solver.step(states[5], 0.01, options=WARM).iterations > warm
+    assert solver.step(states[5], dt=0.01, options=WARM).iterations > warm
 
 
 @KEPT
@@ -108,8 +108,8 @@ def test_kept_jacobian_survives_a_change_of_dt(method, kept):
     solver.reset()
     states, _ = chained_steps(solver, x0, 0.001, SIMPLIFIED, 3)
     for dt in (0.05, 0.001, 0.05):
-        expected = solver.step(states[-1], dt, options=COLD).x1
-        result = solver.step(states[-1], dt, options=kept)
+        expected = solver.step(states[-1], dt=dt, options=COLD).x1
+        result = solver.step(states[-1], dt=dt, options=kept)
         assert np.abs(result.x1 - expected).max() < 1e-8
 
 
@@ -119,7 +119,7 @@ def test_kept_jacobian_reports_failure_instead_of_garbage(reuse):
     x0 = initial(solver)
     solver.reset()
     with pytest.raises(NewtonError, match="did not converge"):
-        solver.step(x0, 0.01, options=NewtonOptions(reuse_jacobian=reuse, max_iterations=1))
+        solver.step(x0, dt=0.01, options=NewtonOptions(reuse_jacobian=reuse, max_iterations=1))
 
 
 @pytest.mark.parametrize("reuse", [-1, 3, 1.5, "chord"])

@@ -117,9 +117,9 @@ def test_the_energy_check_takes_the_energy_of_the_new_parameters(method):
     moving = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=DT,
                              n_steps=100, every=100)
     x0 = solver.initial_state(moving.phi[-1], moving.omega[-1])
-    x1 = solver.step(x0, DT).x1
+    x1 = solver.step(x0, dt=DT).x1
     stiffer = {path: 100 * scene.springs[0].stiffness}
-    assert np.all(np.isfinite(solver.step(x1, DT, parameters=stiffer).x1))
+    assert np.all(np.isfinite(solver.step(x1, dt=DT, parameters=stiffer).x1))
 
 
 @pytest.mark.compile
@@ -136,12 +136,12 @@ def test_parameter_sensitivities_match_central_differences(name, method):
 
     def s1(p):
         x0 = solver.initial_state(phi, omega, p)
-        x1 = solver.step(x0, DT, u, options=options, parameters=p).x1
+        x1 = solver.step(x0, u, DT, options=options, parameters=p).x1
         phi1, omega1, _, _ = solver.outputs(x1, p)
         return np.concatenate([phi1, omega1])
 
     x0 = solver.initial_state(phi, omega, values)
-    analytic = solver.step_sensitivities(x0, DT, u, options=options, parameters=values).ds_dp
+    analytic = solver.step_sensitivities(x0, u, DT, options=options, parameters=values).ds_dp
     assert analytic.shape == (2 * scene.n, len(values))
     for j, value in enumerate(values):
         # A step where truncation (h^2) and the noise of the solved steps (1e-12 / h) are both

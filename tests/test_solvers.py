@@ -50,14 +50,15 @@ def test_jacobian_matches_central_differences(method, quadrature, name):
     for _ in range(3):
         z, x0 = random_step_point(solver, scene)
         dt = rng.uniform(0.001, 0.05)
-        _, jacobian = solver.residual_jacobian(z, x0, dt)
+        _, jacobian = solver.residual_jacobian(z, x0, dt=dt)
         numeric = np.empty_like(jacobian)
         for j in range(solver.nz):
             h = 1e-6 * max(1.0, abs(z[j]))
             up, down = z.copy(), z.copy()
             up[j] += h
             down[j] -= h
-            numeric[:, j] = (solver.residual(up, x0, dt) - solver.residual(down, x0, dt)) / (2 * h)
+            numeric[:, j] = (solver.residual(up, x0, dt=dt)
+                             - solver.residual(down, x0, dt=dt)) / (2 * h)
         error = np.abs(jacobian - numeric).max() / np.abs(jacobian).max()
         assert error <= 1e-6, f"relative Jacobian error {error:.2e}"
 
@@ -65,8 +66,8 @@ def test_jacobian_matches_central_differences(method, quadrature, name):
 def test_residual_and_jacobian_agree_on_the_residual():
     solver = solver_for("three_link_mono", "es", 3)
     z, x0 = random_step_point(solver, load("three_link_mono"))
-    residual, _ = solver.residual_jacobian(z, x0, 0.01)
-    np.testing.assert_array_equal(residual, solver.residual(z, x0, 0.01))
+    residual, _ = solver.residual_jacobian(z, x0, dt=0.01)
+    np.testing.assert_array_equal(residual, solver.residual(z, x0, dt=0.01))
 
 
 @pytest.mark.parametrize("name,quadrature", [("three_link_gravity", 1), ("three_link_mono", 1),
@@ -184,8 +185,8 @@ def test_failed_newton_solve_raises_with_the_step():
     assert caught.value.status == 1 and caught.value.step == 1
     assert len(caught.value.result.samples) == 1      # only the initial row is valid
     with pytest.raises(NewtonError, match="did not converge"):
-        solver.step(solver.initial_state(scene.initial_angles, scene.initial_velocities), 0.01,
-                    options=NewtonOptions(max_iterations=1))
+        solver.step(solver.initial_state(scene.initial_angles, scene.initial_velocities),
+                    dt=0.01, options=NewtonOptions(max_iterations=1))
 
 
 @pytest.mark.parametrize("method", ["vi", "midpoint"])
@@ -202,12 +203,12 @@ def test_the_energy_check_refuses_a_step_that_misses_the_balance(method):
                              n_steps=100, every=100)
     x0 = solver.initial_state(moving.phi[-1], moving.omega[-1])
     with pytest.raises(NewtonError, match="energy balance") as caught:
-        solver.step(x0, 0.01, options={"energy_tol": 1e-300})
+        solver.step(x0, dt=0.01, options={"energy_tol": 1e-300})
     assert caught.value.status == STATUS_CODES["ENERGY_JUMP"]
-    assert np.all(np.isfinite(solver.step(x0, 0.01).x1))
-    assert np.all(np.isfinite(solver.step(x0, 0.01, options={"energy_tol": 0.0}).x1))
+    assert np.all(np.isfinite(solver.step(x0, dt=0.01).x1))
+    assert np.all(np.isfinite(solver.step(x0, dt=0.01, options={"energy_tol": 0.0}).x1))
     with pytest.raises(NewtonError, match="bad argument"):
-        solver.step(x0, 0.01, options={"energy_tol": -1.0})
+        solver.step(x0, dt=0.01, options={"energy_tol": -1.0})
     run = solver.simulate(scene.initial_angles, scene.initial_velocities, **STANDARD)
     assert run.split_steps == 0
 
@@ -219,8 +220,8 @@ def test_es_has_no_energy_check():
     solver = solver_for("three_link_mono", "es", 3)
     assert not solver.manifest["energy_check"]
     x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
-    np.testing.assert_array_equal(solver.step(x0, 0.01, options={"energy_tol": 1e-300}).x1,
-                                  solver.step(x0, 0.01, options={"energy_tol": 0.0}).x1)
+    np.testing.assert_array_equal(solver.step(x0, dt=0.01, options={"energy_tol": 1e-300}).x1,
+                                  solver.step(x0, dt=0.01, options={"energy_tol": 0.0}).x1)
 
 
 def test_step_matches_simulate():
@@ -228,7 +229,7 @@ def test_step_matches_simulate():
     solver = solver_for("three_link_multi", "es", 3)
     x = solver.initial_state(scene.initial_angles, scene.initial_velocities)
     for _ in range(10):
-        step = solver.step(x, 0.01)
+        step = solver.step(x, dt=0.01)
         x = step.x1
         assert 1 <= step.iterations <= 5
     result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
@@ -240,9 +241,9 @@ def test_step_matches_simulate():
 def test_bad_arguments_are_refused():
     solver = solver_for("three_link_mono", "es", 3)
     with pytest.raises(NewtonError, match="bad argument"):
-        solver.step(np.zeros(solver.nx), -0.01)
+        solver.step(np.zeros(solver.nx), dt=-0.01)
     with pytest.raises(ValueError, match="12 entries"):
-        solver.step(np.zeros(3), 0.01)
+        solver.step(np.zeros(3), dt=0.01)
     # Every entry point checks its pointers: NULL gives BAD_ARGUMENT (or, for the two that
     # return nothing, no effect), never a crash.
     library = ctypes.CDLL(str(solver.library_path))   # its own function objects, untyped
@@ -297,11 +298,11 @@ def test_two_solvers_run_side_by_side():
     xb = second.initial_state(np.zeros(3), np.ones(3))
     alone_a, alone_b = xa.copy(), xb.copy()
     for _ in range(20):
-        xa = first.step(xa, 0.01).x1
-        xb = second.step(xb, 0.01).x1
+        xa = first.step(xa, dt=0.01).x1
+        xb = second.step(xb, dt=0.01).x1
     for _ in range(20):
-        alone_a = first.step(alone_a, 0.01).x1
+        alone_a = first.step(alone_a, dt=0.01).x1
     for _ in range(20):
-        alone_b = second.step(alone_b, 0.01).x1
+        alone_b = second.step(alone_b, dt=0.01).x1
     np.testing.assert_array_equal(xa, alone_a)
     np.testing.assert_array_equal(xb, alone_b)

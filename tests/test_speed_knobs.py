@@ -47,7 +47,7 @@ def test_a_large_model_is_compiled_with_o1(monkeypatch, tmp_path):
             in large.files["CMakeLists.txt"])
     solver = Solver.from_files(large.files)
     x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
-    assert solver.step(x0, 0.01).iterations >= 1
+    assert solver.step(x0, dt=0.01).iterations >= 1
     # The Makefile builds with the per-file rules (make -n prints the commands it would run).
     directory = write_package(large, tmp_path / "package")
     commands = subprocess.run(["make", "-n", f"{small.prefix}_model.o", f"{small.prefix}.o"],

@@ -145,21 +145,21 @@ def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
         z = 0.01 * rng.standard_normal(solver.nz)
 
         # The residual Jacobian against central differences of the C residual.
-        _, jacobian = solver.residual_jacobian(z, x0, dt, u=u, parameters=p)
+        _, jacobian = solver.residual_jacobian(z, x0, u, dt, parameters=p)
         steps = 1e-6 * np.maximum(1.0, np.abs(z))
         numeric = central_differences(
-            lambda v, x0=x0, u=u, p=p: solver.residual(v, x0, dt, u=u, parameters=p), z, steps)
+            lambda v, x0=x0, u=u, p=p: solver.residual(v, x0, u, dt, parameters=p), z, steps)
         record("residual Jacobian", relative_error(jacobian, numeric))
 
         # The step sensitivities against central differences of the joint-space step map.
         if solver.has_sensitivities:
             def step_map(s, v, q):
                 x = solver.initial_state(s[:n], s[n:], q)
-                x1 = solver.step(x, dt, u=v, options=TIGHT, parameters=q).x1
+                x1 = solver.step(x, v, dt, options=TIGHT, parameters=q).x1
                 phi, omega, _, _ = solver.outputs(x1, q)
                 return np.concatenate([phi, omega])
 
-            sens = solver.step_sensitivities(x0, dt, u=u, parameters=p)
+            sens = solver.step_sensitivities(x0, u, dt, parameters=p)
             record("d s1 / d s0", relative_error(sens.ds_ds, central_differences(
                 lambda s, u=u, p=p: step_map(s, u, p), s0, np.full(2 * n, 1e-4))))
             if nu:
@@ -177,10 +177,10 @@ def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
 
         # Generated functions against their SymPy expressions.
         args = list(z) + list(x0) + u_list + p_list + [dt]
-        record("residual", relative_error(solver.residual(z, x0, dt, u=u, parameters=p),
+        record("residual", relative_error(solver.residual(z, x0, u, dt, parameters=p),
                                           reference.residual(*args)))
         record("initial state", relative_error(x0, reference.initial_state(*s0, *p_list)))
-        x1 = solver.step(x0, dt, u=u, parameters=p).x1
+        x1 = solver.step(x0, u, dt, parameters=p).x1
         # The step of order 4 or 6 is a composition: its stages in turn.
         expected = x0
         for fraction in reference.composition:
@@ -218,7 +218,7 @@ def _converged_unknowns(solver: Solver, x0, dt, u, p):
     """z of the step from x0, by Newton on the C residual from zero (None if it fails)."""
     z = np.zeros(solver.nz)
     for _ in range(50):
-        residual, jacobian = solver.residual_jacobian(z, x0, dt, u=u, parameters=p)
+        residual, jacobian = solver.residual_jacobian(z, x0, u, dt, parameters=p)
         update = np.linalg.solve(jacobian, -residual)
         z = z + update
         if np.abs(update).max() <= 1e-14 * max(1.0, np.abs(z).max()):

@@ -1,0 +1,169 @@
+"""A control loop's step in joint space: the state kept in C's layout, its angles and rates in
+preallocated arrays, one step per call with no allocation.
+
+`Solver.step` takes and returns the scheme's internal state and allocates its results, which
+suits verification; a controller written in Python wants (phi, omega) after every step at the
+least cost. A Stepper keeps the internal state (so the Newton warm start carries from step to
+step as in `simulate`), steps it in place and writes phi and omega, the energy and the
+constraint error into arrays it owns. Its C calls are bound once, with their arguments.
+
+Threads: a Stepper has a C workspace of its own and is used by one thread at a time; make one
+per thread (they share the loaded library, which keeps no mutable state).
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from .errors import NewtonError
+
+
+def _address(buffer) -> ctypes.c_void_p:
+    """A pointer argument for a call without argtypes: a numpy array's data or a ctypes
+    object's address."""
+    if isinstance(buffer, np.ndarray):
+        return ctypes.c_void_p(buffer.ctypes.data)
+    return ctypes.c_void_p(ctypes.addressof(buffer))
+
+
+def _bound(solver, name: str, arguments: dict):
+    """<prefix>_<name> and its arguments in the manifest's order, for calls without argtypes:
+    ctypes then converts nothing per call (a call costs a third of one with argtypes), so
+    every argument must already be of its C type: c_void_p for pointers (NULL: None),
+    c_double for doubles."""
+    function = solver._lib[f"{solver.prefix}_{name}"]    # an object of its own: no argtypes
+    function.restype = ctypes.c_int
+    values = []
+    for parameter, c_type in solver.manifest["entry_points"][name]["parameters"]:
+        value = arguments[parameter]
+        if c_type.endswith("*"):
+            value = None if value is None else _address(value)
+        elif c_type != "double":
+            raise ValueError(f"{name}: no raw argument of C type {c_type!r} ({parameter})")
+        values.append(value)
+    return function, tuple(values)
+
+
+class Stepper:
+    """Steps one chain in joint space; see the module docstring. Made by `Solver.stepper`.
+
+    After construction and after every `step`: `phi`, `omega` (n,) are the joint angles
+    (wrapped to (-pi, pi], as in a sample row) and rates, `t` the time (t0 + k dt), `energy` and
+    `constraint_error` those of the state, `iterations` the last step's Newton iterations,
+    and, for a scene with energy flows, `input_work` and `dissipated` their sums since the
+    start. The arrays are updated in place: keep a copy to remember a value.
+    """
+
+    def __init__(self, solver, phi, omega, dt: float, options=None, parameters=None):
+        self.solver = solver
+        n, nu = solver.n, solver.nu
+        self.phi, self.omega = np.empty(n), np.empty(n)
+        self._u = np.zeros(nu)
+        # t = base + count dt, as simulate's t0 + k dt (a sum of dt would drift from it in the
+        # last bits); a new dt starts a new base.
+        self._base, self._count = 0.0, 0
+        self.energy = self.constraint_error = 0.0
+        self.iterations = 0
+        self.input_work = self.dissipated = 0.0
+        self._states = (np.empty(solver.nx), np.empty(solver.nx))
+        self._flows = np.zeros(2)
+        self._scalars = np.zeros(2)
+        self._p_values = (solver.parameter_values(parameters) if solver.parameters
+                          else np.zeros(0))
+        self._workspace = ctypes.create_string_buffer(solver._workspace_size)
+        self._options = solver.newton_options(options).as_c()
+        self._dt = ctypes.c_double(float(dt))
+        self.dt = dt
+        self._iterations = ctypes.c_int(0)
+        self._flowing = solver.energy_flows
+        common = dict(p=self._p_values if solver.parameters else None,
+                      workspace=self._workspace, u=self._u if nu else None)
+        # Two argument lists each, the states' roles swapped: a step writes the other state.
+        self._step_arguments, self._outputs_arguments = [], []
+        for current, following in ((0, 1), (1, 0)):
+            self._step_function, arguments = _bound(solver, "step", dict(
+                common, x0=self._states[current], x1=self._states[following], dt=self._dt,
+                flows=self._flows, options=self._options, iterations=self._iterations))
+            self._step_arguments.append(arguments)
+            self._outputs_function, arguments = _bound(solver, "outputs", dict(
+                common, x=self._states[following], phi=self.phi, omega=self.omega,
+                energy=self._scalars[:1], constraint_error=self._scalars[1:]))
+            self._outputs_arguments.append(arguments)
+        self.reset(phi, omega)
+
+    @property
+    def u(self) -> np.ndarray:
+        """The torques of the next step (nu,), held until changed (assigning copies)."""
+        return self._u
+
+    @u.setter
+    def u(self, value) -> None:
+        self._u[:] = value
+
+    @property
+    def dt(self) -> float:
+        """The step length (s); may be changed between steps."""
+        return self._dt.value
+
+    @dt.setter
+    def dt(self, value: float) -> None:
+        value = float(value)
+        if not (np.isfinite(value) and value != 0.0):
+            raise ValueError(f"dt: must be finite and nonzero, got {value!r}")
+        self._base, self._count = self.t, 0
+        self._dt.value = value
+
+    @property
+    def t(self) -> float:
+        """The time of the state (s)."""
+        return self._base + self._count * self._dt.value
+
+    @property
+    def state(self) -> np.ndarray:
+        """A copy of the scheme's internal state (for Solver.step, step_sensitivities)."""
+        return self._states[self._current].copy()
+
+    def reset(self, phi, omega, t: float = 0.0) -> None:
+        """Start again from joint space (phi, omega) at time t, with no Newton history."""
+        solver = self.solver
+        solver._call("workspace_init", workspace=self._workspace)
+        x = solver.initial_state(phi, omega, self._p_values if solver.parameters else None)
+        # _current: which of the two states is the chain's; the step from state c writes
+        # state 1 - c, and _outputs_arguments[c] read state 1 - c.
+        self._states[0][:] = x
+        self._current = 0
+        status = self._outputs_function(*self._outputs_arguments[1])
+        if status:
+            raise NewtonError(f"{solver.prefix}_outputs: {solver.status_message(status)}",
+                              status=status)
+        self.energy, self.constraint_error = float(self._scalars[0]), float(self._scalars[1])
+        self._base, self._count = float(t), 0
+        self.input_work = self.dissipated = 0.0
+        self.iterations = 0
+
+    def step(self, u=None) -> None:
+        """One step of dt with torques u (actuated scenes; None: keep `self.u`). Updates phi,
+        omega, t and the rest in place; raises NewtonError if the step fails (the state is
+        then that before the step)."""
+        if u is not None:
+            self._u[:] = u
+        current = self._current
+        status = self._step_function(*self._step_arguments[current])
+        if status:
+            solver = self.solver
+            raise NewtonError(f"step at t = {self.t:.6g} s failed after "
+                              f"{self._iterations.value} Newton iterations: "
+                              f"{solver.status_message(status)}", status=status)
+        self._current = 1 - current
+        self._count += 1
+        status = self._outputs_function(*self._outputs_arguments[current])
+        if status:
+            raise NewtonError(f"{self.solver.prefix}_outputs at t = {self.t:.6g} s: "
+                              f"{self.solver.status_message(status)}", status=status)
+        self.iterations = self._iterations.value
+        scalars = self._scalars
+        self.energy, self.constraint_error = scalars[0], scalars[1]
+        if self._flowing:
+            self.input_work += self._flows[0]
+            self.dissipated += self._flows[1]
