@@ -355,3 +355,21 @@ def test_scaling_point_measures_time_and_memory():
         timing = point["timings"][variant.label]
         assert timing["dt"] == 0.01 and timing["step_ns"] > 0 and not timing["failures"]
         assert timing["mujoco_step_seconds"] > 0      # MuJoCo timed beside it, in the child
+
+
+@pytest.mark.compile
+def test_control_study_measures_every_loop_and_headline_j(tmp_path):
+    """The control loops' part: four loops with their peers, and headline j from them."""
+    from chaingen.studies.bench.control import control_study, control_table
+    from chaingen.studies.bench.headlines import control_headlines
+
+    config = bench_config(quick=True, out=tmp_path / "benchmarks.md")
+    rows = control_study(config, lambda message: None)
+    assert len(rows) == 4
+    assert all(row.seconds > 0 and row.peer_seconds > 0 for row in rows)
+    table = control_table(rows, config)
+    assert "stepper.step" in table and "PD in C" in table
+    found = control_headlines(rows)
+    assert [h.key for h in found] == ["j", "j"]
+    assert all(h.passed in (True, False) for h in found)
+    assert all(h.passed is None for h in control_headlines(None))

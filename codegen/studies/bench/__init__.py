@@ -20,6 +20,9 @@ child processes, so that a size that takes too long can be stopped):
 3. Headline ratios with the issue's targets, computed from parts 1 and 2.
 4. Studies: run-time parameters against constants compiled in, and a sweep of many runs on
    this machine's cores and on Dask against a loop of single runs (the studies module).
+5. Control loops: a controller in a Python loop over `Solver.stepper` against MuJoCo's
+   Python loop, and one in C closing simulate's loop against the open loop (the control
+   module).
 
 The parts live in their own modules: config (what runs), runs (part 1), scaling (part 2),
 headlines (part 3), knobs (the speed knobs), harness (the C timing program), report and figures.
@@ -36,6 +39,7 @@ from ...scene import METHODS, load_reference_scene
 from . import knobs
 from .accuracy import reference_study
 from .config import HEADLINE_DT, HEADLINE_SCENE, BenchConfig, bench_config
+from .control import control_study, control_table
 from .figures import plot_scaling, plot_work_precision
 from .headlines import headlines
 from .report import headline_table, machine_description, markdown, reference_table, scaling_table
@@ -103,7 +107,9 @@ def _run_bench(config: BenchConfig, progress, emit, started: float) -> BenchRepo
     knobs = knob_study(config, progress, emit)
     studies = study_part(config, progress)
     emit(f"\nstudies\n\n{study_tables(studies)}")
-    found = headlines(reference, scaling, config)
+    control = control_study(config, progress)
+    emit(f"\ncontrol loops\n\n{control_table(control, config)}")
+    found = headlines(reference, scaling, config, control)
     emit(f"\nheadline\n\n{headline_table(found)}")
     figures = {}
     for name, rows in reference.items():
@@ -113,7 +119,7 @@ def _run_bench(config: BenchConfig, progress, emit, started: float) -> BenchRepo
     wall = time.perf_counter() - started
     document = write_text(config.out, markdown(config, found, reference, scaling,
                                                      figures, machine, wall, knobs,
-                                                     studies))
+                                                     studies, control))
     emit(f"\nwrote {document} and {len(figures)} figures in {config.figures} "
          f"({wall / 60:.1f} min)")
     return BenchReport(found, reference, scaling, document, figures, wall)

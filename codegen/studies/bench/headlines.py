@@ -321,9 +321,11 @@ def compiled_peer_headlines(rows) -> list[Headline]:
 
 
 def headlines(reference: dict[str, list[RunRow]], scaling: list[ScalingRow] | None,
-              config: BenchConfig) -> list[Headline]:
-    """Rows a-e of the issue, one per Newton variant, and f-h against the compiled peers
-    (over every configuration of ours), from this run's measurements."""
+              config: BenchConfig, control=None) -> list[Headline]:
+    """Rows a-e of the issue, one per Newton variant, f-h against the compiled peers (over
+    every configuration of ours), i of the adaptive steps and j of the control loops
+    (`control`: the rows of control.control_study, None if not run), from this run's
+    measurements."""
     rows = reference.get(HEADLINE_SCENE, [])
     scene = load_reference_scene(HEADLINE_SCENE)
     es = method_label(scene, "es", 3)
@@ -362,6 +364,7 @@ def headlines(reference: dict[str, list[RunRow]], scaling: list[ScalingRow] | No
                 f"<= {TARGET_STEP_OVER_EVALUATION:g}", ratio <= TARGET_STEP_OVER_EVALUATION))
     found += compiled_peer_headlines(rows)
     found += adaptive_headlines(reference.get(ADAPTIVE_SCENE, []))
+    found += control_headlines(control)
     return sorted(found, key=lambda headline: headline.key)   # stable: variants stay in order
 
 
@@ -401,3 +404,27 @@ def scaling_headlines(scaling: list[ScalingRow] | None, variant: Variant) -> lis
                                   f"{_us(row.mujoco_step_seconds)}, dt = {row.dt:g} s)",
                                   target, value <= limit))
     return found
+
+
+def control_headlines(control) -> list[Headline]:
+    """j: a step from a Python loop at n = 3, and the C controller's closed loop against the
+    open loop (control.py; the table there has the loop with a Python controller too)."""
+    from .control import TARGET_C_CONTROLLER_RATIO, TARGET_PYTHON_LOOP_SECONDS, control_scene
+
+    where = f"{control_scene().name}, dt = {HEADLINE_DT:g} s"
+    python_claim = f"a step from a Python loop (stepper.step, torques held), {where}"
+    c_claim = f"simulate closed by a C controller / open-loop simulate, {where}"
+    python_target = f"<= {TARGET_PYTHON_LOOP_SECONDS * 1e6:g} us"
+    c_target = f"<= {TARGET_C_CONTROLLER_RATIO:g}"
+    if not control:
+        return [Headline("j", python_claim, "default options", "not in this run", python_target,
+                         None),
+                Headline("j", c_claim, "default options", "not in this run", c_target, None)]
+    python, c_loop = control[0], control[2]
+    return [Headline("j", python_claim, "default options",
+                     f"{_us(python.seconds)} ({python.ratio:.2f} x MuJoCo RK4's loop, "
+                     f"{_us(python.peer_seconds)})", python_target,
+                     python.seconds <= TARGET_PYTHON_LOOP_SECONDS),
+            Headline("j", c_claim, "default options",
+                     f"{c_loop.ratio:.2f} ({_us(c_loop.seconds)} / {_us(c_loop.peer_seconds)})",
+                     c_target, c_loop.ratio <= TARGET_C_CONTROLLER_RATIO)]

@@ -20,6 +20,7 @@ from .config import (
     VARIANTS,
     BenchConfig,
 )
+from .control import control_table
 from .headlines import Headline
 from .knobs import knob_table
 from .runs import RunRow
@@ -198,7 +199,7 @@ HOW_MEASURED = """\
 
 def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
              figures: dict[str, Path], machine, wall_seconds: float, knobs=(),
-             studies=None) -> str:
+             studies=None, control=None) -> str:
     lines = ["# Benchmarks: speed against accuracy", "",
              f"Written by `{config.command}` in {wall_seconds / 60:.1f} min of wall time on "
              f"{time.strftime('%Y-%m-%d')}. Every number and figure comes from that run; nothing "
@@ -208,7 +209,8 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
              "The issue's targets, measured side by side in this run (a-c, e-h on "
              f"{HEADLINE_SCENE}, standard run; d on the scaling series). f and g compare the "
              "cheapest measured runs that hold both errors (not interpolated), h interpolates "
-             "each method's CPU at a trajectory error as c does at an energy error.", "",
+             "each method's CPU at a trajectory error as c does at an energy error; j is on the "
+             "control loops (last section).", "",
              headline_table(found), "", "## Machine", ""]
     lines += [f"- {key}: {value}" for key, value in machine]
     lines += ["", "## How it is measured", "",
@@ -254,6 +256,8 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
     if studies is not None:
         lines += ["## Studies: run-time parameters and sweeps", "",
                   " ".join(STUDIES_TEXT.split("\n")), "", study_tables(studies), ""]
+    if control:
+        lines += ["## Control loops", "", control_table(control, config), ""]
     return "\n".join(lines).rstrip() + "\n"
 
 
