@@ -5,6 +5,7 @@ reading scenes and checking settings stay quick.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 
@@ -109,7 +110,27 @@ def build_solver(scene: Scene, method: str, quadrature: int, *,
     bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while.
     parameters: key paths of the scene's numbers the solver takes at run time (every call
     then takes their values, the scene's own by default). order: of the step, 2 (the
-    scheme's own), 4 or 6 (a symmetric composition of its steps)."""
+    scheme's own), 4 or 6 (a symmetric composition of its steps).
+
+    A solver built before from the same inputs (scene, method, options, chaingen's code, the
+    tool versions, the compiler: codegen/generate/key.py) loads from the build cache's index
+    without running SymPy or CasADi."""
+    from .generate.key import solver_key
+    from .runtime.build import (
+        DEFAULT_OPTIMISATION,
+        BuiltLibrary,
+        compiler,
+        indexed_library,
+        remember,
+    )
+
+    key = solver_key(scene, method, quadrature, sensitivities=sensitivities,
+                     parameters=tuple(parameters), order=order,
+                     build=(compiler(), *DEFAULT_OPTIMISATION))
+    found = indexed_library(key)
+    if found is not None:
+        library, manifest = found
+        return Solver(library.path, manifest, build_hash=library.build_hash)
     from .generate.package import GENERATE_STAGES, generate_package
 
     with Progress(f"generate {scene.name} ({method})", total=GENERATE_STAGES + 1,
@@ -117,7 +138,10 @@ def build_solver(scene: Scene, method: str, quadrature: int, *,
         package = generate_package(scene, method, quadrature, sensitivities=sensitivities,
                                    parameters=parameters, order=order, progress=progress)
         progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
-        return Solver.from_files(package.files)
+        solver = Solver.from_files(package.files)
+    with contextlib.suppress(OSError):      # an index that cannot be written only costs time
+        remember(key, BuiltLibrary(solver.library_path, solver.build_hash), solver.manifest)
+    return solver
 
 
 def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None = None,

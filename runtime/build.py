@@ -122,6 +122,48 @@ def ready_cache(cache: Path) -> Path:
     return cache
 
 
+#: The cache's index from a solver's inputs (codegen/generate/key.py solver_key) to its
+#: library and manifest: build_solver's lookup before any SymPy or CasADi work.
+INDEX = "inputs"
+
+
+def indexed_library(key: str, cache: Path | None = None) -> tuple[BuiltLibrary, dict] | None:
+    """The verified library and manifest the index holds for `key`, or None: no entry, or an
+    entry that is unreadable, or whose library is missing or not the one it names (then the
+    caller generates and builds as if there were none, and `remember` replaces the entry)."""
+    cache = Path(cache) if cache is not None else cache_directory()
+    try:
+        entry = json.loads((cache / INDEX / f"{key}.json").read_text())
+        library = cache / entry["library"]
+        built, manifest = entry["build_hash"], entry["manifest"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if (not isinstance(manifest, dict) or library.parent != cache
+            or not verified(library, built)):
+        return None
+    return BuiltLibrary(library, built), manifest
+
+
+def remember(key: str, library: BuiltLibrary, manifest: dict, cache: Path | None = None) -> None:
+    """Record in the index that `key` builds `library` with `manifest`: written to a temporary
+    file and renamed, so that a reader sees the old entry or the new, never half of one (two
+    processes remembering the same key write the same text)."""
+    cache = ready_cache(Path(cache) if cache is not None else cache_directory())
+    folder = cache / INDEX
+    folder.mkdir(exist_ok=True)
+    text = json.dumps({"library": library.path.name, "build_hash": library.build_hash,
+                       "manifest": manifest}, sort_keys=True)
+    handle, temporary = tempfile.mkstemp(prefix=f".{key}-", suffix=".json", dir=folder)
+    try:
+        with os.fdopen(handle, "w") as stream:
+            stream.write(text)
+        os.replace(temporary, folder / f"{key}.json")
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temporary)
+        raise
+
+
 @contextlib.contextmanager
 def locked(path: Path):
     """An exclusive lock on the file `path` (created if needed), released on leaving."""

@@ -109,6 +109,7 @@ class Solver:
     def __init__(self, library: Path, manifest: dict, *, build_hash: str | None = None):
         self.library_path = Path(library)
         self.manifest = manifest
+        self.build_hash = build_hash
         self.prefix = manifest["prefix"]
         self.n = manifest["n_joints"]
         self.nx = manifest["nx"]

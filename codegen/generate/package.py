@@ -8,7 +8,6 @@ through chaingen.generate.interface, so the header, the Python loader and the ma
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import importlib.resources
 import json
 import os
@@ -24,13 +23,14 @@ from ..errors import PackageWriteError
 from ..runtime import contract
 from ..runtime.contract import Features
 from ..runtime.files import write_directory
-from ..scene import Scene, quadrature_used
+from ..scene import Scene
 from ..symbolic.schemes import DiscreteScheme, build_scheme
 from ..version import VERSION
 from .casadi_functions import chains_state, scheme_functions
 from .casadi_source import casadi_c_source, work_sizes
 from .example import example_context
 from .interface import CInterface, c_literal
+from .key import input_hash
 
 #: template -> file it renders ({prefix} is replaced by the package prefix)
 TEMPLATES = {
@@ -81,26 +81,6 @@ def c_list(values) -> str:
 def package_prefix(scene: Scene, method: str) -> str:
     """C prefix of every exported symbol: the scene's C name and the method."""
     return f"{scene.c_name}_{method}"
-
-
-def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool = True,
-               parameters=(), order: int = 2) -> str:
-    """sha256 of everything the generated code depends on, and nothing else.
-
-    The initial state and the simulation defaults do not enter the code; the tool versions and
-    the paths of the run-time parameters do.
-    """
-    code_relevant = dataclasses.asdict(scene)
-    for key in ("initial_angles", "initial_velocities", "simulation"):
-        code_relevant.pop(key)
-    payload = {
-        "scene": code_relevant, "method": method,
-        "quadrature": quadrature_used(scene, method, quadrature, order),
-        "sensitivities": sensitivities, "parameters": list(parameters), "order": order,
-        "chaingen": VERSION, "sympy": sympy.__version__, "casadi": casadi.__version__,
-    }
-    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def template_environment(interface: CInterface | None = None) -> jinja2.Environment:

@@ -1,0 +1,81 @@
+"""What a generated package depends on, as hashes computed without SymPy or CasADi.
+
+- `input_hash`: the scene's code-relevant numbers, the method and its options, and the tool
+  versions. It is the package's identity (the manifest's "input_hash", the banner of every
+  generated file), so generated/ stays reproducible byte for byte.
+- `solver_key`: input_hash and everything else that decides the compiled library: chaingen's own
+  code and templates as installed (an edited template must not load yesterday's build, also in
+  an editable install whose version did not move), the compiler and the build flags. It keys the
+  build cache's index from inputs to libraries (runtime/build.py), which lets `build_solver`
+  load an unchanged solver without running SymPy or CasADi.
+
+The tool versions come from the installed distributions' metadata, which is read without
+importing the tools (importing SymPy alone costs about a second).
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import importlib.metadata
+import json
+from pathlib import Path
+
+from ..scene import Scene, quadrature_used
+from ..version import VERSION
+
+#: The files of the installed package whose text decides the generated code and its build.
+CODE_SUFFIXES = (".py", ".j2", ".h")
+
+
+def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool = True,
+               parameters=(), order: int = 2) -> str:
+    """sha256 of everything the generated code depends on, and nothing else.
+
+    The initial state and the simulation defaults do not enter the code; the tool versions and
+    the paths of the run-time parameters do.
+    """
+    code_relevant = dataclasses.asdict(scene)
+    for key in ("initial_angles", "initial_velocities", "simulation"):
+        code_relevant.pop(key)
+    payload = {
+        "scene": code_relevant, "method": method,
+        "quadrature": quadrature_used(scene, method, quadrature, order),
+        "sensitivities": sensitivities, "parameters": list(parameters), "order": order,
+        "chaingen": VERSION, "sympy": importlib.metadata.version("sympy"),
+        "casadi": importlib.metadata.version("casadi"),
+    }
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def code_digest() -> str:
+    """sha256 over the installed chaingen package's code, templates and C headers (paths and
+    contents), computed once a process (a few milliseconds)."""
+    from .. import runtime, templates  # their folders may live elsewhere
+
+    return folders_digest([Path(__file__).resolve().parent.parent,     # the chaingen package
+                           Path(runtime.__file__).resolve().parent,
+                           Path(templates.__file__).resolve().parent])
+
+
+def folders_digest(folders) -> str:
+    """sha256 over the CODE_SUFFIXES files under `folders`: their paths relative to their
+    folder, and their contents."""
+    entries = sorted({(str(path.relative_to(folder)), path) for folder in folders
+                      for path in Path(folder).rglob("*")
+                      if path.suffix in CODE_SUFFIXES and "__pycache__" not in path.parts})
+    digest = hashlib.sha256()
+    for name, path in entries:
+        digest.update(name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def solver_key(scene: Scene, method: str, quadrature: int, *, sensitivities: bool,
+               parameters=(), order: int = 2, build: tuple[str, ...] = ()) -> str:
+    """The build cache index's key of the solver build_solver makes: input_hash, chaingen's
+    code (code_digest) and `build` (the compiler and flags)."""
+    payload = [input_hash(scene, method, quadrature, sensitivities, parameters, order),
+               code_digest(), list(build)]
+    return hashlib.sha256(json.dumps(payload).encode()).hexdigest()[:32]
