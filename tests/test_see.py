@@ -25,7 +25,7 @@ from chaingen.symbolic.com_model import com_model, joint_space_positions
 from chaingen.views.animate import ChainDrawing, animate, frame_plan
 from chaingen.views.plots import DPI, FIGURE_SIZE, broken_at_wraps, load_run, plot_files
 
-from helpers import load, scene_path
+from helpers import load, require_tools, scene_path
 
 PIL = pytest.importorskip("PIL.Image")
 PNG_SIZE = (int(FIGURE_SIZE[0] * DPI), int(FIGURE_SIZE[1] * DPI))
@@ -375,9 +375,9 @@ def test_generation_reports_its_stages():
     assert "SymPy" in notes[0][1] and "CasADi" in notes[1][1]
 
 
-@pytest.mark.compile
-@pytest.mark.skipif(__import__("shutil").which("ffmpeg") is None, reason="ffmpeg not installed")
+@pytest.mark.tools
 def test_animation_as_mp4_with_ffmpeg(runs, tmp_path):
+    require_tools("ffmpeg")    # .ci/run installs it: there a missing ffmpeg fails, not skips
     out, plan = animate(load("three_link_multi"), load_run(runs["es"]), tmp_path / "chain.mp4",
                         pixels=240)
     assert out.read_bytes()[4:8] == b"ftyp" and plan.indices.size == 51

@@ -185,6 +185,22 @@ def _check_divides(dt: float, t_end: float, option: str) -> None:
                          "(the trajectory error is taken at t_end)")
 
 
+#: The first line of every report, and the mark a quick run's report carries.
+REPORT_TITLE = "# Benchmarks: speed against accuracy"
+QUICK_MARK = "**Quick mode**"
+
+
+def is_full_report(path: Path) -> bool:
+    """Whether `path` is the report of a full `chaingen bench` run (a quick run's carries
+    QUICK_MARK in its opening paragraph)."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as stream:
+            head = stream.read(4096)
+    except OSError:
+        return False
+    return head.startswith(REPORT_TITLE) and QUICK_MARK not in head
+
+
 def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str | None = None,
                  timeout: float = 300.0, skip_scaling: bool = False,
                  skip_reference: bool = False, skip_sweep: bool = False,
@@ -223,6 +239,9 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
     out_default = out is None
     out = Path(out) if out is not None else Path(DEFAULT_OUT)
     check_output_file(out, "--out")
+    if quick and is_full_report(out):
+        raise BenchError(f"--out: {out} is the report of a full run; --quick (a smoke test) "
+                         "does not replace it: give another --out")
     figures_default = figures is None
     figures = Path(figures) if figures is not None else out.parent / "figures"
     if figures.exists() and not figures.is_dir():

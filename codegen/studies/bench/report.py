@@ -17,6 +17,8 @@ from .config import (
     HEADLINE_DT,
     HEADLINE_SCENE,
     MUJOCO_TIMED_STEPS,
+    QUICK_MARK,
+    REPORT_TITLE,
     VARIANTS,
     BenchConfig,
 )
@@ -200,10 +202,10 @@ HOW_MEASURED = """\
 def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
              figures: dict[str, Path], machine, wall_seconds: float, knobs=(),
              studies=None, control=None) -> str:
-    lines = ["# Benchmarks: speed against accuracy", "",
+    lines = [REPORT_TITLE, "",
              f"Written by `{config.command}` in {wall_seconds / 60:.1f} min of wall time on "
              f"{time.strftime('%Y-%m-%d')}. Every number and figure comes from that run; nothing "
-             "is edited by hand." + (" **Quick mode**: a smoke test with short runs and few "
+             "is edited by hand." + (f" {QUICK_MARK}: a smoke test with short runs and few "
                                      "series, not the benchmark." if config.quick else ""),
              "", "## Headline", "",
              "The issue's targets, measured side by side in this run (a-c, e-h on "
