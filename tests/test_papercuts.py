@@ -1,6 +1,7 @@
 """The papercuts a new user met (issue 18), each with the check that fails without its fix."""
 from __future__ import annotations
 
+import platform
 import re
 import shutil
 import subprocess
@@ -66,3 +67,38 @@ def test_from_directory_loads_a_package_built_in_place_with_make(tmp_path):
     scene = load_reference_scene("three_link_mono")
     x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
     assert solver.step(x0, dt=0.01).iterations >= 1
+
+
+@pytest.mark.compile
+def test_readme_example_output_is_a_fresh_runs(tmp_path):
+    """The README's example block equals a fresh `chaingen simulate` of it in every field that
+    does not depend on the machine's speed; the errors exactly on x86-64 (the README's
+    machine), to their order of magnitude elsewhere (their last digits move with the machine
+    and the compiler)."""
+    text = (ROOT / "README.md").read_text()
+    block = re.search(r"```\n\$ (chaingen simulate \S+)\n(.*?)```", text, re.S)
+    assert block, "no example block in the README"
+    command, shown = block.group(1).split(), block.group(2)
+    result = chaingen_in_process(*command[1:], cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    fresh = result.stdout
+
+    def fields(summary: str) -> dict:
+        lines = summary.strip("\n").splitlines()
+        found = {"header": lines[0].strip()}
+        for line in lines[1:]:                  # "  <label, 23 columns><value>"
+            found[line[2:25].strip()] = line[25:].strip()
+        return found
+
+    expected, got = fields(shown), fields(fresh)
+    assert set(expected) == set(got)
+    for name in ("header", "steps", "Newton iterations"):
+        assert expected[name] == got[name], name
+    for name in ("max |energy error|", "max |constraint error|"):
+        if platform.machine() == "x86_64":      # the README's machine: the same bits
+            assert expected[name] == got[name], name
+            continue
+        shown_value, fresh_value = (float(value.split()[0]) for value in (expected[name],
+                                                                           got[name]))
+        assert fresh_value == 0.0 and shown_value == 0.0 or \
+            0.1 <= fresh_value / shown_value <= 10.0, (name, shown_value, fresh_value)
