@@ -71,6 +71,31 @@ def test_the_drawing_puts_every_point_where_the_model_has_it(name):
     assert drawing.clock.get_text() == "t =    1.25 s"
 
 
+@pytest.mark.parametrize("pixels", [400, 480])
+@pytest.mark.parametrize("name", ["three_link_multi", "three_link_gravity"])
+def test_the_frame_keeps_its_labels_inside_and_names_units(name, pixels):
+    """Every tick label (minus signs included) and axis label lies inside the frame at the
+    README's 400 px and the default 480 px, and the axes carry their unit."""
+    drawing = ChainDrawing(load(name), pixels=pixels, title="a title")
+    drawing.draw(np.full(drawing.scene.n, -2.5), 12.5)
+    renderer = drawing.figure.canvas.get_renderer()
+    drawing.figure.canvas.draw()
+    width, height = drawing.figure.canvas.get_width_height()
+    axes = drawing.axes
+    labels = [label for label in axes.get_xticklabels() + axes.get_yticklabels()
+              if label.get_visible() and label.get_text()]
+    labels += [axes.xaxis.label, axes.yaxis.label]
+    if drawing.scene.springs:                        # the colour bar's ticks and label too
+        labels += [label for label in drawing.bar.ax.get_yticklabels() if label.get_text()]
+        labels.append(drawing.bar.ax.yaxis.label)
+    assert any(label.get_text().startswith(("-", "\u2212")) for label in labels)
+    for label in labels:
+        box = label.get_window_extent(renderer)
+        assert box.x0 >= 0 and box.y0 >= 0 and box.x1 <= width and box.y1 <= height, \
+            (label.get_text(), box, width, height)
+    assert axes.get_xlabel() == "x [m]" and axes.get_ylabel() == "y [m]"
+
+
 def test_the_multi_articular_spring_runs_through_all_four_fastenings():
     scene = load("three_link_multi")
     (spring,) = scene.springs

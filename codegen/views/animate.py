@@ -118,8 +118,14 @@ class ChainDrawing:
         from matplotlib import colormaps
         from matplotlib.colors import Normalize
 
-        axes = self.figure.add_axes((0.04, 0.04, 0.80, 0.86))
+        # Margins in pixels, so that the tick labels (with their minus signs) and the axis
+        # labels stay inside the frame at any --size; the colour bar takes the right side.
+        left, bottom, top = 58.0 / pixels, 44.0 / pixels, 1.0 - 30.0 / pixels
+        right = 1.0 - (104.0 if scene.springs else 24.0) / pixels
+        axes = self.figure.add_axes((left, bottom, right - left, top - bottom))
         self.axes = axes
+        axes.set_xlabel("x [m]", fontsize=7, labelpad=2)
+        axes.set_ylabel("y [m]", fontsize=7, labelpad=2)
         radius = 1.08 * reach(scene)
         axes.set_xlim(-radius, radius)
         axes.set_ylim(-radius, radius)
@@ -147,11 +153,12 @@ class ChainDrawing:
             self.figure.suptitle(title, fontsize=9)
         if scene.springs:
             from matplotlib.cm import ScalarMappable
-            bar_axes = self.figure.add_axes((0.87, 0.12, 0.03, 0.70))
+            bar_axes = self.figure.add_axes((1.0 - 84.0 / pixels, 0.12, 12.0 / pixels, 0.70))
             bar = self.figure.colorbar(ScalarMappable(norm=self.norm, cmap=self.colormap),
                                        cax=bar_axes)
             bar.set_label("spring stretch (s - S0) / S0", fontsize=7)
             bar.ax.tick_params(labelsize=6)
+            self.bar = bar
         self.canvas = self.figure.canvas
 
     def draw(self, phi, t: float) -> FrameGeometry:
