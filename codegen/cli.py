@@ -52,6 +52,14 @@ def parser() -> argparse.ArgumentParser:
                           help="leave out step_sensitivities (smaller code, faster build)")
     add_parameters_option(generate)
 
+    export = command("export", help="write a scene as a MuJoCo model (MJCF)")
+    export.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format.md)")
+    export.add_argument("--mjcf", type=Path, required=True, metavar="OUT.xml",
+                        help="the MuJoCo XML to write")
+    export.add_argument("--dt", type=number, help="its time step in s (default: the scene's)")
+    export.add_argument("--integrator", default="RK4",
+                        help="MuJoCo's integrator: RK4 (default), Euler, implicit, implicitfast")
+
     simulate = command("simulate", help="simulate a scene with a generated solver")
     add_scheme_options(simulate)
     add_newton_options(simulate)
@@ -178,6 +186,29 @@ def command_generate(args) -> int:
                                order=settings.order)
     directory = write_package(package, target)
     print(f"wrote {directory}/: {', '.join(package.files)}")
+    return 0
+
+
+def command_export(args) -> int:
+    from .reference.mjcf import MUJOCO_INTEGRATORS, mjcf_from_scene
+    from .runtime.files import write_text
+
+    scene = load_scene(args.scene)
+    dt = scene.simulation.dt if args.dt is None else args.dt
+    if not (dt > 0.0 and dt < float("inf")):
+        raise SettingsError(f"--dt: must be > 0 s and finite, got {dt!r}")
+    if args.integrator not in MUJOCO_INTEGRATORS:
+        raise SettingsError(f"--integrator: must be one of {', '.join(MUJOCO_INTEGRATORS)}, "
+                            f"got {args.integrator!r}")
+    check_output_file(args.mjcf, "--mjcf", [args.scene])
+    try:
+        text = mjcf_from_scene(scene, dt=dt, integrator=args.integrator, export=True)
+    except ValueError as error:               # what MuJoCo cannot represent (J = 0)
+        raise SettingsError(f"{args.scene}: {error}") from None
+    write_text(args.mjcf, text)
+    motors = f", motors on joints {list(scene.actuated_joints)}" if scene.actuated_joints else ""
+    print(f"wrote {args.mjcf}: {scene.n} links, {len(scene.springs)} spring tendons{motors}, "
+          f"dt {dt:g} s, {args.integrator}")
     return 0
 
 
@@ -406,7 +437,8 @@ def main(argv: list[str] | None = None) -> int:
     debug = args.debug or os.environ.get("CHAINGEN_DEBUG", "") not in ("", "0")
     handlers = {"generate": command_generate, "simulate": command_simulate,
                 "check": command_check, "order": command_order, "bench": command_bench,
-                "plot": command_plot, "animate": command_animate, "sweep": command_sweep}
+                "plot": command_plot, "animate": command_animate, "sweep": command_sweep,
+                "export": command_export}
     try:
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take

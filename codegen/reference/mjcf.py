@@ -65,12 +65,19 @@ def joint_name(i: int) -> str:
     return f"joint{i}"
 
 
-def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4") -> str:
+def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
+                    export: bool = False) -> str:
     """MJCF text of `scene`'s chain (model.md section 10), time step `dt`, MuJoCo `integrator`.
 
     Bodies, joints and tendons are in the scene's order, so qpos[i-1] is phi_i and tendon k is
     scene.springs[k]. Joint damping d_i becomes the hinge's ``damping``; nothing else (no
     armature, limits or joint stiffness) is added.
+
+    export (`chaingen export --mjcf`): also what a user of the file sees and drives: a capsule
+    geom along each link (no contacts, no mass: the <inertial> stays the only mass), visible
+    sites and tendons, and a motor (gear 1, no control limits) on each actuated joint, in the
+    scene's order, so that data.ctrl[j] is the torque of the j-th actuated joint. The
+    dynamics are those of the reference model.
 
     Raises ValueError for a link with J_i = 0 (MuJoCo cannot represent a moving body without
     rotational inertia), for dt that is not positive and finite, and for an unknown integrator.
@@ -90,10 +97,12 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4") -> str:
     # Sites per body: index 0 is the world body, index i the body of link i. The fastening
     # P_j lies on body j-1 at (L_{j-1}, r_j, 0) (at (0, r_1, 0) on the world body).
     sites: list[list[str]] = [[] for _ in range(scene.n + 1)]
+    size = 0.015 * sum(link.length for link in scene.links)      # of the drawn geometry
+    looks = (f' size={quoteattr(_number(size))} rgba="0.2 0.2 0.2 1"' if export else "")
 
     def site_xml(name: str, j: int, r: float) -> str:
         x = 0.0 if j == 1 else scene.links[j - 2].length
-        return f"<site name={quoteattr(name)} pos={quoteattr(_vector(x, r, 0.0))}/>"
+        return f"<site name={quoteattr(name)} pos={quoteattr(_vector(x, r, 0.0))}{looks}/>"
 
     for j, r in enumerate(scene.chain_fastenings(), start=1):
         sites[j - 1].append(site_xml(chain_fastening_site(j), j, r))
@@ -108,10 +117,12 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4") -> str:
             for j, r in zip(fastenings, scene.spring_fastenings(spring)):
                 sites[j - 1].append(site_xml(spring_fastening_site(k, j), j, r))
         path = "".join(f"\n      <site site={quoteattr(name)}/>" for name in names)
+        drawn = (f' width={quoteattr(_number(0.5 * size))} rgba="0.7 0.1 0.1 1"'
+                 if export else "")
         tendons.append(
             f"    <spatial name={quoteattr(tendon_name(k))} "
             f"stiffness={quoteattr(_number(spring.stiffness))} "
-            f"springlength={quoteattr(_number(spring.rest_length))}>"
+            f"springlength={quoteattr(_number(spring.rest_length))}{drawn}>"
             f"{path}\n    </spatial>")
 
     # Bodies nest: build from the tip inwards.
@@ -130,6 +141,12 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4") -> str:
             f"mass={quoteattr(_number(link.mass))} "
             f"diaginertia={quoteattr(_vector(link.inertia, link.inertia, link.inertia))}/>",
         ]
+        if export:
+            lines.append(
+                f"{indent}  <geom name={quoteattr(f'link{i}_geom')} type=\"capsule\" "
+                f"fromto={quoteattr(_vector(0.0, 0.0, 0.0, link.length, 0.0, 0.0))} "
+                f"size={quoteattr(_number(size))} mass=\"0\" contype=\"0\" "
+                f"conaffinity=\"0\" rgba=\"0.5 0.5 0.55 1\"/>")
         lines += [f"{indent}  {site}" for site in sites[i]]
         body = "\n".join(lines) + "\n"
         body += inner
@@ -138,6 +155,12 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4") -> str:
 
     world_sites = "".join(f"    {site}\n" for site in sites[0])
     tendon_block = ("  <tendon>\n" + "\n".join(tendons) + "\n  </tendon>\n") if tendons else ""
+    actuator_block = ""
+    if export and scene.actuated_joints:
+        motors = "".join(f"    <motor name={quoteattr(f'motor{j}')} "
+                         f"joint={quoteattr(joint_name(j))} gear=\"1\"/>\n"
+                         for j in scene.actuated_joints)
+        actuator_block = f"  <actuator>\n{motors}  </actuator>\n"
     return (
         f"<mujoco model={quoteattr(scene.name)}>\n"
         f"  <compiler angle=\"radian\"/>\n"
@@ -150,5 +173,6 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4") -> str:
         f"{inner}"
         f"  </worldbody>\n"
         f"{tendon_block}"
+        f"{actuator_block}"
         f"</mujoco>\n"
     )
