@@ -31,6 +31,7 @@ import numpy as np
 
 from . import contract
 from .build import build_shared_library
+from .controller import context_address, controller_address
 from .errors import NewtonError
 from .interface import ControlStruct, NewtonOptions, StatsStruct, ctypes_type
 from .results import Sensitivities, SimulationResult, StepResult
@@ -77,23 +78,6 @@ def _step_length(dt, what: str) -> float:
         raise TypeError(f"{what}() needs dt; the arguments are in C's order: {what}(x0, u, dt) "
                         f"(u=None for an unactuated scene), e.g. {what}(x0, dt=0.01)")
     return float(dt)
-
-
-def _address(pointer, name: str) -> int | None:
-    """A void * argument: None, an int address or a ctypes pointer or buffer."""
-    if pointer is None or isinstance(pointer, int):
-        return pointer
-    try:
-        return ctypes.cast(pointer, ctypes.c_void_p).value
-    except ctypes.ArgumentError:
-        raise ValueError(f"{name}: an address (int), a ctypes pointer or None, got "
-                         f"{type(pointer).__name__}") from None
-
-
-#: The C type of <prefix>_controller (contract.CONTROLLER_PARAMETERS), for Python controllers;
-#: the arrays as plain addresses (ints), which ctypes passes without building pointer objects.
-_CONTROLLER = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_long, ctypes.c_double, ctypes.c_void_p,
-                               ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p)
 
 
 def _vector(values, size: int, name: str) -> np.ndarray:
@@ -384,7 +368,7 @@ class Solver:
                 raise ValueError(f"hold must be an integer >= 1 (steps per controller call), "
                                  f"got {hold!r}")
             recorded = np.zeros((n_steps, self.nu))
-            address, callback = self._controller_address(controller, errors)
+            address, callback = controller_address(controller, self.n, self.nu, errors)
         elif self.nu:
             recorded = (np.zeros((n_steps, self.nu)) if torques is None
                         else np.ascontiguousarray(torques, dtype=np.float64))
@@ -412,7 +396,7 @@ class Solver:
             entry = "simulate_controlled"
             arguments.update(controller=address, hold=hold, torques=_pointer(recorded),
                              context=(None if callback is not None else
-                                      _address(controller_context, "controller_context")))
+                                      context_address(controller_context)))
         started = time.perf_counter()
         if stop is not None:
             stop._attach(control)
@@ -449,44 +433,6 @@ class Solver:
                 f"{self.status_message(status)}",
                 status=status, step=failed, time=stats.steps * dt, result=result)
         return result
-
-    def _controller_address(self, controller, errors: list):
-        """(address of a C controller, the ctypes callback to keep alive or None). A Python
-        callable is wrapped; an exception it raises goes to `errors` and stops the run."""
-        if isinstance(controller, ctypes._CFuncPtr):
-            return ctypes.cast(controller, ctypes.c_void_p).value, None
-        if isinstance(controller, int) and not isinstance(controller, bool):
-            if controller == 0:
-                raise ValueError("controller: the address of a C function, got 0 (NULL)")
-            return controller, None
-        if not callable(controller):
-            raise ValueError(f"controller: a callable controller(t, phi, omega) -> torques, or "
-                             f"a C function pointer, got {type(controller).__name__}")
-        n, nu = self.n, self.nu
-        views: dict[int, np.ndarray] = {}    # the C loop's arrays by address (they stay put)
-
-        def view(address: int, size: int) -> np.ndarray:
-            array = views.get(address)
-            if array is None:
-                array = views[address] = np.frombuffer(
-                    (ctypes.c_double * size).from_address(address), dtype=np.float64)
-            return array
-
-        def call(step, t, phi, omega, u, context) -> int:
-            try:
-                value = controller(t, view(phi, n).copy(), view(omega, n).copy())
-                torques = np.asarray(value, dtype=np.float64)
-                if torques.shape != (nu,) or not np.all(np.isfinite(torques)):
-                    raise ValueError(f"controller: must return {nu} finite torques, got "
-                                     f"{value!r} at t = {t:g} s")
-                view(u, nu)[:] = torques
-                return 0
-            except BaseException as error:   # raised again once the run has stopped
-                errors.append(error)
-                return 1
-
-        callback = _CONTROLLER(call)
-        return ctypes.cast(callback, ctypes.c_void_p).value, callback
 
     def _run_controlled(self, entry: str, arguments: dict, control, progress) -> int:
         """The run `entry` (simulate_observed or simulate_controlled) with `arguments`: in

@@ -18,6 +18,7 @@ import dataclasses
 import functools
 import hashlib
 import importlib.metadata
+import importlib.resources
 import json
 from pathlib import Path
 
@@ -53,11 +54,9 @@ def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool =
 def code_digest() -> str:
     """sha256 over the installed chaingen package's code, templates and C headers (paths and
     contents), computed once a process (a few milliseconds)."""
-    from .. import runtime, templates  # their folders may live elsewhere
-
-    return folders_digest([Path(__file__).resolve().parent.parent,     # the chaingen package
-                           Path(runtime.__file__).resolve().parent,
-                           Path(templates.__file__).resolve().parent])
+    # The three folders may live in different places (an editable install maps them).
+    return folders_digest([Path(str(importlib.resources.files(package)))
+                           for package in ("chaingen", "chaingen.runtime", "chaingen.templates")])
 
 
 def folders_digest(folders) -> str:
