@@ -104,10 +104,11 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
     return settings
 
 
-def build_solver(scene: Scene, method: str, quadrature: int, *,
+def build_solver(scene: Scene, method: str | None = None, quadrature: int | None = None, *,
                  sensitivities: bool = True, parameters=(), order: int = 2) -> Solver:
     """Generate and build (or load from the cache) a scene's solver; on a terminal a progress
     bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while.
+    method and quadrature: the scene's own ([simulation]) by default.
     parameters: key paths of the scene's numbers the solver takes at run time (every call
     then takes their values, the scene's own by default). order: of the step, 2 (the
     scheme's own), 4 or 6 (a symmetric composition of its steps).
@@ -124,6 +125,8 @@ def build_solver(scene: Scene, method: str, quadrature: int, *,
         remember,
     )
 
+    method = scene.simulation.method if method is None else method
+    quadrature = scene.simulation.quadrature if quadrature is None else quadrature
     key = solver_key(scene, method, quadrature, sensitivities=sensitivities,
                      parameters=tuple(parameters), order=order,
                      build=(compiler(), *DEFAULT_OPTIMISATION))

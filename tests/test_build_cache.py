@@ -121,3 +121,22 @@ def test_the_code_digest_follows_the_templates(tmp_path):
     assert folders_digest([copy]) == before
     (copy / "Makefile.j2").write_text((copy / "Makefile.j2").read_text() + "\n")
     assert folders_digest([copy]) != before
+
+
+def test_method_and_quadrature_default_to_the_scenes_own():
+    """build_solver(scene) builds the solver the scene's [simulation] names (method, K)."""
+    import dataclasses
+
+    from chaingen import build_solver, load_reference_scene
+
+    scene = load_reference_scene("three_link_mono")
+
+    def own(**simulation):
+        return dataclasses.replace(scene, simulation=dataclasses.replace(scene.simulation,
+                                                                         **simulation))
+
+    assert build_solver(own(method="vi"), sensitivities=False).manifest["method"] == "vi"
+    five = build_solver(own(method="es", quadrature=5), sensitivities=False)
+    assert (five.manifest["method"], five.manifest["quadrature"]) == ("es", 5)
+    assert five.library_path == build_solver(scene, "es", 5, sensitivities=False).library_path
+    assert five.library_path != build_solver(scene, "es", 3, sensitivities=False).library_path

@@ -485,3 +485,13 @@ int main(void)
         assert (int(status), int(steps)) == (0, 20)
         assert int(accepted) >= 40 and int(rejected) >= 1
         assert 0 < float(smallest) <= float(largest) <= 0.05
+
+
+def test_readme_quotes_the_examples_figures(plain_example):
+    """The README's sentence on the example: its final tracking error (as printed, to two
+    digits) and its worst-case Newton count."""
+    error, worst, _ = example_results(run([plain_example]))
+    quoted = re.search(r"ends with a tracking error of (\S+) rad, at\s+most (\d+) Newton",
+                       (ROOT / "README.md").read_text())
+    assert quoted, "README.md no longer describes the example's run"
+    assert (quoted.group(1), int(quoted.group(2))) == (f"{error:.1e}".replace("e-0", "e-"), worst)
