@@ -61,7 +61,6 @@ from .scene import (
                      parse_scene,
 )
 from .simulation import RunSettings, build_solver, run_settings, simulate_scene
-from .studies.sweep import sweep
 from .version import VERSION as __version__
 
 __all__ = ["METHODS", "QUADRATURE_RANGE", "BuildError", "ChaingenError", "Link", "NewtonError",
@@ -70,3 +69,13 @@ __all__ = ["METHODS", "QUADRATURE_RANGE", "BuildError", "ChaingenError", "Link",
            "Spring", "StepResult", "Stepper", "StopSignal", "UnsupportedSceneError", "__version__",
            "build_solver", "load_reference_scene", "load_scene", "parse_scene",
            "read_trajectory", "run_settings", "simulate_scene", "sweep", "write_trajectory"]
+
+
+def __getattr__(name: str):
+    """chaingen.sweep, imported on first use: a solver loaded from the cache needs none of the
+    studies' code (PEP 562)."""
+    if name == "sweep":
+        from .studies.sweep import sweep
+
+        return sweep
+    raise AttributeError(f"module 'chaingen' has no attribute {name!r}")
