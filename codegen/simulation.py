@@ -105,10 +105,10 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
 
 
 def build_solver(scene: Scene, method: str | None = None, quadrature: int | None = None, *,
-                 sensitivities: bool = True, parameters=(), order: int = 2) -> Solver:
+                 sensitivities: bool = True, parameters=(), order: int | None = None) -> Solver:
     """Generate and build (or load from the cache) a scene's solver; on a terminal a progress
     bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while.
-    method and quadrature: the scene's own ([simulation]) by default.
+    method, quadrature and order: the scene's own ([simulation]) by default.
     parameters: key paths of the scene's numbers the solver takes at run time (every call
     then takes their values, the scene's own by default). order: of the step, 2 (the
     scheme's own), 4 or 6 (a symmetric composition of its steps).
@@ -127,6 +127,7 @@ def build_solver(scene: Scene, method: str | None = None, quadrature: int | None
 
     method = scene.simulation.method if method is None else method
     quadrature = scene.simulation.quadrature if quadrature is None else quadrature
+    order = scene.simulation.order if order is None else order
     key = solver_key(scene, method, quadrature, sensitivities=sensitivities,
                      parameters=tuple(parameters), order=order,
                      build=(compiler(), *DEFAULT_OPTIMISATION))

@@ -26,7 +26,8 @@ solver = chaingen.build_solver(scene, sys.argv[2], 3, sensitivities=False)
 built = time.perf_counter() - started
 result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01, n_steps=200)
 print(json.dumps({"seconds": built, "sympy": "sympy" in sys.modules,
-                  "casadi": "casadi" in sys.modules, "phi": result.phi[-1].tolist()}))
+                  "casadi": "casadi" in sys.modules, "phi": result.phi[-1].tolist(),
+                  "studies": "chaingen.studies.sweep" in sys.modules}))
 """
 
 
@@ -52,6 +53,7 @@ def test_second_build_loads_without_sympy_or_casadi(tmp_path):
     assert first["sympy"] and first["casadi"]            # generated the first time
     second = child("three_link_mono", "vi", tmp_path)
     assert not second["sympy"] and not second["casadi"]  # loaded from the index
+    assert not second["studies"]                        # chaingen.sweep loads on first use
     assert second["phi"] == first["phi"]                 # the same solver, bit for bit
     print(f"build_solver in a new process: {first['seconds']:.2f} s, then "
           f"{second['seconds']:.3f} s from the index")
@@ -123,8 +125,8 @@ def test_the_code_digest_follows_the_templates(tmp_path):
     assert folders_digest([copy]) != before
 
 
-def test_method_and_quadrature_default_to_the_scenes_own():
-    """build_solver(scene) builds the solver the scene's [simulation] names (method, K)."""
+def test_method_quadrature_and_order_default_to_the_scenes_own():
+    """build_solver(scene) builds the solver the scene's [simulation] names (method, K, order)."""
     import dataclasses
 
     from chaingen import build_solver, load_reference_scene
@@ -140,3 +142,5 @@ def test_method_and_quadrature_default_to_the_scenes_own():
     assert (five.manifest["method"], five.manifest["quadrature"]) == ("es", 5)
     assert five.library_path == build_solver(scene, "es", 5, sensitivities=False).library_path
     assert five.library_path != build_solver(scene, "es", 3, sensitivities=False).library_path
+    fourth = build_solver(own(method="midpoint", order=4), sensitivities=False)
+    assert (fourth.manifest["method"], fourth.manifest["order"]) == ("midpoint", 4)
