@@ -14,6 +14,7 @@ import re
 from dataclasses import dataclass
 
 from ..errors import SceneError
+from ..runtime.keypaths import canonical_path, spelling_error
 from .values import Scene
 
 #: The numbers of a link and of a spring that a solver may take as parameters, with their unit.
@@ -24,21 +25,23 @@ SPRING_NUMBERS = {"stiffness": "N/m", "rest_length": "m"}
 RUN_NUMBERS = {"initial.angles": "rad", "initial.velocities": "rad/s", "simulation.dt": "s",
                "simulation.t_end": "s"}
 
-_PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>\d+)\]\.(?P<key>\w+)"
-                   r"(?:\[(?P<entry>\d+)\])?|(?P<top>gravity|base\.fastening)"
-                   r"|(?P<run>initial\.angles|initial\.velocities)\[(?P<joint>\d+)\]"
-                   r"|(?P<setting>simulation\.dt|simulation\.t_end)")
+_PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>[0-9]+)\]\.(?P<key>\w+)"
+                   r"(?:\[(?P<entry>[0-9]+)\])?|(?P<top>gravity|base\.fastening)"
+                   r"|(?P<run>initial\.angles|initial\.velocities)\[(?P<joint>[0-9]+)\]"
+                   r"|(?P<setting>simulation\.dt|simulation\.t_end)", re.ASCII)
 
 #: Keys that are the structure of a solver, not numbers: named as such when a study tries them.
-_STRUCTURE = re.compile(r"springs\[\d+\]\.joints(?:\[\d+\])?|actuation(?:\.joints"
-                        r"(?:\[\d+\])?)?|simulation\.(?:method|quadrature)|links|springs"
-                        r"|name")
+_STRUCTURE = re.compile(r"springs\[[0-9]+\]\.joints(?:\[[0-9]+\])?|actuation(?:\.joints"
+                        r"(?:\[[0-9]+\])?)?|simulation\.(?:method|quadrature)|links|springs"
+                        r"|name", re.ASCII)
 
 
 @dataclass(frozen=True)
 class NumberPath:
-    """One number of a scene: its key path, its unit, and whether it is compiled into a
-    solver (a structural number never is: n, the joints a spring spans, the actuated joints)."""
+    """One number of a scene: its key path (canonical: chaingen.runtime.keypaths, so equal
+    paths are the same number and different ones different numbers), its unit, and whether it
+    is compiled into a solver (a structural number never is: n, the joints a spring spans, the
+    actuated joints)."""
 
     path: str
     unit: str
@@ -50,13 +53,18 @@ class NumberPath:
 
 def number_path(scene: Scene, path: str, *, where: str = "") -> NumberPath:
     """The number of `scene` at `path`, or SceneError naming the path and why it names no
-    number (an unknown key, an index beyond the chain, a structural integer)."""
+    number (an unknown key, an index beyond the chain, a structural integer) or why it is
+    not the number's one spelling (chaingen.runtime.keypaths: written otherwise, it names
+    the canonical spelling)."""
     prefix = f"{where}: " if where else ""
-    if _STRUCTURE.fullmatch(path.strip()):
+    refused = spelling_error(path)
+    if refused:
+        raise SceneError(f"{prefix}{refused}")
+    if _STRUCTURE.fullmatch(path):
         raise SceneError(f"{prefix}{path}: is structure, compiled into the solver (n, the "
                          "joints a spring spans, the actuated joints, the method, K): a study "
                          "varies numbers only; make a scene per structure")
-    match = _PATH.fullmatch(path.strip())
+    match = _PATH.fullmatch(path) if canonical_path(path) == path else None
     if not match:
         raise SceneError(f"{prefix}{path}: names no number of the scene (a key path such as "
                          "links[0].mass, springs[1].stiffness, springs[0].offsets[1], "
@@ -101,7 +109,7 @@ def number_path(scene: Scene, path: str, *, where: str = "") -> NumberPath:
 def _split(path: str) -> list:
     """links[1].mass -> ["links", 1, "mass"]; springs[0].offsets[2] -> [..., "offsets", 2]."""
     parts: list = []
-    for name, index in re.findall(r"(\w+)|\[(\d+)\]", path):
+    for name, index in re.findall(r"(\w+)|\[([0-9]+)\]", path):
         parts.append(name if name else int(index))
     return parts
 
