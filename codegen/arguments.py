@@ -10,16 +10,23 @@ from .runtime import contract
 from .scene import METHODS, ORDERS
 
 
-def positive_int(text: str) -> int:
+def positive_int(text: str, bits: int = 64) -> int:
+    """An integer >= 1 that fits the signed C integer of `bits` it lands in (a long: 64, an
+    int: 32), so that nothing wraps on the way."""
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    if value >= 2 ** 63:
-        raise argparse.ArgumentTypeError(f"must be below 2^63, got {value}")
+    if value >= 2 ** (bits - 1):
+        raise argparse.ArgumentTypeError(f"must be below 2^{bits - 1}, got {value}")
     return value
+
+
+def positive_c_int(text: str) -> int:
+    """positive_int for a C int (32 bits): an int field of the Newton options."""
+    return positive_int(text, 32)
 
 
 def number(text: str) -> float:
@@ -63,7 +70,9 @@ def add_newton_options(parser: argparse.ArgumentParser) -> None:
         elif field.switch:
             group.add_argument(flag, choices=("on", "off"), help=field.comment or None)
         elif field.python_type is int:
-            group.add_argument(flag, type=positive_int, metavar="N",
+            if field.c_type != "int":
+                raise ValueError(f"{field.name}: no command-line type for C {field.c_type}")
+            group.add_argument(flag, type=positive_c_int, metavar="N",
                                help=field.comment or None)
         elif field.name in contract.ADAPTIVE_TOLERANCES:
             group.add_argument(flag, type=adaptive_tolerance, metavar="X",

@@ -13,13 +13,12 @@ from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
 from .runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
+from .runtime.solver import MAX_SAMPLE_BYTES  # samples are held in memory before they are written
 from .scene import METHODS, QUADRATURE_RANGE, Scene
 from .symbolic.composition import order_error, quadrature_error
 
 #: A run of more steps is refused: at about 1 us a step it would take days.
 MAX_STEPS = 10 ** 12
-#: Samples are held in memory before they are written.
-MAX_SAMPLE_BYTES = 4 * 2 ** 30
 
 
 @dataclass(frozen=True)

@@ -75,6 +75,10 @@ def _newton_options_class():
 
 
 def _check_options(options) -> None:
+    for field in contract.NEWTON_OPTIONS:     # a C int would wrap a larger value silently
+        value = getattr(options, field.name)
+        if field.c_type == "int" and not -2 ** 31 <= value < 2 ** 31:
+            raise ValueError(f"NewtonOptions.{field.name}: must fit a C int, got {value!r}")
     for name in contract.ADAPTIVE_TOLERANCES:
         value = getattr(options, name)
         if not contract.is_adaptive_tolerance(value):

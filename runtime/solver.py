@@ -7,23 +7,24 @@ studies, their arguments in C's order. The C signatures are
 not written here: they come from the package's manifest, which records the parameter list of
 every entry point it exports (chaingen.runtime.contract).
 
-Threads: one Solver may be used from any number of threads at once. Each thread gets a C
-workspace of its own on its first call (ctypes releases the GIL during the C call, so a shared
-one would be overwritten), so a thread's steps see only its own Newton history (warm start,
-kept Jacobian) and its results equal those of the same calls made alone.
+Threads and callbacks: one Solver may be used from any number of threads at once, and from
+inside its own callbacks. Each thread gets a C workspace of its own on its first call (ctypes
+releases the GIL during the C call, so a shared one would be overwritten), so a thread's steps
+see only its own Newton history (warm start, kept Jacobian) and its results equal those of the
+same calls made alone. A running call owns its workspace: a call made while it runs (a
+progress callback calling `outputs` or `step`, a controller calling `simulate` for a rollout)
+gets a spare workspace with no Newton history (runtime/workspaces.py), and the running call's
+results are those it gives undisturbed.
 
-Interrupts: `simulate` runs the C loop in a worker thread when called from the main thread and
-waits for it there, so Ctrl-C (KeyboardInterrupt) and exceptions of a progress callback arrive
-promptly; the loop is told to stop through its control block and stops after the current step.
-Runs in other threads (a pool running a study) are stopped from outside with a StopSignal passed
-to their simulate calls: `signal.stop()` ends every run that holds it after its current step.
+Interrupts: Ctrl-C, an exception of a progress callback and a StopSignal end a running simulate
+after its current step (runtime/runs.py).
 """
 from __future__ import annotations
 
 import ctypes
 import dataclasses
 import json
-import threading
+import operator
 import time
 from pathlib import Path
 
@@ -34,38 +35,18 @@ from .build import build_shared_library
 from .controller import context_address, controller_address
 from .errors import NewtonError
 from .interface import ControlStruct, NewtonOptions, StatsStruct, ctypes_type
+from .keypaths import spelling_error
 from .results import Sensitivities, SimulationResult, StepResult
+from .runs import StopSignal, run_watched
 from .stepper import Stepper
+from .workspaces import Workspaces
+
+__all__ = ["MAX_SAMPLE_BYTES", "Solver", "StopSignal"]
 
 _double_p = ctypes.POINTER(ctypes.c_double)
-#: Seconds between two looks of the waiting thread at a running simulate: progress, Ctrl-C.
-POLL_SECONDS = 0.05
-
-
-class StopSignal:
-    """Stops the simulate calls given it, from any thread: each running one ends after its
-    current step (NewtonError with status INTERRUPTED), and a later one does not start."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._blocks: dict[int, ControlStruct] = {}
-        self.stopped = False
-
-    def stop(self) -> None:
-        with self._lock:
-            self.stopped = True
-            for block in self._blocks.values():
-                block.stop = 1
-
-    def _attach(self, block: ControlStruct) -> None:
-        with self._lock:
-            if self.stopped:
-                block.stop = 1
-            self._blocks[id(block)] = block
-
-    def _detach(self, block: ControlStruct) -> None:
-        with self._lock:
-            self._blocks.pop(id(block), None)
+#: Samples (and recorded torques) are held in memory: a run that would need more is refused
+#: before anything is allocated.
+MAX_SAMPLE_BYTES = 4 * 2 ** 30
 
 
 def _pointer(array: np.ndarray):
@@ -78,6 +59,16 @@ def _step_length(dt, what: str) -> float:
         raise TypeError(f"{what}() needs dt; the arguments are in C's order: {what}(x0, u, dt) "
                         f"(u=None for an unactuated scene), e.g. {what}(x0, dt=0.01)")
     return float(dt)
+
+
+def _parameter_bounds(entries: list) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lower bounds, whether each is allowed) of the run-time parameters from the manifest,
+    -inf where there is none; None for a manifest that records no ranges."""
+    if not all("lower" in entry and "lower_inclusive" in entry for entry in entries):
+        return None
+    return (np.array([-np.inf if entry["lower"] is None else float(entry["lower"])
+                      for entry in entries], dtype=float),
+            np.array([bool(entry["lower_inclusive"]) for entry in entries], dtype=bool))
 
 
 def _vector(values, size: int, name: str) -> np.ndarray:
@@ -108,6 +99,7 @@ class Solver:
         self.parameters = tuple(entry["path"] for entry in manifest["parameters"])
         self.default_parameters = np.array([entry["value"] for entry in manifest["parameters"]],
                                            dtype=float)
+        self._bounds = _parameter_bounds(manifest["parameters"])
         self._lib = ctypes.CDLL(str(self.library_path))
         self._entry_points = {name: self._declare(name, entry)
                               for name, entry in manifest["entry_points"].items()}
@@ -116,7 +108,8 @@ class Solver:
             if built != build_hash:
                 raise ValueError(f"{self.library_path}: built as {built!r}, not {build_hash!r}")
         self._workspace_size = self._call("workspace_size")
-        self._threads = threading.local()
+        self._workspaces = Workspaces(self._workspace_size, lambda workspace: self._call(
+            "workspace_init", workspace=workspace))
         self.default_options = NewtonOptions(**manifest["newton_defaults"])
 
     @classmethod
@@ -145,16 +138,6 @@ class Solver:
                              for _, c_type in entry["parameters"]]
         return function, tuple(parameter for parameter, _ in entry["parameters"])
 
-    @property
-    def _workspace(self):
-        """The calling thread's C workspace, made (and initialised) on its first use."""
-        workspace = getattr(self._threads, "workspace", None)
-        if workspace is None:
-            workspace = self._threads.workspace = ctypes.create_string_buffer(
-                self._workspace_size)
-            self._call("workspace_init", workspace=workspace)
-        return workspace
-
     def newton_options(self, options: NewtonOptions | dict | None = None) -> NewtonOptions:
         """Newton options: given ones as they are, or the package's defaults with the fields
         of a dict (contract field names) replaced."""
@@ -177,6 +160,20 @@ class Solver:
         function, parameters = self._entry_points[name]
         return function(*[arguments[parameter] for parameter in parameters])
 
+    @property
+    def _workspace(self):
+        """The calling thread's own workspace, for a direct `_call` (tests)."""
+        return self._workspaces.home()
+
+    def _leased(self, name: str, **arguments):
+        """`_call` in a workspace this call holds alone while it runs (runtime/workspaces.py):
+        the thread's own, or a spare if a call of the thread is running (a callback's)."""
+        workspace, home = self._workspaces.lease()
+        try:
+            return self._call(name, workspace=workspace, **arguments)
+        finally:
+            self._workspaces.release(workspace, home)
+
     def _check(self, status: int, what: str) -> None:
         if status:
             raise NewtonError(f"{self.prefix}_{what}: {self.status_message(status)}",
@@ -189,42 +186,66 @@ class Solver:
 
     def reset(self) -> None:
         """Forget the calling thread's Newton state carried between steps (warm start, reused
-        Jacobian)."""
-        self._call("workspace_init", workspace=self._workspace)
+        Jacobian). Refused inside a callback of a running call of this thread, whose workspace
+        it is (the callback's own calls start with no Newton history anyway)."""
+        if self._workspaces.home_busy():
+            raise RuntimeError(f"{self.prefix}: reset() inside a callback of a running call: "
+                               "the thread's workspace is that call's (a callback's calls start "
+                               "with no Newton history)")
+        self._call("workspace_init", workspace=self._workspaces.home())
 
     def initial_state(self, phi, phidot, parameters=None) -> np.ndarray:
         x = np.empty(self.nx)
-        self._check(self._call("initial_state", phi=_pointer(_vector(phi, self.n, "phi")),
+        self._check(self._leased("initial_state", phi=_pointer(_vector(phi, self.n, "phi")),
                                p=self._p(parameters),
                                phidot=_pointer(_vector(phidot, self.n, "phidot")),
-                               x=_pointer(x), workspace=self._workspace), "initial_state")
+                               x=_pointer(x)), "initial_state")
         return x
 
     def outputs(self, x, parameters=None) -> tuple[np.ndarray, np.ndarray, float, float]:
         """(phi, omega, energy, constraint error) of a state."""
         phi, omega, scalars = np.empty(self.n), np.empty(self.n), np.empty(2)
-        self._check(self._call("outputs", x=_pointer(_vector(x, self.nx, "x")),
+        self._check(self._leased("outputs", x=_pointer(_vector(x, self.nx, "x")),
                                p=self._p(parameters),
                                phi=_pointer(phi), omega=_pointer(omega),
                                energy=_pointer(scalars[:1]),
-                               constraint_error=_pointer(scalars[1:]),
-                               workspace=self._workspace), "outputs")
+                               constraint_error=_pointer(scalars[1:])), "outputs")
         return phi, omega, float(scalars[0]), float(scalars[1])
 
     def parameter_values(self, parameters=None) -> np.ndarray:
         """The parameter vector p: the defaults, a full sequence in the order of
-        `self.parameters`, or a dict of paths whose values replace the defaults."""
+        `self.parameters`, or a dict of paths (each in its one spelling, as `self.parameters`
+        has it: chaingen.runtime.keypaths) whose values replace the defaults. A value the
+        scene format refuses (a mass <= 0, a stiffness < 0, NaN, ...) is refused here too."""
         if parameters is None:
             return self.default_parameters.copy()
         if isinstance(parameters, dict):
             values = self.default_parameters.copy()
             for path, value in parameters.items():
                 if path not in self.parameters:
-                    raise ValueError(f"{self.prefix} has no parameter {path!r} (its parameters: "
-                                     f"{', '.join(self.parameters) or 'none'})")
+                    refused = spelling_error(path)
+                    raise ValueError(refused or f"{self.prefix} has no parameter {path!r} (its "
+                                     f"parameters: {', '.join(self.parameters) or 'none'})")
                 values[self.parameters.index(path)] = float(value)
-            return values
-        return _vector(parameters, len(self.parameters), "parameters")
+        else:
+            values = _vector(parameters, len(self.parameters), "parameters")
+        self._check_parameters(values)
+        return values
+
+    def _check_parameters(self, values: np.ndarray) -> None:
+        """ValueError naming the first value out of its range, as the scene reader words it."""
+        if self._bounds is None:
+            raise ValueError(f"{self.prefix}: its manifest gives no range of its parameters "
+                             "(made by an older chaingen): generate the package again")
+        lower, inclusive = self._bounds
+        good = np.isfinite(values) & ((values > lower) | (inclusive & (values == lower)))
+        if good.all():
+            return
+        index = int(np.argmin(good))
+        value = float(values[index])
+        rule = ("must be finite" if not np.isfinite(value) else
+                f"must be {'>=' if inclusive[index] else '>'} {float(lower[index]):g}")
+        raise ValueError(f"{self.parameters[index]}: {rule}, got {value!r}")
 
     def _p(self, parameters):
         """The p argument: a pointer for a package with parameters, else None (none)."""
@@ -250,10 +271,10 @@ class Solver:
         """F(z; x0, u, dt): the arguments in C's order."""
         dt = _step_length(dt, "residual")
         out = np.empty(self.nz)
-        self._check(self._call("residual", z=_pointer(_vector(z, self.nz, "z")),
+        self._check(self._leased("residual", z=_pointer(_vector(z, self.nz, "z")),
                                p=self._p(parameters),
                                x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
-                               dt=dt, residual=_pointer(out), workspace=self._workspace),
+                               dt=dt, residual=_pointer(out)),
                     "residual")
         return out
 
@@ -262,11 +283,11 @@ class Solver:
         """(F, dF/dz) at z; the arguments in C's order."""
         dt = _step_length(dt, "residual_jacobian")
         residual, jacobian = np.empty(self.nz), np.empty(self.nz * self.nz)
-        self._check(self._call("residual_jacobian", z=_pointer(_vector(z, self.nz, "z")),
+        self._check(self._leased("residual_jacobian", z=_pointer(_vector(z, self.nz, "z")),
                                p=self._p(parameters),
                                x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
-                               dt=dt, residual=_pointer(residual), jacobian=_pointer(jacobian),
-                               workspace=self._workspace), "residual_jacobian")
+                               dt=dt, residual=_pointer(residual),
+                               jacobian=_pointer(jacobian)), "residual_jacobian")
         return residual, jacobian.reshape((self.nz, self.nz), order="F")
 
     def holding_torques(self, phi, parameters=None) -> np.ndarray:
@@ -274,9 +295,9 @@ class Solver:
         if not self.has_entry_point("holding_torques"):
             raise ValueError(f"{self.prefix} has no actuated joints: no holding_torques")
         tau = np.empty(self.n)
-        self._check(self._call("holding_torques", phi=_pointer(_vector(phi, self.n, "phi")),
+        self._check(self._leased("holding_torques", phi=_pointer(_vector(phi, self.n, "phi")),
                                p=self._p(parameters),
-                               tau=_pointer(tau), workspace=self._workspace), "holding_torques")
+                               tau=_pointer(tau)), "holding_torques")
         return tau
 
     # -- steps --------------------------------------------------------------------------------
@@ -299,11 +320,11 @@ class Solver:
         dt = _step_length(dt, "step")
         x1, iterations, flows = np.empty(self.nx), ctypes.c_int(0), np.zeros(2)
         c_options = self.newton_options(options).as_c()
-        status = self._call("step", x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
-                            p=self._p(parameters),
-                            dt=dt, x1=_pointer(x1), flows=_pointer(flows),
-                            options=ctypes.byref(c_options), workspace=self._workspace,
-                            iterations=ctypes.byref(iterations))
+        status = self._leased("step", x0=_pointer(_vector(x0, self.nx, "x0")),
+                              u=self._inputs(u), p=self._p(parameters),
+                              dt=dt, x1=_pointer(x1), flows=_pointer(flows),
+                              options=ctypes.byref(c_options),
+                              iterations=ctypes.byref(iterations))
         if status:
             raise self._step_failed(status, iterations.value)
         return StepResult(x1, iterations.value, float(flows[0]), float(flows[1]))
@@ -320,11 +341,12 @@ class Solver:
         x1, iterations = np.empty(self.nx), ctypes.c_int(0)
         ds_ds, ds_du, ds_dp = np.empty(ns * ns), np.empty(ns * self.nu), np.empty(ns * n_p)
         c_options = self.newton_options(options).as_c()
-        status = self._call("step_sensitivities", x0=_pointer(_vector(x0, self.nx, "x0")),
-                            u=self._inputs(u), p=self._p(parameters), dt=dt, x1=_pointer(x1),
-                            ds_ds=_pointer(ds_ds), ds_du=_pointer(ds_du),
-                            ds_dp=_pointer(ds_dp), options=ctypes.byref(c_options),
-                            workspace=self._workspace, iterations=ctypes.byref(iterations))
+        status = self._leased("step_sensitivities",
+                              x0=_pointer(_vector(x0, self.nx, "x0")),
+                              u=self._inputs(u), p=self._p(parameters), dt=dt, x1=_pointer(x1),
+                              ds_ds=_pointer(ds_ds), ds_du=_pointer(ds_du),
+                              ds_dp=_pointer(ds_dp), options=ctypes.byref(c_options),
+                              iterations=ctypes.byref(iterations))
         if status:
             raise self._step_failed(status, iterations.value)
         return Sensitivities(x1, iterations.value, ds_ds.reshape((ns, ns), order="F"),
@@ -355,9 +377,21 @@ class Solver:
         Raises NewtonError naming the failing step and time; the rows written before it are in
         its `result`.
         """
+        try:
+            n_steps, every = operator.index(n_steps), operator.index(every)
+        except TypeError:
+            raise ValueError(f"n_steps and every must be integers, got {n_steps!r}, "
+                             f"{every!r}") from None
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
                              f"{n_steps}, {every}")
+        held = n_steps if self.nu and (controller is not None or torques is None) else 0
+        needed = 8 * ((n_steps // every + 1) * self.nsample + held * self.nu)
+        if needed > MAX_SAMPLE_BYTES:
+            raise ValueError(f"simulate: {n_steps} steps sampled every {every} would hold "
+                             f"{needed / 2 ** 30:.3g} GiB of samples (limit "
+                             f"{MAX_SAMPLE_BYTES / 2 ** 30:g} GiB): sample less often (a "
+                             "larger every)")
         inputs, recorded, errors, callback = None, None, [], None
         if controller is not None:
             if not self.nu:
@@ -387,7 +421,7 @@ class Solver:
         c_options = self.newton_options(options).as_c()
         arguments = dict(x0=_pointer(x0), t0=0.0, dt=dt, n_steps=n_steps, every=every, u=inputs,
                          p=_pointer(p_values) if self.parameters else None,
-                         options=ctypes.byref(c_options), workspace=self._workspace,
+                         options=ctypes.byref(c_options),
                          samples=_pointer(samples), x_final=None, stats=ctypes.byref(stats),
                          observer=None, context=None, interval=1,
                          control=ctypes.byref(control))
@@ -398,13 +432,18 @@ class Solver:
                              context=(None if callback is not None else
                                       context_address(controller_context)))
         started = time.perf_counter()
+        # The run owns this workspace until it returns: a call from a callback meanwhile
+        # (progress, the controller) gets another (runtime/workspaces.py).
+        arguments["workspace"], home = self._workspaces.lease()
         if stop is not None:
             stop._attach(control)
         try:
-            status = self._run_controlled(entry, arguments, control, progress)
+            status = run_watched(lambda: self._call(entry, **arguments), control, progress,
+                                 f"{self.prefix} simulate")
         finally:
             if stop is not None:
                 stop._detach(control)
+            self._workspaces.release(arguments["workspace"], home)
         wall = time.perf_counter() - started
         valid = stats.steps // every + 1
         result = SimulationResult(
@@ -433,36 +472,3 @@ class Solver:
                 f"{self.status_message(status)}",
                 status=status, step=failed, time=stats.steps * dt, result=result)
         return result
-
-    def _run_controlled(self, entry: str, arguments: dict, control, progress) -> int:
-        """The run `entry` (simulate_observed or simulate_controlled) with `arguments`: in
-        this thread, or, from the main thread or with
-        a progress callback, in a worker while this thread waits, reports progress and stays
-        interruptible; an exception here (Ctrl-C, progress's own) stops the loop through
-        `control` and propagates once the worker has returned."""
-        if progress is None and threading.current_thread() is not threading.main_thread():
-            return self._call(entry, **arguments)
-        outcome: list = []
-
-        def run() -> None:
-            try:
-                outcome.append(self._call(entry, **arguments))
-            except BaseException as error:    # raised again in the waiting thread
-                outcome.append(error)
-
-        worker = threading.Thread(target=run, name=f"{self.prefix} simulate", daemon=True)
-        worker.start()
-        try:
-            while worker.is_alive():
-                worker.join(POLL_SECONDS)
-                if progress is not None:
-                    progress(int(control.steps))
-        except BaseException:
-            control.stop = 1
-            worker.join()
-            raise
-        if isinstance(outcome[0], BaseException):
-            raise outcome[0]
-        if progress is not None:
-            progress(int(control.steps))     # the end, also of a run shorter than one look
-        return outcome[0]

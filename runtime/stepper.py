@@ -60,6 +60,7 @@ class Stepper:
         n, nu = solver.n, solver.nu
         self.phi, self.omega = np.empty(n), np.empty(n)
         self._u = np.zeros(nu)
+        self._inputs_shape = (nu,) if nu else None    # of a u taken as it is
         # t = base + count dt, as simulate's t0 + k dt (a sum of dt would drift from it in the
         # last bits); a new dt starts a new base.
         self._base, self._count = 0.0, 0
@@ -99,7 +100,18 @@ class Stepper:
 
     @u.setter
     def u(self, value) -> None:
-        self._u[:] = value
+        self._set_inputs(value)
+
+    def _set_inputs(self, value) -> None:
+        """u = value: exactly nu torques (no scalar spread over the joints, as Solver.step)."""
+        u = self._u
+        array = np.asarray(value, dtype=np.float64)
+        if not u.shape[0]:
+            raise ValueError(f"{self.solver.prefix} has no actuated joints; u must be None")
+        if array.shape != u.shape:
+            raise ValueError(f"u must have {u.shape[0]} entries (one per actuated joint), got "
+                             f"shape {array.shape}")
+        u[:] = array
 
     @property
     def dt(self) -> float:
@@ -109,8 +121,8 @@ class Stepper:
     @dt.setter
     def dt(self, value: float) -> None:
         value = float(value)
-        if not (np.isfinite(value) and value != 0.0):
-            raise ValueError(f"dt: must be finite and nonzero, got {value!r}")
+        if not (0.0 < value < np.inf):
+            raise ValueError(f"dt: must be > 0 and finite, got {value!r}")
         self._base, self._count = self.t, 0
         self._dt.value = value
 
@@ -147,7 +159,10 @@ class Stepper:
         omega, t and the rest in place; raises NewtonError if the step fails (the state is
         then that before the step)."""
         if u is not None:
-            self._u[:] = u
+            if type(u) is np.ndarray and u.shape == self._inputs_shape:
+                self._u[:] = u
+            else:
+                self._set_inputs(u)
         current = self._current
         status = self._step_function(*self._step_arguments[current])
         if status:

@@ -188,7 +188,7 @@ def test_stepper_holds_u_and_takes_a_new_dt(actuated):
     loop.dt = 0.005
     loop.step()
     assert loop.t == pytest.approx(0.105)
-    with pytest.raises(ValueError, match="dt: must be finite and nonzero"):
+    with pytest.raises(ValueError, match="dt: must be > 0 and finite"):
         loop.dt = 0.0
     with pytest.raises(ValueError):
         loop.u = [1.0, 2.0]                           # three actuated joints
