@@ -104,3 +104,25 @@ def test_a_missing_peer_fails_where_required(required, outcome, monkeypatch):
         test_compiled_peers.require_peer("numbalsoda-DOP853")
     test_compiled_peers.require_peer("CVODES-BDF")          # CasADi's: never skipped
 
+
+
+def test_the_bench_report_says_the_peers_were_not_run(monkeypatch):
+    """chaingen bench without the extra: its machine section says which peers did not run and
+    why (the runs' rows are notes: test_compiled_peers.test_bench_notes_a_missing_numbalsoda)."""
+    import importlib.metadata
+
+    from chaingen.studies.bench.report import machine_description
+
+    installed = dict(machine_description())["compiled peers"]
+    version = importlib.metadata.version
+
+    def without_peers(package):
+        if package in PEER_PACKAGES:
+            raise importlib.metadata.PackageNotFoundError(package)
+        return version(package)
+
+    monkeypatch.setattr(importlib.metadata, "version", without_peers)
+    missing = dict(machine_description())["compiled peers"]
+    assert missing.startswith("numbalsoda's LSODA and DOP853 not run (numbalsoda and numba, "
+                              "the `peers` extra, are not installed), CVODES of CasADi ")
+    assert "not installed" not in installed or installed == missing

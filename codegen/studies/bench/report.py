@@ -151,9 +151,12 @@ def machine_description() -> list[tuple[str, str]]:
         ("SciPy", f"{version('scipy')} (right-hand side and Jacobian: CasADi C compiled by "
                   "chaingen.reference.scipy_peer with the runtime's default flags; integrator in "
                   "Python)"),
-        ("compiled peers", f"numbalsoda {version('numbalsoda')} with numba "
-                           f"{version('numba')} (LSODA, DOP853; right-hand side: the SciPy "
-                           "peer's compiled C, called from a numba cfunc), CVODES of CasADi "
+        ("compiled peers", (f"numbalsoda {version('numbalsoda')} with numba "
+                            f"{version('numba')} (LSODA, DOP853; right-hand side: the SciPy "
+                            "peer's compiled C, called from a numba cfunc)"
+                            if version("numbalsoda") != "not installed" else
+                            "numbalsoda's LSODA and DOP853 not run (numbalsoda and numba, the "
+                            "`peers` extra, are not installed)") + ", CVODES of CasADi "
                            f"{version('casadi')} (the ODE and its Jacobian as CasADi C, built "
                            "with the runtime's default flags)"),
         ("Python", platform.python_version()),
