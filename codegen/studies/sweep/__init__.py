@@ -14,25 +14,18 @@ The results' dependencies (pyarrow, xarray, zarr, dask) are the extra `sweep`.
 from __future__ import annotations
 
 import importlib.util
-import math
 import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from ...errors import ChaingenError
-from .spec import SweepError, SweepSpec, load_spec, parse_spec
+from .spec import SweepError, SweepSpec, chunk_size, load_spec, parse_spec
 from .store import RUNS, TRAJECTORIES, SweepStore
 
 __all__ = ["SweepError", "SweepOutcome", "SweepSpec", "load_spec", "parse_spec", "run_sweep",
            "sweep"]
 
-#: Chunks of about this fraction of the runs (at most MAX_CHUNK): small enough to spread
-#: over the workers and to lose little when interrupted, big enough that a chunk's overhead
-#: (a task, a file) is small against its runs. Fixed by the run count alone, so a rerun on
-#: another machine continues the same store.
-CHUNKS = 40
-MAX_CHUNK = 64
 ENGINES = ("local", "dask")
 
 
@@ -43,10 +36,6 @@ class SweepOutcome:
     computed: int          # runs computed by this call (the others were stored already)
     build_hash: str
     generate_seconds: float
-
-
-def chunk_size(runs: int) -> int:
-    return max(1, min(MAX_CHUNK, math.ceil(runs / CHUNKS)))
 
 
 def require_extra() -> None:

@@ -14,10 +14,13 @@ a worker that does not see OUT returns its chunk to the client, which stores it.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import platform
+import signal
 import tempfile
 import threading
+import uuid
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from pathlib import Path
 
@@ -96,22 +99,23 @@ def _worker_solver(build_hash: str, library: bytes, files: dict[str, str],
     return solver
 
 
-def _sees_out(out: Path, digest: str) -> bool:
-    """Whether this worker sees the client's OUT (the record of this very sweep)."""
+def _sees_out(out: Path, digest: str, store_id: str) -> bool:
+    """Whether this worker sees the client's OUT (the record of this very sweep and OUT)."""
     try:
-        return json.loads((out / SPEC_FILE).read_text()).get("digest") == digest
+        record = json.loads((out / SPEC_FILE).read_text())
+        return record.get("digest") == digest and record.get("store") == store_id
     except (OSError, ValueError, AttributeError):
         return False
 
 
-def _dask_chunk(spec: SweepSpec, out: str, chunk: int, first: int, count: int,
+def _dask_chunk(spec: SweepSpec, out: str, chunk: int, store_id: str, first: int, count: int,
                 build_hash: str, library: bytes, files: dict[str, str], machine: str):
     """One chunk on a Dask worker. Where the worker sees OUT (a file system shared with the
     client) it commits the chunk there and returns its failed runs; elsewhere it returns the
     chunk for the client to commit."""
     solver = _worker_solver(build_hash, library, files, machine)
-    store = SweepStore(out, spec, chunk)
-    shared = _sees_out(Path(out), store.digest)
+    store = SweepStore(out, spec, chunk, store_id)
+    shared = _sees_out(Path(out), store.digest, store_id)
     if shared and first in store.stored():       # already committed (a retry)
         return 0
     result = run_chunk(spec, solver, first, count, build_hash)
@@ -126,6 +130,15 @@ def _preload() -> None:
     import pyarrow.parquet  # noqa: F401
     import xarray  # noqa: F401
     import zarr  # noqa: F401
+
+
+def _local_worker() -> None:
+    """A worker of the LocalCluster that --dask-local starts: Ctrl-C at a terminal reaches the
+    whole process group, and only the sweep's process answers it (it stops the sweep and the
+    cluster, one line), not every worker with a traceback; the cancelled tasks of a cluster
+    being closed are not logged."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed").setLevel(logging.ERROR)
 
 
 class DaskSession:
@@ -146,12 +159,16 @@ class DaskSession:
 
         try:
             if self.scheduler is None:
+                # The scheduler's HTTP server on a free port of this machine: with None it
+                # takes 8787 (or warns that the port is in use and takes another).
                 self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
-                                             processes=True, dashboard_address=None)
+                                             processes=True, dashboard_address="127.0.0.1:0")
                 self._client = Client(self._cluster)
             else:
                 self._client = Client(self.scheduler, timeout=CONNECT_SECONDS)
             self._client.run(_preload)
+            if self._cluster is not None:
+                self._client.run(_local_worker)
         except Exception as error:    # raised again in the waiting thread
             self._error = error
 
@@ -165,6 +182,10 @@ class DaskSession:
 
     def close(self) -> None:
         self._thread.join()
+        if self._cluster is not None:
+            # Closing the cluster this call started cancels its running tasks: that is the
+            # point (an interrupted or failed sweep), not news to log.
+            logging.getLogger("distributed").setLevel(logging.ERROR)
         if self._client is not None:
             self._client.close()
         if self._cluster is not None:
@@ -181,14 +202,18 @@ def run_dask(spec: SweepSpec, store: SweepStore, files: dict[str, str], library:
     from distributed import as_completed
 
     client = session.client()
+    # Task keys unique to this call: two sweeps of one spec on one scheduler (into two OUTs,
+    # or one resumed while the other's tasks linger) never share a task.
+    token = f"{store.digest[:12]}-{store.store_id[:12]}-{uuid.uuid4().hex[:12]}"
     # The library and the spec travel once to every worker, not with every task.
     shipped = client.scatter(library.read_bytes(), broadcast=True)
     shipped_spec = client.scatter(spec, broadcast=True)
     total = sum(count for _, count in todo)
     done = failed = 0
-    futures = [client.submit(_dask_chunk, shipped_spec, str(store.out), store.chunk, first,
-                             count, build_hash, shipped, files, platform.machine(), pure=False,
-                             retries=3, key=f"chunk-{store.digest[:12]}-{first}")
+    futures = [client.submit(_dask_chunk, shipped_spec, str(store.out), store.chunk,
+                             store.store_id, first, count, build_hash, shipped, files,
+                             platform.machine(), pure=False, retries=3,
+                             key=f"chunk-{token}-{first}")
                for first, count in todo]
     counts = {future.key: count for future, (_, count) in zip(futures, todo)}
     with Progress(f"sweep {spec.scene.name} (dask)", total=total, unit="runs") as bar:

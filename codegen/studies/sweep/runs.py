@@ -5,6 +5,7 @@ indices, small enough to keep the per-task overhead low and big enough to amorti
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -49,9 +50,7 @@ class ChunkResult:
 
 def sample_count(spec: SweepSpec) -> int:
     """Samples kept per run: the longest run's (0 without trajectories)."""
-    if not spec.every:
-        return 0
-    return max(spec.n_steps(run) // spec.every + 1 for run in spec.runs)
+    return spec.sample_count()
 
 
 class ChunkStopped(ChaingenError):
@@ -84,66 +83,110 @@ def run_chunk(spec: SweepSpec, solver: Solver, first: int, count: int,
             elif path.startswith("initial.velocities["):
                 omega0[int(path[len("initial.velocities["):-1])] = value
         dt = run.get("simulation.dt", spec.scene.simulation.dt)
-        steps = spec.n_steps(run)
+        steps = int(spec.steps[index])
         parameters = {path: run[path] for path in spec.parameters}
         row = {"run": index, **{axis.path: run[axis.path] for axis in spec.axes},
                "status": "ok", "message": "", "solver": build_hash}
-        stride = metric_stride(steps, spec.every)
-        if stop is not None and stop.stopped:
-            raise ChunkStopped(f"runs {first}..{first + count - 1}: stopped")
-        started = time.thread_time()
-        try:
-            simulated = solver.simulate(phi0, omega0, dt=dt, n_steps=steps, every=stride,
-                                        options=spec.options, parameters=parameters, stop=stop)
-            failure = None
-        except NewtonError as error:
+        metric = metric_stride(steps)
+        wanted = {"metrics": metric, "final": steps}
+        if spec.every:
+            wanted["trajectory"] = spec.every
+        found: dict[str, tuple] = {}      # what -> (result, rows of it, failure)
+        row["cpu_seconds"] = 0.0
+        for stride, covers in sampling(steps, wanted):
             if stop is not None and stop.stopped:
-                raise ChunkStopped(f"runs {first}..{first + count - 1}: stopped") from None
-            simulated, failure = error.result, error
-        row["cpu_seconds"] = time.thread_time() - started
+                raise ChunkStopped(f"runs {first}..{first + count - 1}: stopped")
+            started = time.thread_time()
+            try:
+                simulated = solver.simulate(phi0, omega0, dt=dt, n_steps=steps, every=stride,
+                                            options=spec.options, parameters=parameters,
+                                            stop=stop)
+                failure = None
+            except NewtonError as error:
+                if stop is not None and stop.stopped:
+                    raise ChunkStopped(f"runs {first}..{first + count - 1}: stopped") from None
+                simulated, failure = error.result, error
+            row["cpu_seconds"] += time.thread_time() - started
+            for what in covers:
+                found[what] = (simulated, slice(None, None, wanted[what] // stride), failure)
+        simulated, rows, failure = found["metrics"]
         if failure is not None:
             row["status"] = STATUS_NAMES.get(failure.status, f"status_{failure.status}")
             row["message"] = str(failure)
-        row.update(_summary(simulated, n, failure is None))
+        row.update(_summary(simulated, rows, n))
+        final, _, failed = found["final"]
+        state = (np.concatenate([final.phi[-1], final.omega[-1]])
+                 if failed is None and final is not None else np.full(2 * n, np.nan))
+        row.update({f"phi{i + 1}": float(state[i]) for i in range(n)})
+        row.update({f"omega{i + 1}": float(state[n + i]) for i in range(n)})
         result.rows.append(row)
-        if samples and simulated is not None:
-            kept_rows = slice(None, None, spec.every // stride)
-            valid = min(len(simulated.samples[kept_rows]), samples)
-            result.phi[offset, :valid] = simulated.phi[kept_rows][:valid]
-            result.omega[offset, :valid] = simulated.omega[kept_rows][:valid]
-            result.energy[offset, :valid] = simulated.energy[kept_rows][:valid]
-            result.constraint_error[offset, :valid] = \
-                simulated.constraint_error[kept_rows][:valid]
-            result.time[offset, :valid] = simulated.t[kept_rows][:valid]
+        if samples:
+            simulated, rows, _ = found["trajectory"]
+            if simulated is not None:
+                valid = min(len(simulated.samples[rows]), samples)
+                result.phi[offset, :valid] = simulated.phi[rows][:valid]
+                result.omega[offset, :valid] = simulated.omega[rows][:valid]
+                result.energy[offset, :valid] = simulated.energy[rows][:valid]
+                result.constraint_error[offset, :valid] = \
+                    simulated.constraint_error[rows][:valid]
+                result.time[offset, :valid] = simulated.t[rows][:valid]
     return result
 
 
-def metric_stride(steps: int, every: int) -> int:
-    """The sampling of a run: every step up to METRIC_SAMPLES, else the smallest stride that
-    fits; a divisor of the trajectory's `every` (or `every` itself) when trajectories are kept."""
-    stride = max(1, -(-steps // METRIC_SAMPLES))
-    if every and every % stride:
-        return every
-    return stride
+def metric_stride(steps: int) -> int:
+    """The metrics' stride (docs/sweep-format.md): every step of a run of up to
+    METRIC_SAMPLES steps, else the smallest stride that keeps at most that many."""
+    return max(1, -(-steps // METRIC_SAMPLES))
 
 
-def _summary(simulated, n: int, completed: bool) -> dict:
-    """The metrics of one run (NaN where the run has none)."""
+#: A simulate call of a run may hold this many sample rows, beyond those its trajectory keeps.
+MAX_ROWS = 4 * METRIC_SAMPLES
+
+
+def sampling(steps: int, wanted: dict[str, int]) -> list[tuple[int, tuple[str, ...]]]:
+    """The simulate calls of a run of `steps` steps: (stride, what it serves) for each, where
+    `wanted` gives the stride each thing needs (the metrics, the trajectory, the final state:
+    stride `steps`). A call of stride c serves every stride that is a multiple of c. As few
+    calls as do it, each of at most MAX_ROWS samples (or the trajectory's own): one call for a
+    run of up to METRIC_SAMPLES steps, and for most longer ones. The calls of one run are the
+    same run (bitwise), sampled differently."""
+    def fits(group: tuple[str, ...], stride: int) -> bool:
+        return (steps // stride + 1 <= MAX_ROWS
+                or ("trajectory" in group and stride == wanted["trajectory"]))
+
+    best = None
+    for partition in _partitions(tuple(wanted)):
+        calls = [(math.gcd(*(wanted[what] for what in group)), group) for group in partition]
+        if all(fits(group, stride) for stride, group in calls):
+            cost = (len(calls), sum(steps // stride for stride, _ in calls))
+            if best is None or cost < best[0]:
+                best = (cost, calls)
+    return best[1]
+
+
+def _partitions(items: tuple) -> list[list[tuple]]:
+    """Every partition of `items` into groups."""
+    if not items:
+        return [[]]
+    head, rest = items[0], items[1:]
+    partitions = []
+    for partition in _partitions(rest):
+        partitions.append([(head,)] + partition)
+        for index, group in enumerate(partition):
+            partitions.append(partition[:index] + [(head,) + group] + partition[index + 1:])
+    return partitions
+
+
+def _summary(simulated, rows: slice, n: int) -> dict:
+    """The metrics of one run over the sample rows `rows` (NaN where the run has none)."""
     nan = float("nan")
     if simulated is None or not len(simulated.samples):
-        values = {"steps": 0, "max_energy_error": nan, "max_constraint_error": nan,
-                  "newton_mean": nan, "newton_max": 0}
-        final = np.full(2 * n, nan)
-    else:
-        error = simulated.balance_error if "dissipated" in simulated.columns \
-            else simulated.energy_error
-        values = {"steps": int(simulated.n_steps),
-                  "max_energy_error": float(np.abs(error).max()),
-                  "max_constraint_error": float(np.abs(simulated.constraint_error).max()),
-                  "newton_mean": float(simulated.mean_newton_iterations),
-                  "newton_max": int(simulated.max_newton_iterations)}
-        final = (np.concatenate([simulated.phi[-1], simulated.omega[-1]]) if completed
-                 else np.full(2 * n, nan))
-    values.update({f"phi{i + 1}": float(final[i]) for i in range(n)})
-    values.update({f"omega{i + 1}": float(final[n + i]) for i in range(n)})
-    return values
+        return {"steps": 0, "max_energy_error": nan, "max_constraint_error": nan,
+                "newton_mean": nan, "newton_max": 0}
+    error = simulated.balance_error if "dissipated" in simulated.columns \
+        else simulated.energy_error
+    return {"steps": int(simulated.n_steps),
+            "max_energy_error": float(np.abs(error[rows]).max()),
+            "max_constraint_error": float(np.abs(simulated.constraint_error[rows]).max()),
+            "newton_mean": float(simulated.mean_newton_iterations),
+            "newton_max": int(simulated.max_newton_iterations)}

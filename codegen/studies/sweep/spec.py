@@ -19,6 +19,7 @@ import json
 import math
 import os
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,8 +29,10 @@ import numpy as np
 from ...errors import ChaingenError, SceneError
 from ...runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from ...scene import METHODS, QUADRATURE_RANGE, Scene, load_scene
-from ...scene.parameters import NumberPath, number_path, with_values
+from ...scene.parameters import NumberPath, number_path
+from ...simulation import MAX_SAMPLE_BYTES, MAX_STEPS
 from ...symbolic.composition import order_error, quadrature_error
+from .checks import check_runs
 
 MODES = ("product", "zip", "sample")
 SAMPLERS = ("sobol", "latin-hypercube")
@@ -39,6 +42,18 @@ TOP_KEYS = ("scene", "method", "quadrature", "order", "rtol", "atol", "mode", "s
 RANGE_KEYS = ("from", "to", "num", "spacing")
 #: A sweep of more runs than this is refused as a mistake (a product of long axes).
 MAX_RUNS = 10_000_000
+#: Chunks of about this fraction of the runs (at most MAX_CHUNK): small enough to spread
+#: over the workers and to lose little when interrupted, big enough that a chunk's overhead
+#: (a task, a file) is small against its runs. Fixed by the run count alone, so a rerun on
+#: another machine continues the same store.
+CHUNKS = 40
+MAX_CHUNK = 64
+#: The trajectories of all runs (trajectories.zarr, uncompressed) may take at most this much.
+MAX_TRAJECTORY_BYTES = 2 ** 40
+
+
+def chunk_size(runs: int) -> int:
+    return max(1, min(MAX_CHUNK, math.ceil(runs / CHUNKS)))
 
 
 class SweepError(ChaingenError):
@@ -61,6 +76,41 @@ class Axis:
         return self.number.path
 
 
+class Runs(Sequence):
+    """Every run's values, held as one column per axis (numpy, float64): run k is
+    {path: column[k]}. Compact for 10^7 runs, where a dict per run would take gigabytes."""
+
+    def __init__(self, columns: dict[str, np.ndarray]):
+        self.columns = {path: np.ascontiguousarray(values, dtype=np.float64)
+                        for path, values in columns.items()}
+        self._count = len(next(iter(self.columns.values()))) if self.columns else 0
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[k] for k in range(*index.indices(self._count))]
+        if not -self._count <= index < self._count:
+            raise IndexError(f"run {index} of {self._count}")
+        return {path: float(column[index]) for path, column in self.columns.items()}
+
+    def column(self, path: str) -> np.ndarray:
+        return self.columns[path]
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Runs):
+            return NotImplemented
+        return (list(self.columns) == list(other.columns)
+                and all(np.array_equal(self.columns[path], other.columns[path])
+                        for path in self.columns))
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        return f"Runs({self._count} runs of {', '.join(self.columns)})"
+
+
 @dataclass(frozen=True)
 class SweepSpec:
     """A checked spec: the base scene, the scheme, the axes, and every run's values."""
@@ -72,7 +122,7 @@ class SweepSpec:
     quadrature: int
     mode: str
     axes: tuple[Axis, ...]
-    runs: tuple[dict[str, float], ...] = field(repr=False)
+    runs: Runs = field(repr=False)
     t_end: float
     every: int
     seed: int
@@ -99,14 +149,41 @@ class SweepSpec:
     def digest(self) -> str:
         """What identifies the sweep's results: the expanded spec and the base scene (as read
         when the spec was checked, so a worker elsewhere needs no scene file)."""
-        text = json.dumps({"document": self.document, "scene": self.scene_text,
-                           "runs": list(self.runs)}, sort_keys=True, default=str)
-        return hashlib.sha256(text.encode()).hexdigest()
+        text = json.dumps({"document": self.document, "scene": self.scene_text},
+                          sort_keys=True, default=str)
+        digest = hashlib.sha256(text.encode())
+        for path, column in self.runs.columns.items():
+            digest.update(path.encode() + b"\0" + column.astype("<f8").tobytes())
+        return digest.hexdigest()
+
+    @functools.cached_property
+    def steps(self) -> np.ndarray:
+        """Every run's step count (int64), as n_steps gives it (checked: at most MAX_STEPS)."""
+        return _step_counts(self.runs, self.scene.simulation.dt, self.t_end)
+
+    @property
+    def chunk(self) -> int:
+        return chunk_size(len(self.runs))
 
     def n_steps(self, run: dict[str, float]) -> int:
         dt = run.get("simulation.dt", self.scene.simulation.dt)
         t_end = run.get("simulation.t_end", self.t_end)
         return max(1, round(t_end / dt))
+
+    def sample_count(self) -> int:
+        """Trajectory samples kept per run: the longest run's (0 without trajectories)."""
+        if not self.every:
+            return 0
+        return int(self.steps.max()) // self.every + 1
+
+
+def _step_counts(runs: Runs, dt: float, t_end: float) -> np.ndarray:
+    dts = runs.columns.get("simulation.dt", np.array([dt]))
+    ends = runs.columns.get("simulation.t_end", np.array([t_end]))
+    with np.errstate(all="ignore"):
+        counts = np.maximum(np.rint(ends / dts), 1.0)
+    counts = np.broadcast_to(np.minimum(counts, 2.0 ** 62), (len(runs),))
+    return counts.astype(np.int64)
 
 
 def load_spec(path: str | os.PathLike) -> SweepSpec:
@@ -190,20 +267,26 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
         raise fail("axes", "missing: at least one varied number, e.g. "
                            "[axes] \"springs[0].stiffness\" = [5.0, 10.0]")
     axes = tuple(_axis(scene, path, value, mode, source) for path, value in axes_table.items())
+    named: dict[str, str] = {}
+    for key, axis in zip(axes_table, axes):
+        if axis.path in named:
+            raise fail(f"axes.{json.dumps(key)}", f"names the same number as "
+                                                  f"axes.{json.dumps(named[axis.path])} "
+                                                  f"({axis.path}); give each number once")
+        named[axis.path] = key
     if mode == "zip":
         lengths = {axis.path: len(axis.values) for axis in axes}
         if len(set(lengths.values())) > 1:
             raise fail("axes", "zip axes must have equal lengths, got "
                                + ", ".join(f"{path}: {count}" for path, count in lengths.items()))
     runs = _expand(axes, mode, samples, sampler, seed, source)
-    if len(runs) > MAX_RUNS:
-        raise fail("axes", f"{len(runs)} runs, more than {MAX_RUNS}")
     spec = SweepSpec(source=source, scene_path=scene_path, scene=scene, method=method,
-                     quadrature=quadrature, mode=mode, axes=axes, runs=tuple(runs),
+                     quadrature=quadrature, mode=mode, axes=axes, runs=runs,
                      t_end=float(t_end), every=every, seed=seed, sampler=sampler,
                      document=document, scene_text=scene_path.read_text(encoding="utf-8"),
                      order=order, **tolerances)
     _check_values(spec)
+    _check_sizes(spec)
     return spec
 
 
@@ -254,55 +337,82 @@ def _axis(scene: Scene, path: str, value, mode: str, source: str) -> Axis:
     num = value.get("num")
     if not (_integer(num) and num >= 1):
         raise SweepError(f"{source}: {where}.num: must be an integer >= 1, got {num!r}")
+    if num > MAX_RUNS:
+        raise SweepError(f"{source}: {where}.num: {num} values, more than the {MAX_RUNS} runs "
+                         "a sweep may have")
     grid = (np.geomspace(low, high, num) if spacing == "log" else np.linspace(low, high, num))
-    return Axis(number, values=tuple(float(item) for item in grid), spacing=spacing)
+    return Axis(number, values=tuple(grid.tolist()), spacing=spacing)
 
 
-def _expand(axes, mode, samples, sampler, seed, source) -> list[dict[str, float]]:
+def _expand(axes, mode, samples, sampler, seed, source) -> Runs:
     if mode == "product":
         count = math.prod(len(axis.values) for axis in axes)
         if count > MAX_RUNS:
             raise SweepError(f"{source}: axes: {count} runs, more than {MAX_RUNS}")
         grids = np.meshgrid(*[np.array(axis.values) for axis in axes], indexing="ij")
-        columns = [grid.ravel() for grid in grids]
-        return [{axis.path: float(column[k]) for axis, column in zip(axes, columns)}
-                for k in range(count)]
+        return Runs({axis.path: grid.ravel() for axis, grid in zip(axes, grids)})
     if mode == "zip":
-        return [{axis.path: axis.values[k] for axis in axes}
-                for k in range(len(axes[0].values))]
+        return Runs({axis.path: np.array(axis.values) for axis in axes})
     from scipy.stats import qmc
 
     if sampler == "sobol":
-        unit = qmc.Sobol(len(axes), scramble=True, seed=seed).random(samples)
+        # The first `samples` points of the scrambled Sobol sequence, drawn as the power of two
+        # that holds them: the same points as random(samples), without SciPy's warning that
+        # only a power of two keeps the sequence's balance (docs/sweep-format.md, section 4).
+        power = max(0, math.ceil(math.log2(samples)))
+        unit = qmc.Sobol(len(axes), scramble=True, seed=seed).random_base2(power)[:samples]
     else:
         unit = qmc.LatinHypercube(len(axes), seed=seed).random(samples)
-    runs = []
-    for row in unit:
-        run = {}
-        for axis, u in zip(axes, row):
-            if axis.spacing == "log":
-                run[axis.path] = float(math.exp(math.log(axis.low)
-                                                + u * (math.log(axis.high) - math.log(axis.low))))
-            else:
-                run[axis.path] = float(axis.low + u * (axis.high - axis.low))
-        runs.append(run)
-    return runs
+    columns = {}
+    for axis, u in zip(axes, unit.T):
+        if axis.spacing == "log":
+            low, high = math.log(axis.low), math.log(axis.high)
+            columns[axis.path] = np.exp(low + u * (high - low))
+        else:
+            columns[axis.path] = axis.low + u * (axis.high - axis.low)
+    return Runs(columns)
 
 
 def _check_values(spec: SweepSpec) -> None:
-    """Every run's values against the scene's own rules: the first one out of range is named
-    with its axis and run."""
-    for index, run in enumerate(spec.runs):
-        values = {path: value for path, value in run.items()
-                  if not path.startswith("simulation.")}
-        for path, value in run.items():
-            if path.startswith("simulation.") and not (math.isfinite(value) and value > 0):
-                raise SweepError(f"{spec.source}: axes.{json.dumps(path)}: run {index}: must be "
-                                 f"> 0 and finite (s), got {value!r}")
-        try:
-            with_values(spec.scene, values, where="run")
-        except SceneError as error:
-            message = str(error).split(": ", 1)[1]
-            raise SweepError(f"{spec.source}: axes: run {index} "
-                             f"({', '.join(f'{p} = {v:g}' for p, v in run.items())}): "
-                             f"{message}") from None
+    """Every run's values against the scene's own rules (checks.py: screened with numpy, the
+    suspects judged by the scene reader): the first one out of range is named with its axis
+    and run."""
+    runs = spec.runs
+
+    def describe(index: int) -> str:
+        return ", ".join(f"{path} = {value:g}" for path, value in runs[index].items())
+
+    check_runs(spec.scene, runs.columns, spec.source, describe)
+
+
+def _check_sizes(spec: SweepSpec) -> None:
+    """Step counts and sample sizes within simulate's limits (MAX_STEPS, MAX_SAMPLE_BYTES):
+    a run's steps, the samples a chunk of runs holds in memory, the trajectories on disk."""
+    runs, n = spec.runs, spec.scene.n
+    dts = runs.columns.get("simulation.dt", np.full(len(runs), spec.scene.simulation.dt))
+    ends = runs.columns.get("simulation.t_end", np.full(len(runs), spec.t_end))
+    with np.errstate(all="ignore"):
+        ratio = ends / dts
+    over = np.flatnonzero(~(ratio <= MAX_STEPS))
+    if len(over):
+        index = int(over[0])
+        key = ("axes" if {"simulation.dt", "simulation.t_end"} & set(runs.columns)
+               else "t_end")
+        raise SweepError(f"{spec.source}: {key}: run {index}: t_end / dt = {ratio[index]:.3g} "
+                         f"steps, more than the {MAX_STEPS:.0e} a run may take (dt = "
+                         f"{dts[index]:g} s, t_end = {ends[index]:g} s)")
+    if not spec.every:
+        return
+    samples = spec.sample_count()
+    row = (2 * n + 3) * 8
+    held = spec.chunk * samples * row
+    if held > MAX_SAMPLE_BYTES:
+        raise SweepError(f"{spec.source}: every: {samples} samples a run, {spec.chunk} runs a "
+                         f"chunk would hold {held / 2 ** 30:.1f} GiB of samples (limit "
+                         f"{MAX_SAMPLE_BYTES / 2 ** 30:.0f} GiB); keep fewer with a larger every")
+    stored = len(runs) * samples * row
+    if stored > MAX_TRAJECTORY_BYTES:
+        raise SweepError(f"{spec.source}: every: {len(runs)} runs of {samples} samples would "
+                         f"store {stored / 2 ** 40:.1f} TiB of trajectories (limit "
+                         f"{MAX_TRAJECTORY_BYTES / 2 ** 40:.0f} TiB); keep fewer with a larger "
+                         "every")
