@@ -165,6 +165,11 @@ class Solver:
         """The calling thread's own workspace, for a direct `_call` (tests)."""
         return self._workspaces.home()
 
+    def _serve(self, entry: str, arguments: dict) -> int:
+        """simulate's C run, in whichever thread runs it (a callback's calls get spares)."""
+        self._workspaces.serve()
+        return self._call(entry, **arguments)
+
     def _leased(self, name: str, **arguments):
         """`_call` in a workspace this call holds alone while it runs (runtime/workspaces.py):
         the thread's own, or a spare if a call of the thread is running (a callback's)."""
@@ -438,7 +443,7 @@ class Solver:
         if stop is not None:
             stop._attach(control)
         try:
-            status = run_watched(lambda: self._call(entry, **arguments), control, progress,
+            status = run_watched(lambda: self._serve(entry, arguments), control, progress,
                                  f"{self.prefix} simulate")
         finally:
             if stop is not None:

@@ -33,7 +33,6 @@ class Workspaces:
         workspace = getattr(self._threads, "workspace", None)
         if workspace is None:
             workspace = self._threads.workspace = ctypes.create_string_buffer(self._size)
-            self._threads.busy = False
             self._initialise(workspace)
         return workspace
 
@@ -45,19 +44,20 @@ class Workspaces:
         """(a workspace the caller holds alone until `release`, whether it is the thread's
         home one): the home workspace when free, else a spare with no Newton history."""
         threads = self._threads
-        if not getattr(threads, "busy", True):
+        if not getattr(threads, "busy", False):
             threads.busy = True
-            return threads.workspace, True
-        if getattr(threads, "workspace", None) is None:
-            workspace = self.home()
-            threads.busy = True
-            return workspace, True
+            return self.home(), True
         with self._lock:
             workspace = self._spares.pop() if self._spares else None
         if workspace is None:
             workspace = ctypes.create_string_buffer(self._size)
         self._initialise(workspace)
         return workspace, False
+
+    def serve(self) -> None:
+        """Mark the calling thread as one that runs a call for another (simulate's worker):
+        the calls of its callbacks get spares, as on any other thread."""
+        self._threads.busy = True
 
     def release(self, workspace, home: bool) -> None:
         if home:

@@ -71,8 +71,8 @@ def _controller_rolls_out_with_simulate() -> None:
 
     def controller(t, phi, omega):
         rollout = solver.simulate(phi, omega, dt=DT, n_steps=horizon)
-        solver.step(solver.initial_state(phi, omega), dt=DT)     # a step too: its own space
-        rollouts.append((phi, omega, rollout.samples))
+        x1 = solver.step(solver.initial_state(phi, omega), dt=DT).x1    # a step too
+        rollouts.append((phi, omega, rollout.samples, x1))
         return law(phi, omega, rollout)
 
     closed = solver.simulate(phi0, omega0, dt=DT, n_steps=300, controller=controller)
@@ -82,10 +82,13 @@ def _controller_rolls_out_with_simulate() -> None:
     assert len(rollouts) == 300
     # ... and each rollout, and the torques chosen from it, are those computed afterwards
     for k in (0, 1, 2, 150, 299):
-        phi, omega, samples = rollouts[k]
+        phi, omega, samples, x1 = rollouts[k]
         np.testing.assert_array_equal(phi, closed.phi[k])
         again = solver.simulate(phi, omega, dt=DT, n_steps=horizon)
         np.testing.assert_array_equal(samples, again.samples)
+        solver.reset()          # the callback's step had no Newton history either
+        np.testing.assert_array_equal(x1, solver.step(solver.initial_state(phi, omega),
+                                                      dt=DT).x1)
         np.testing.assert_array_equal(closed.torques[k], law(phi, omega, again))
 
 
@@ -172,3 +175,12 @@ def test_a_leased_workspace_is_held_alone_until_released():
     thread.start()
     thread.join()
     assert other[0][1] and other[0][0] is not home      # each thread has its own home
+
+    def worker() -> None:        # simulate's worker, running a call for another thread
+        spaces.serve()
+        other.append(spaces.lease())
+
+    thread = threading.Thread(target=worker)
+    thread.start()
+    thread.join()
+    assert not other[1][1] and initialised[-1] is other[1][0]   # its callbacks get spares
