@@ -71,8 +71,8 @@ def test_compiled_peer_tests_skip_without_numbalsoda(tmp_path):
     environment.pop("CHAINGEN_REQUIRE_TOOLS", None)
     result = subprocess.run(
         [sys.executable, "-m", "pytest", "-o", "addopts=", "-p", "no:xdist", "-p",
-         "no:cacheprovider", "-q", "-rs", "-m", "compile", "-k", "numbalsoda",
-         "tests/test_compiled_peers.py"],
+         "no:cacheprovider", f"--basetemp={tmp_path / 'pytest'}", "-q", "-rs", "-m",
+         "compile", "-k", "numbalsoda", "tests/test_compiled_peers.py"],
         capture_output=True, text=True, cwd=ROOT, env=environment, timeout=300)
     assert result.returncode == 0, result.stdout + result.stderr
     assert re.search(r"\b8 skipped\b", result.stdout), result.stdout
