@@ -67,7 +67,8 @@ def test_compiled_peer_tests_skip_without_numbalsoda(tmp_path):
     for name in PEER_PACKAGES:
         (tmp_path / f"{name}.py").write_text(
             f"raise ImportError('{name} hidden by test_setup', name='{name}')\n")
-    environment = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")]))}
     environment.pop("CHAINGEN_REQUIRE_TOOLS", None)
     result = subprocess.run(
         [sys.executable, "-m", "pytest", "-o", "addopts=", "-p", "no:xdist", "-p",
