@@ -306,7 +306,7 @@ class SweepStore:
         with writes(self.out / TRAJECTORIES, "the trajectories"):
             group = zarr.open_group(staging, mode="w-", zarr_format=3)
             group.attrs.update({"scene": spec.scene.name, "method": spec.method,
-                                "sweep_digest": self.digest, "sweep_store": self.store_id,
+                                "sweep_digest": self.digest,
                                 "units": "phi rad, omega rad/s, energy J, constraint_error m, "
                                          "t s"})
 
@@ -354,7 +354,7 @@ class SweepStore:
             shapes = {name: tuple(group[name].shape) for name in self._variables()}
         except Exception as error:       # zarr's errors for missing or garbled metadata
             raise StoreError(f"{path}: damaged ({type(error).__name__}); {remove}") from None
-        if attrs.get("sweep_digest") != self.digest or attrs.get("sweep_store") != self.store_id:
+        if attrs.get("sweep_digest") != self.digest:
             raise StoreError(f"{path}: is not this sweep's trajectories; {remove}")
         sizes = self._sizes()
         for name, dimensions in self._variables().items():
