@@ -88,10 +88,13 @@ def test_the_manifest_ranges_are_the_scene_reader_s():
     phi0, omega0 = scene.initial_angles, scene.initial_velocities
     with pytest.raises(ValueError, match=r"^links\[1\]\.mass: must be > 0, got -1\.0$"):
         solver.simulate(phi0, omega0, dt=DT, n_steps=10, parameters={"links[1].mass": -1.0})
-    with pytest.raises(ValueError, match=r"stiffness: must be >= 0"):
+    with pytest.raises(ValueError, match=r"^springs\[0\]\.stiffness: must be > 0, got -1"):
         solver.stepper(phi0, omega0, DT, parameters={"springs[0].stiffness": -1.0})
-    ok = solver.simulate(phi0, omega0, dt=DT, n_steps=10, parameters={"gravity": -3.0})
-    assert ok.parameters["gravity"] == -3.0
+    with pytest.raises(ValueError, match=r"^links\[0\]\.inertia: must be finite, got nan$"):
+        solver.step(solver.initial_state(phi0, omega0), dt=DT,
+                    parameters={"links[0].inertia": float("nan")})
+    ok = solver.simulate(phi0, omega0, dt=DT, n_steps=10, parameters={"gravity": 3.0})
+    assert ok.parameters["gravity"] == 3.0
 
 
 # -- point 12: the samples of a run fit in memory -------------------------------------------
