@@ -71,27 +71,43 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, engine: str = "local",
             session.close()
 
 
-def _run(spec: SweepSpec, store: SweepStore, engine: str, session, workers) -> SweepOutcome:
-    import time
+#: Solvers this process built, by what they are built from: a second sweep of the same scene,
+#: scheme and parameters (the next study in a notebook) generates and loads nothing again.
+_BUILT: dict[tuple, tuple] = {}
 
+
+def _build(spec: SweepSpec):
+    """(package files, library, solver) of the spec's solver, built once per process."""
     from ...generate.package import GENERATE_STAGES, generate_package
     from ...progress import Progress
     from ...runtime import Solver
     from ...runtime.build import build_shared_library
+
+    key = (spec.scene, spec.method, spec.quadrature, spec.order, spec.parameters)
+    if key not in _BUILT:
+        with Progress(f"generate {spec.scene.name} ({spec.method})",
+                      total=GENERATE_STAGES + 1, unit="stages") as progress:
+            package = generate_package(spec.scene, spec.method, spec.quadrature,
+                                       sensitivities=False, parameters=spec.parameters,
+                                       order=spec.order, progress=progress)
+            progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
+            manifest = package.manifest
+            library = build_shared_library(manifest["prefix"], package.files,
+                                           manifest["sources"],
+                                           source_flags={name: tuple(flags) for name, flags
+                                                         in manifest["source_flags"].items()})
+        solver = Solver(library.path, manifest, build_hash=library.build_hash)
+        _BUILT[key] = (package.files, library, solver)
+    return _BUILT[key]
+
+
+def _run(spec: SweepSpec, store: SweepStore, engine: str, session, workers) -> SweepOutcome:
+    import time
+
     from .engines import run_dask, run_local
 
     started = time.perf_counter()
-    with Progress(f"generate {spec.scene.name} ({spec.method})", total=GENERATE_STAGES + 1,
-                  unit="stages") as progress:
-        package = generate_package(spec.scene, spec.method, spec.quadrature,
-                                   sensitivities=False, parameters=spec.parameters,
-                                   order=spec.order, progress=progress)
-        progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
-        manifest = package.manifest
-        library = build_shared_library(manifest["prefix"], package.files, manifest["sources"],
-                                       source_flags={name: tuple(flags) for name, flags
-                                                     in manifest["source_flags"].items()})
-    solver = Solver(library.path, manifest, build_hash=library.build_hash)
+    files, library, solver = _build(spec)
     generate_seconds = time.perf_counter() - started
     with store.writing():
         stored = store.open(library.build_hash, engine)
@@ -99,8 +115,7 @@ def _run(spec: SweepSpec, store: SweepStore, engine: str, session, workers) -> S
         if todo and engine == "local":
             run_local(spec, store, solver, library.build_hash, todo, workers=workers)
         elif todo:
-            run_dask(spec, store, package.files, library.path, library.build_hash, todo,
-                     session)
+            run_dask(spec, store, files, library.path, library.build_hash, todo, session)
         store.assemble()
     return SweepOutcome(store.out, len(spec.runs), sum(count for _, count in todo),
                         library.build_hash, generate_seconds)

@@ -106,11 +106,9 @@ def _short_segments(scene: Scene, block: dict[str, np.ndarray], count: int) -> n
 
 
 def check_runs(scene: Scene, columns: dict[str, np.ndarray], source: str,
-               describe: Callable[[int], str]) -> None:
-    """SweepError-ready check: raises `SceneError`-derived messages through `fail`; see
-    spec._check_values. The first run the reader refuses is named with its values."""
-    from .spec import SweepError
-
+               describe: Callable[[int], str], error: type[Exception]) -> None:
+    """`error` (one line) naming the first run the scene reader refuses, with its values
+    (`describe`) and the reader's message; `source` is the spec file."""
     total = len(next(iter(columns.values()))) if columns else 0
     for first in range(0, total, BLOCK):
         count = min(BLOCK, total - first)
@@ -118,13 +116,13 @@ def check_runs(scene: Scene, columns: dict[str, np.ndarray], source: str,
             run = {path: float(column[index]) for path, column in columns.items()}
             for path, value in run.items():
                 if path.startswith("simulation.") and not (math.isfinite(value) and value > 0):
-                    raise SweepError(f"{source}: axes.{json.dumps(path)}: run {index}: must "
-                                     f"be > 0 and finite (s), got {value!r}")
+                    raise error(f"{source}: axes.{json.dumps(path)}: run {index}: must be "
+                                f"> 0 and finite (s), got {value!r}")
             values = {path: value for path, value in run.items()
                       if not path.startswith("simulation.")}
             try:
                 with_values(scene, values, where="run")
-            except SceneError as error:
-                message = str(error).split(": ", 1)[1]
-                raise SweepError(f"{source}: axes: run {index} ({describe(int(index))}): "
-                                 f"{message}") from None
+            except SceneError as refused:
+                message = str(refused).split(": ", 1)[1]
+                raise error(f"{source}: axes: run {index} ({describe(int(index))}): "
+                            f"{message}") from None

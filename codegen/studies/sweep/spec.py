@@ -382,7 +382,7 @@ def _check_values(spec: SweepSpec) -> None:
     def describe(index: int) -> str:
         return ", ".join(f"{path} = {value:g}" for path, value in runs[index].items())
 
-    check_runs(spec.scene, runs.columns, spec.source, describe)
+    check_runs(spec.scene, runs.columns, spec.source, describe, SweepError)
 
 
 def _check_sizes(spec: SweepSpec) -> None:
