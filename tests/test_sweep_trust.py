@@ -476,3 +476,50 @@ def test_the_documented_sweep_paths_warn_nothing(tmp_path):
         runs.groupby("springs[0].stiffness")["max_energy_error"].max()
         assert abs(data.phi.sel(joint=2)).max("t").values.shape == (12,)
         assert data.phi.sel(joint=3).std("t").values.shape == (12,)
+
+
+@pytest.fixture
+def small_file_system(tmp_path):
+    """A tmpfs of 3 MB (root and mount rights; skipped elsewhere), made larger by `grow`."""
+    mount = tmp_path / "small"
+    mount.mkdir()
+    made = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mount)],
+                          capture_output=True)
+    if made.returncode:
+        pytest.skip("cannot mount a tmpfs here (needs root and mount rights)")
+
+    def grow():
+        subprocess.run(["mount", "-o", "remount,size=64m", str(mount)], check=True)
+
+    try:
+        yield mount, grow
+    finally:
+        subprocess.run(["umount", str(mount)], check=False)
+
+
+@pytest.mark.compile
+def test_a_really_full_disk_is_one_line_and_the_sweep_resumes(tmp_path, small_file_system):
+    mount, grow = small_file_system
+    spec = write_spec(tmp_path, f"""
+scene = "{MONO}"
+t_end = 20.0
+every = 1
+[axes]
+"springs[0].stiffness" = {{ from = 1.0, to = 30.0, num = 40 }}
+""")
+    out = mount / "out"
+    result = chaingen_in_process("sweep", spec, "-o", out, "--quiet", cwd=tmp_path)
+    assert result.returncode == 1, result.stderr
+    assert len(result.stderr.splitlines()) == 1 and "No space left on device" in result.stderr
+    assert "internal error" not in result.stderr and f"{out}" in result.stderr
+    assert not (out / "runs.parquet").exists()
+    stored = len(list((out / "parts").glob("runs-*.parquet")))
+    assert 0 < stored < 40
+    hidden = [path for path in (*out.iterdir(), *(out / "parts").iterdir())
+              if path.name.startswith(".")]
+    assert hidden == []
+    grow()
+    result = chaingen_in_process("sweep", spec, "-o", out, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert f"40 runs ({40 - stored} computed now)" in result.stdout
+    assert list(pd.read_parquet(out / "runs.parquet")["run"]) == list(range(40))

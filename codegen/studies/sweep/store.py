@@ -90,6 +90,16 @@ def writes(path: Path, what: str):
                               "to resume)") from None
 
 
+@contextlib.contextmanager
+def _removed_on_failure(directory: Path):
+    """The directory being built, removed if the block fails."""
+    try:
+        yield
+    except BaseException:
+        shutil.rmtree(directory, ignore_errors=True)
+        raise
+
+
 def _lexists(path: Path) -> bool:
     return os.path.lexists(path)
 
@@ -303,7 +313,7 @@ class SweepStore:
         spec, n = self.spec, self.spec.scene.n
         runs, samples = len(spec.runs), sample_count(spec)
         staging = self.out / self._staging_name()
-        with writes(self.out / TRAJECTORIES, "the trajectories"):
+        with writes(self.out / TRAJECTORIES, "the trajectories"), _removed_on_failure(staging):
             group = zarr.open_group(staging, mode="w-", zarr_format=3)
             group.attrs.update({"scene": spec.scene.name, "method": spec.method,
                                 "sweep_digest": self.digest,
