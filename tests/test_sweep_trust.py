@@ -523,3 +523,23 @@ every = 1
     assert result.returncode == 0, result.stderr
     assert f"40 runs ({40 - stored} computed now)" in result.stdout
     assert list(pd.read_parquet(out / "runs.parquet")["run"]) == list(range(40))
+
+
+@pytest.mark.compile
+def test_a_resumed_sweep_removes_its_own_leftovers_and_nothing_else(finished, tmp_path):
+    """The staged files of writes a kill cut short are the sweep's own: removed on resume."""
+    out = copy_of(finished, tmp_path)
+    record = json.loads((out / "sweep.json").read_text())
+    (out / "parts" / "runs-000000003.parquet").unlink()
+    leftovers = [out / "parts" / ".runs-000000003.parquet.k2j4x9_q.parquet",
+                 out / ".runs.parquet.a8bq3x0z.parquet", out / ".sweep.json.z0y9x8w7"]
+    for path in leftovers:
+        path.write_bytes(b"half")
+    staging = out / f".trajectories.zarr.{record['store']}.staging"
+    (staging / "phi").mkdir(parents=True)
+    result = chaingen_in_process("sweep", write_spec(tmp_path, SMALL), "-o", out, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "12 runs (1 computed now)" in result.stdout
+    assert not any(path.exists() for path in leftovers) and not staging.exists()
+    assert sorted(path.name for path in out.iterdir()) == \
+        ["parts", "runs.parquet", "sweep.json", "trajectories.zarr"]
