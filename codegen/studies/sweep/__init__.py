@@ -14,6 +14,7 @@ The results' dependencies (pyarrow, xarray, zarr, dask) are the extra `sweep`.
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -71,8 +72,9 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, engine: str = "local",
             session.close()
 
 
-#: Solvers this process built, by what they are built from: a second sweep of the same scene,
-#: scheme and parameters (the next study in a notebook) generates and loads nothing again.
+#: Solvers this process built, by what they are built from (and the compiler asked for): a
+#: second sweep of the same scene, scheme and parameters (the next study in a notebook)
+#: generates and loads nothing again.
 _BUILT: dict[tuple, tuple] = {}
 
 
@@ -83,7 +85,8 @@ def _build(spec: SweepSpec):
     from ...runtime import Solver
     from ...runtime.build import build_shared_library
 
-    key = (spec.scene, spec.method, spec.quadrature, spec.order, spec.parameters)
+    key = (spec.scene, spec.method, spec.quadrature, spec.order, spec.parameters,
+           os.environ.get("CC", ""))
     if key not in _BUILT:
         with Progress(f"generate {spec.scene.name} ({spec.method})",
                       total=GENERATE_STAGES + 1, unit="stages") as progress:
