@@ -282,7 +282,7 @@ def test_dask_sweep_survives_a_killed_worker(tmp_path):
     run_sweep(spec, tmp_path / "local")
     out = tmp_path / "dask"
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+                      dashboard_address="127.0.0.1:0") as cluster, Client(cluster) as client:
         pids = list(client.run(os.getpid).values())
         finished: list = []
         thread = threading.Thread(target=lambda: finished.append(
