@@ -11,6 +11,9 @@ The cache trusts nothing by its name alone:
   altered, replaced by a link to another) is removed and built again, never loaded;
 - the library exports the build hash it was compiled with (`<prefix>_build_hash()`), which the
   loader compares with the one it asked for;
+- an index entry (build_solver's lookup by inputs) records the sha256 of its manifest, and is
+  used only when the manifest it holds still has it: a manifest altered in the cache, which the
+  loader would trust for the sizes of every buffer, is a broken entry, generated again;
 - builders of one library take turns (a lock file beside it): the first compiles, the others
   wait and load its result;
 - each build works in a directory of its own, locked while it runs; a directory left by a build
@@ -127,18 +130,26 @@ def ready_cache(cache: Path) -> Path:
 INDEX = "inputs"
 
 
+def manifest_digest(manifest: dict) -> str:
+    """sha256 of a manifest's content (its canonical JSON), as an index entry records it."""
+    text = json.dumps(manifest, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
 def indexed_library(key: str, cache: Path | None = None) -> tuple[BuiltLibrary, dict] | None:
     """The verified library and manifest the index holds for `key`, or None: no entry, or an
-    entry that is unreadable, or whose library is missing or not the one it names (then the
-    caller generates and builds as if there were none, and `remember` replaces the entry)."""
+    entry that is unreadable, whose manifest is not the one it recorded (manifest_digest), or
+    whose library is missing or not the one it names (then the caller generates and builds as if
+    there were none, and `remember` replaces the entry)."""
     cache = Path(cache) if cache is not None else cache_directory()
     try:
         entry = json.loads((cache / INDEX / f"{key}.json").read_text())
         library = cache / entry["library"]
         built, manifest = entry["build_hash"], entry["manifest"]
+        intact = entry["manifest_sha256"] == manifest_digest(manifest)
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    if (not isinstance(manifest, dict) or library.parent != cache
+    if (not intact or not isinstance(manifest, dict) or library.parent != cache
             or not verified(library, built)):
         return None
     return BuiltLibrary(library, built), manifest
@@ -152,7 +163,8 @@ def remember(key: str, library: BuiltLibrary, manifest: dict, cache: Path | None
     folder = cache / INDEX
     folder.mkdir(exist_ok=True)
     text = json.dumps({"library": library.path.name, "build_hash": library.build_hash,
-                       "manifest": manifest}, sort_keys=True)
+                       "manifest": manifest, "manifest_sha256": manifest_digest(manifest)},
+                      sort_keys=True)
     handle, temporary = tempfile.mkstemp(prefix=f".{key}-", suffix=".json", dir=folder)
     try:
         with os.fdopen(handle, "w") as stream:

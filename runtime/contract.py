@@ -81,8 +81,10 @@ STATUSES = (
            "the Newton Jacobian is singular (no usable pivot)"),
     Status("NONFINITE", 3, "NaN or Inf in the residual or the iterate",
            "NaN or Inf in the residual or the Newton iterate"),
-    Status("BAD_ARGUMENT", 4, "a null pointer, dt <= 0, n_steps < 0, every < 1, interval < 1, "
-                              "an unknown reuse_jacobian or a bad rtol, atol or energy_tol",
+    Status("BAD_ARGUMENT", 4, "a null pointer, dt <= 0 or not finite, a NaN or Inf in a state "
+                              "or posture, n_steps < 0, every < 1, interval < 1, hold < 1, "
+                              "more sample rows than memory can address, an unknown "
+                              "reuse_jacobian or a bad rtol, atol or energy_tol",
            "bad argument"),
     Status("EVALUATION_FAILED", 5, "a generated function reported an error",
            "a generated function reported an evaluation error"),
@@ -105,6 +107,10 @@ STATUSES = (
            "the converged step missed the energy balance by more than energy_tol times its "
            "kinetic energy (a spurious Newton root of a step too long for the motion)",
            when="energy_check"),
+    Status("BAD_PARAMETER", 10, "a run-time parameter p_i is not finite or below its lower "
+                                "bound, a value the scene format refuses (see p above)",
+           "a run-time parameter is not finite or below its lower bound (a value the scene "
+           "format refuses)", when="parameters"),
 )
 STATUS_CODES = {status.name: status.code for status in STATUSES}
 
@@ -116,6 +122,56 @@ def status_message(code: int, segment_tolerance: float | None = None) -> str:
             tolerance = "its tolerance" if segment_tolerance is None else f"{segment_tolerance:g}"
             return status.message.format(segment_tolerance=tolerance)
     return f"unknown status {code}"
+
+
+# --------------------------------------------------------------------------------------------
+# Ranges of the scene's numbers
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class LowerBound:
+    """The least value a number of a scene may take: `value` itself too when `inclusive`."""
+
+    value: float
+    inclusive: bool
+
+    def admits(self, number: float) -> bool:
+        """Whether `number` is within the bound (NaN never is)."""
+        return number >= self.value if self.inclusive else number > self.value
+
+    @property
+    def rule(self) -> str:
+        """'>= 0', '> 0': the bound as the scene reader's messages say it."""
+        return f"{'>=' if self.inclusive else '>'} {self.value:g}"
+
+
+#: The lower bounds of a scene's numbers, by the last key of their key path (links[1].mass:
+#: "mass"), stated once: the scene reader refuses a number below its bound
+#: (docs/scene-format.md), a package's C refuses a run-time parameter below it (status
+#: BAD_PARAMETER), and the manifest records it for the Python runtime. A number not named here
+#: (com, com_normal, fastening, offsets, angles, velocities) may be any finite value.
+NUMBER_BOUNDS = {
+    "gravity": LowerBound(0.0, True),
+    "mass": LowerBound(0.0, False),
+    "inertia": LowerBound(0.0, True),
+    "length": LowerBound(0.0, False),
+    "damping": LowerBound(0.0, True),
+    "stiffness": LowerBound(0.0, False),
+    "rest_length": LowerBound(0.0, True),
+    "dt": LowerBound(0.0, False),
+    "t_end": LowerBound(0.0, False),
+}
+
+
+def lower_bound(path: str) -> LowerBound | None:
+    """The bound of the number at key path `path` (NUMBER_BOUNDS), None when it has none."""
+    return NUMBER_BOUNDS.get(re.sub(r"\[[0-9]+\]", "", path).rsplit(".", 1)[-1])
+
+
+#: The longest scene name: it prefixes every exported C name and the names of a package's files
+#: and of its libraries in the build cache (lib<name>_<method>-<hash>.so.json), which must stay
+#: within the 255 bytes file systems allow.
+MAX_SCENE_NAME_LENGTH = 128
 
 
 # --------------------------------------------------------------------------------------------

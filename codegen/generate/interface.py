@@ -21,6 +21,9 @@ from ..runtime.contract import P_ARGUMENT, EntryPoint, Features, Parameter, _par
 
 #: Width of the generated C text.
 WIDTH = 100
+#: A comment beside a long name (a long scene name makes long macros) is wrapped at this width at
+#: least, overrunning WIDTH rather than leaving no room.
+MIN_COMMENT_WIDTH = 40
 
 #: The solver's static functions whose parameters follow the scene's features.
 INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
@@ -63,6 +66,10 @@ INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
         f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
         "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
         "int *iterations, {prefix}_stats *counters")),
+    EntryPoint("evaluate_residual", "static int",
+               contract.ENTRY_POINTS_BY_NAME["residual"].parameters),
+    EntryPoint("evaluate_residual_jacobian", "static int",
+               contract.ENTRY_POINTS_BY_NAME["residual_jacobian"].parameters),
     EntryPoint("stage_sensitivities", "static int",
                contract.ENTRY_POINTS_BY_NAME["step_sensitivities"].parameters,
                when="sensitivities"),
@@ -99,8 +106,9 @@ def c_literal(value: int | float) -> str:
 
 
 def comment_lines(text: str, indent: int, width: int = WIDTH) -> list[str]:
-    """`text` as the lines of a C comment starting at column `indent` ("/* ... */")."""
-    lines = textwrap.wrap(text, width=width - indent - 6) or [""]
+    """`text` as the lines of a C comment starting at column `indent` ("/* ... */"), at least
+    MIN_COMMENT_WIDTH wide."""
+    lines = textwrap.wrap(text, width=max(width - indent - 6, MIN_COMMENT_WIDTH)) or [""]
     if len(lines) == 1:
         return [f"/* {lines[0]} */"]
     return ([f"/* {lines[0]}"] + [" " * indent + f" * {line}" for line in lines[1:-1]]

@@ -19,7 +19,7 @@ import casadi
 import jinja2
 import sympy
 
-from ..errors import PackageWriteError
+from ..errors import PackageWriteError, SceneError
 from ..runtime import contract
 from ..runtime.contract import Features
 from ..runtime.files import write_directory
@@ -79,8 +79,24 @@ def c_list(values) -> str:
 
 
 def package_prefix(scene: Scene, method: str) -> str:
-    """C prefix of every exported symbol: the scene's C name and the method."""
+    """C prefix of every exported symbol: the scene's C name and the method. SceneError for a
+    name longer than the scene format allows (a Scene made in Python, not read from a file)."""
+    if len(scene.name) > contract.MAX_SCENE_NAME_LENGTH:
+        raise SceneError(f"name: must be at most {contract.MAX_SCENE_NAME_LENGTH} characters "
+                         f"long (it prefixes generated C and file names), not "
+                         f"{len(scene.name)}")
     return f"{scene.c_name}_{method}"
+
+
+def parameter_bounds(paths) -> list[tuple[str, str, str]]:
+    """(C lower bound, C inclusive flag, rule for people) of each run-time parameter: the scene
+    format's bound (contract.NUMBER_BOUNDS); none: -DBL_MAX, inclusive (any finite value)."""
+    bounds = []
+    for path in paths:
+        bound = contract.lower_bound(path)
+        bounds.append(("-DBL_MAX", "1", "any finite value") if bound is None else
+                      (c_literal(bound.value), str(int(bound.inclusive)), bound.rule))
+    return bounds
 
 
 def template_environment(interface: CInterface | None = None) -> jinja2.Environment:
@@ -195,7 +211,9 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         if len(scheme.composition) > 1 else [],
         "nq": functions.parameters.size1_out(0) if functions.parameters is not None else 0,
         "parameters": list(zip(scheme.parameter_paths, scheme.parameter_units,
-                                          map(c_literal, scheme.parameter_values))),
+                               map(c_literal, scheme.parameter_values),
+                               [rule for _, _, rule in parameter_bounds(scheme.parameter_paths)])),
+        "parameter_bounds": parameter_bounds(scheme.parameter_paths),
         "sensitivity_outputs": (["ds_du"] if nu else []) + (["ds_dp"] if n_p else []),
         "sensitivity_checks": ([("ds_du", "NU")] if nu else []) + ([("ds_dp", "NP")]
                                                                      if n_p else []),
@@ -236,9 +254,13 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "order": scheme.order, "composition": list(scheme.composition),
         "n_joints": n, "nx": context["nx"], "nz": context["nz"], "nsample": context["nsample"],
         "actuated_joints": list(scene.actuated_joints), "nu": nu,
-        "parameters": [{"path": path, "unit": unit, "value": value} for path, unit, value
+        "parameters": [{"path": path, "unit": unit, "value": value,
+                        "lower": None if bound is None else bound.value,
+                        "lower_inclusive": True if bound is None else bound.inclusive}
+                       for path, unit, value, bound
                        in zip(scheme.parameter_paths, scheme.parameter_units,
-                              scheme.parameter_values)],
+                              scheme.parameter_values,
+                              map(contract.lower_bound, scheme.parameter_paths))],
         "energy_flows": features.flows, "sensitivities": sensitivities,
         "segment_tolerance": scheme.segment_relative_tolerance if features.segments else None,
         "energy_check": features.energy_check,
@@ -261,6 +283,7 @@ def generate_package(scene: Scene, method: str, quadrature: int, *,
     """Scene -> scheme -> C package, all in memory. parameters: key paths of the scene's
     numbers the solver takes at run time; order: 2 (the scheme's step), 4 or 6 (composed).
     progress: see render_package."""
+    package_prefix(scene, method)   # a name too long for C and file names fails before SymPy
     if progress is not None:
         progress.update(0, "deriving the model and the scheme (SymPy)")
     package = render_package(build_scheme(scene, method, quadrature, parameters, order),

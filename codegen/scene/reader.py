@@ -16,7 +16,13 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from ..errors import SceneError
-from ..runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
+from ..runtime.contract import (
+    ADAPTIVE_TOLERANCE_RULE,
+    ADAPTIVE_TOLERANCES,
+    MAX_SCENE_NAME_LENGTH,
+    NUMBER_BOUNDS,
+    is_adaptive_tolerance,
+)
 from . import kinematics
 from .values import METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
 
@@ -188,16 +194,12 @@ class SceneReader:
             self.fail(path, f"must be finite ({meaning})", value)
         return result
 
-    def positive(self, path: str, value: Any, meaning: str) -> float:
+    def bounded(self, path: str, value: Any, meaning: str) -> float:
+        """A number within the lower bound of its key (NUMBER_BOUNDS: stated once, for C too)."""
         result = self.number(path, value, meaning)
-        if not result > 0.0:
-            self.fail(path, f"must be > 0 ({meaning})", result)
-        return result
-
-    def nonnegative(self, path: str, value: Any, meaning: str) -> float:
-        result = self.number(path, value, meaning)
-        if not result >= 0.0:
-            self.fail(path, f"must be >= 0 ({meaning})", result)
+        bound = NUMBER_BOUNDS[path.rsplit(".", 1)[-1]]
+        if not bound.admits(result):
+            self.fail(path, f"must be {bound.rule} ({meaning})", result)
         return result
 
     def table(self, path: str, value: Any, header: str) -> dict[str, Any]:
@@ -227,17 +229,22 @@ class SceneReader:
         if not NAME_PATTERN.fullmatch(value):
             self.fail("name", "must start with a letter and contain only letters, digits, "
                               "'_' and '-' (it prefixes generated C names)", value)
+        if len(value) > MAX_SCENE_NAME_LENGTH:
+            self.fail("name", f"must be at most {MAX_SCENE_NAME_LENGTH} characters long (it "
+                              f"prefixes generated C and file names), not {len(value)}")
         return value
 
     def default_scene_name(self) -> str:
         name = self.default_name
-        if NAME_PATTERN.fullmatch(name):
+        if NAME_PATTERN.fullmatch(name) and len(name) <= MAX_SCENE_NAME_LENGTH:
             return name
         suggestion = re.sub(r"[^A-Za-z0-9_-]", "_", name)
         if not suggestion[:1].isalpha():
             suggestion = "scene_" + suggestion
+        suggestion = suggestion[:MAX_SCENE_NAME_LENGTH]
         self.fail("name", "not set, and the default (the file's stem) is not a valid scene name "
-                          "(a letter, then letters, digits, '_' or '-'); set it in the file, "
+                          "(a letter, then letters, digits, '_' or '-', at most "
+                          f"{MAX_SCENE_NAME_LENGTH} in all); set it in the file, "
                           f"e.g. name = {json.dumps(suggestion)}", name)
 
     # -- sections -------------------------------------------------------------------------
@@ -260,7 +267,7 @@ class SceneReader:
             if key == "name":
                 name = self.name(value)
             elif key == "gravity":
-                gravity = self.nonnegative("gravity", value, "g in m/s^2 along -y; 0 is off")
+                gravity = self.bounded("gravity", value, "g in m/s^2 along -y; 0 is off")
             elif key == "base":
                 base_fastening = self.base(value)
             elif key == "links":
@@ -319,11 +326,11 @@ class SceneReader:
         for key, item in table.items():
             where = f"{path}.{key}"
             if key == "mass":
-                fields[key] = self.positive(where, item, f"m_{i} in kg, link {i}")
+                fields[key] = self.bounded(where, item, f"m_{i} in kg, link {i}")
             elif key == "inertia":
-                fields[key] = self.nonnegative(where, item, f"J_{i} in kg m^2, link {i}")
+                fields[key] = self.bounded(where, item, f"J_{i} in kg m^2, link {i}")
             elif key == "length":
-                fields[key] = self.positive(where, item, f"L_{i} in m, link {i}")
+                fields[key] = self.bounded(where, item, f"L_{i} in m, link {i}")
             elif key == "com":
                 fields[key] = self.number(where, item, f"a_{i} in m, link {i}")
             elif key == "com_normal":
@@ -331,7 +338,7 @@ class SceneReader:
             elif key == "fastening":
                 fields[key] = self.number(where, item, f"r_{i + 1} in m, link {i}")
             elif key == "damping":
-                fields[key] = self.nonnegative(where, item, f"d_{i} in N m s/rad, joint {i}")
+                fields[key] = self.bounded(where, item, f"d_{i} in N m s/rad, joint {i}")
             else:
                 self.unknown_key(path, key, item, _LINK_KEYS)
         for key in _LINK_REQUIRED:
@@ -355,9 +362,9 @@ class SceneReader:
             if key == "joints":
                 joints = self.spring_joints(where, item)
             elif key == "stiffness":
-                stiffness = self.positive(where, item, "k in N/m")
+                stiffness = self.bounded(where, item, "k in N/m")
             elif key == "rest_length":
-                rest_length = self.nonnegative(where, item, "S_0 in m, over all segments")
+                rest_length = self.bounded(where, item, "S_0 in m, over all segments")
             elif key == "offsets":
                 offsets = self.number_list(where, item, "r of a fastening in m", None, "")
                 offsets_raw = item
@@ -459,9 +466,9 @@ class SceneReader:
                               + " (the order of the step)", item)
                 fields[key] = item
             elif key == "dt":
-                fields[key] = self.positive(where, item, "step in s")
+                fields[key] = self.bounded(where, item, "step in s")
             elif key == "t_end":
-                fields[key] = self.positive(where, item, "duration in s")
+                fields[key] = self.bounded(where, item, "duration in s")
             elif key in ADAPTIVE_TOLERANCES:
                 if (isinstance(item, bool) or not isinstance(item, (int, float))
                         or not is_adaptive_tolerance(item)):

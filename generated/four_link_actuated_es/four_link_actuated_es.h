@@ -100,9 +100,12 @@ extern "C" {
 #define FOUR_LINK_ACTUATED_ES_SINGULAR_JACOBIAN 2 /* Newton: no usable pivot in the LU
                                                    * factorisation */
 #define FOUR_LINK_ACTUATED_ES_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
-#define FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0, every
-                                                   * < 1, interval < 1, an unknown reuse_jacobian
-                                                   * or a bad rtol, atol or energy_tol */
+#define FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT 4      /* a null pointer, dt <= 0 or not finite, a NaN
+                                                   * or Inf in a state or posture, n_steps < 0,
+                                                   * every < 1, interval < 1, hold < 1, more
+                                                   * sample rows than memory can address, an
+                                                   * unknown reuse_jacobian or a bad rtol, atol
+                                                   * or energy_tol */
 #define FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                                    * geometry's size of zero length, or passed
@@ -253,27 +256,30 @@ void four_link_actuated_es_workspace_init(four_link_actuated_es_workspace *works
 FOUR_LINK_ACTUATED_ES_API
 void four_link_actuated_es_default_options(four_link_actuated_es_options *options);
 
-/* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s). */
+/* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s), all
+ * finite (FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT otherwise). */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_initial_state(const double *phi, const double *phidot, double *x,
                                         four_link_actuated_es_workspace *workspace);
 
 /* Joint space and diagnostics of a state: phi[N_JOINTS] wrapped to (-pi, pi], omega[N_JOINTS],
  * energy H = T + V, and the largest structural error of the state's coordinates. Any output
- * pointer may be NULL. */
+ * pointer may be NULL. A state x with a NaN or Inf: FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT. */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_outputs(const double *x, double *phi, double *omega, double *energy,
                                   double *constraint_error,
                                   four_link_actuated_es_workspace *workspace);
 
-/* The joint torques tau[N_JOINTS] (N m) that hold the chain still at posture phi[N_JOINTS]:
- * dV/dphi, gravity and springs. A controller's feed-forward (the example uses it). */
+/* The joint torques tau[N_JOINTS] (N m) that hold the chain still at posture phi[N_JOINTS]
+ * (finite, FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT otherwise): dV/dphi, gravity and springs. A controller's
+ * feed-forward (the example uses it). */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_holding_torques(const double *phi, double *tau,
                                           four_link_actuated_es_workspace *workspace);
 
 /* Residual F(z; x0, u, dt)[NZ] of one step, and with it the Jacobian dF/dz[NZ*NZ]
- * (jacobian[i + j*NZ] = dF_i/dz_j). For verification; step() calls them itself. */
+ * (jacobian[i + j*NZ] = dF_i/dz_j). For verification; step() calls them itself. dt must be finite
+ * and > 0 (FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT otherwise). */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_residual(const double *z, const double *x0, const double *u, double dt,
                                    double *residual, four_link_actuated_es_workspace *workspace);
@@ -303,12 +309,15 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
                                              four_link_actuated_es_workspace *workspace,
                                              int *iterations);
 
-/* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1. */
+/* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1;
+ * 0 when n_steps < 0 or every < 1; -1 when the rows would not fit in memory (rows * NSAMPLE
+ * beyond LONG_MAX, or their bytes beyond SIZE_MAX), which simulate refuses with
+ * FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT. */
 FOUR_LINK_ACTUATED_ES_API
 long four_link_actuated_es_sample_count(long n_steps, long every);
 
 /* Run n_steps steps from x0 at time t0, step k (from t0 + k dt, k = 0..n_steps-1) with the inputs
- * u[k*NU .. k*NU + NU-1]. Writes a sample row (layout above) at step 0 and at every
+ * u[k*NU .. k*NU + NU-1] (u NULL: zero torques at every step). Writes a sample row (layout above) at step 0 and at every
  * `every`-th step into samples[sample_count(n_steps, every) * NSAMPLE], the final state into
  * x_final[NX] (may be NULL) and counters into stats (may be NULL). On a failed step it stops and
  * returns the step's status; stats->steps tells how many steps (and so which rows) are valid.
@@ -355,8 +364,9 @@ typedef int (*four_link_actuated_es_controller)(long step, double t, const doubl
                                                 const double *omega, double *u, void *context);
 
 /* simulate_observed in closed loop: the inputs come from controller(..., context) every `hold`
- * steps (hold >= 1) instead of from an array, and are recorded into torques[n_steps * NU] (may be
- * NULL; row k is the input of step k). The controller runs in the caller's thread, inside the
+ * steps (hold >= 1) instead of from an array. They are recorded as the samples are, every `every`
+ * steps, into torques[ceil(n_steps / every) * NU] (may be NULL): row j is the input held over
+ * step j*every, the step that starts at sample row j. The controller runs in the caller's thread, inside the
  * loop: a C controller costs a function call a step. Samples, x_final, stats and control as in
  * simulate_observed. */
 FOUR_LINK_ACTUATED_ES_API

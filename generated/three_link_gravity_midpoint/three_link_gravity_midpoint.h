@@ -67,22 +67,24 @@ extern "C" {
                                                          * factorisation */
 #define THREE_LINK_GRAVITY_MIDPOINT_NONFINITE 3         /* NaN or Inf in the residual or the
                                                          * iterate */
-#define THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0,
-                                                         * every < 1, interval < 1, an unknown
-                                                         * reuse_jacobian or a bad rtol, atol or
-                                                         * energy_tol */
+#define THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT 4      /* a null pointer, dt <= 0 or not finite, a
+                                                         * NaN or Inf in a state or posture,
+                                                         * n_steps < 0, every < 1, interval < 1,
+                                                         * hold < 1, more sample rows than memory
+                                                         * can address, an unknown reuse_jacobian
+                                                         * or a bad rtol, atol or energy_tol */
 #define THREE_LINK_GRAVITY_MIDPOINT_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define THREE_LINK_GRAVITY_MIDPOINT_INTERRUPTED 7       /* simulate_observed or
                                                          * simulate_controlled: the observer, the
                                                          * controller or control->stop asked to
                                                          * stop */
-#define THREE_LINK_GRAVITY_MIDPOINT_STEP_TOO_SMALL 8    /* adaptive steps: the error test or
-                                                         * Newton failed at a step below 1e-12 dt */
+#define THREE_LINK_GRAVITY_MIDPOINT_STEP_TOO_SMALL 8    /* adaptive steps: the error test or Newton
+                                                         * failed at a step below 1e-12 dt */
 #define THREE_LINK_GRAVITY_MIDPOINT_ENERGY_JUMP 9       /* the converged step missed the energy
                                                          * balance by more than energy_tol times
                                                          * the kinetic energy at its ends: a
-                                                         * spurious root of a step too long for
-                                                         * the motion */
+                                                         * spurious root of a step too long for the
+                                                         * motion */
 
 /* Values of the option reuse_jacobian. */
 #define THREE_LINK_GRAVITY_MIDPOINT_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
@@ -226,21 +228,23 @@ void three_link_gravity_midpoint_workspace_init(three_link_gravity_midpoint_work
 THREE_LINK_GRAVITY_MIDPOINT_API
 void three_link_gravity_midpoint_default_options(three_link_gravity_midpoint_options *options);
 
-/* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s). */
+/* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s), all
+ * finite (THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT otherwise). */
 THREE_LINK_GRAVITY_MIDPOINT_API
 int three_link_gravity_midpoint_initial_state(const double *phi, const double *phidot, double *x,
                                               three_link_gravity_midpoint_workspace *workspace);
 
 /* Joint space and diagnostics of a state: phi[N_JOINTS] wrapped to (-pi, pi], omega[N_JOINTS],
  * energy H = T + V, and the largest structural error of the state's coordinates. Any output
- * pointer may be NULL. */
+ * pointer may be NULL. A state x with a NaN or Inf: THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT. */
 THREE_LINK_GRAVITY_MIDPOINT_API
 int three_link_gravity_midpoint_outputs(const double *x, double *phi, double *omega, double *energy,
                                         double *constraint_error,
                                         three_link_gravity_midpoint_workspace *workspace);
 
 /* Residual F(z; x0, dt)[NZ] of one step, and with it the Jacobian dF/dz[NZ*NZ]
- * (jacobian[i + j*NZ] = dF_i/dz_j). For verification; step() calls them itself. */
+ * (jacobian[i + j*NZ] = dF_i/dz_j). For verification; step() calls them itself. dt must be finite
+ * and > 0 (THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT otherwise). */
 THREE_LINK_GRAVITY_MIDPOINT_API
 int three_link_gravity_midpoint_residual(const double *z, const double *x0, double dt,
                                          double *residual,
@@ -270,7 +274,10 @@ int three_link_gravity_midpoint_step_sensitivities(const double *x0, double dt, 
                                                    three_link_gravity_midpoint_workspace *workspace,
                                                    int *iterations);
 
-/* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1. */
+/* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1;
+ * 0 when n_steps < 0 or every < 1; -1 when the rows would not fit in memory (rows * NSAMPLE
+ * beyond LONG_MAX, or their bytes beyond SIZE_MAX), which simulate refuses with
+ * THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT. */
 THREE_LINK_GRAVITY_MIDPOINT_API
 long three_link_gravity_midpoint_sample_count(long n_steps, long every);
 

@@ -69,9 +69,12 @@ extern "C" {
 #define THREE_LINK_GRAVITY_VI_SINGULAR_JACOBIAN 2 /* Newton: no usable pivot in the LU
                                                    * factorisation */
 #define THREE_LINK_GRAVITY_VI_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
-#define THREE_LINK_GRAVITY_VI_BAD_ARGUMENT 4      /* a null pointer, dt <= 0, n_steps < 0, every
-                                                   * < 1, interval < 1, an unknown reuse_jacobian
-                                                   * or a bad rtol, atol or energy_tol */
+#define THREE_LINK_GRAVITY_VI_BAD_ARGUMENT 4      /* a null pointer, dt <= 0 or not finite, a NaN
+                                                   * or Inf in a state or posture, n_steps < 0,
+                                                   * every < 1, interval < 1, hold < 1, more
+                                                   * sample rows than memory can address, an
+                                                   * unknown reuse_jacobian or a bad rtol, atol
+                                                   * or energy_tol */
 #define THREE_LINK_GRAVITY_VI_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define THREE_LINK_GRAVITY_VI_INTERRUPTED 7       /* simulate_observed or simulate_controlled:
                                                    * the observer, the controller or
@@ -225,21 +228,23 @@ void three_link_gravity_vi_workspace_init(three_link_gravity_vi_workspace *works
 THREE_LINK_GRAVITY_VI_API
 void three_link_gravity_vi_default_options(three_link_gravity_vi_options *options);
 
-/* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s). */
+/* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s), all
+ * finite (THREE_LINK_GRAVITY_VI_BAD_ARGUMENT otherwise). */
 THREE_LINK_GRAVITY_VI_API
 int three_link_gravity_vi_initial_state(const double *phi, const double *phidot, double *x,
                                         three_link_gravity_vi_workspace *workspace);
 
 /* Joint space and diagnostics of a state: phi[N_JOINTS] wrapped to (-pi, pi], omega[N_JOINTS],
  * energy H = T + V, and the largest structural error of the state's coordinates. Any output
- * pointer may be NULL. */
+ * pointer may be NULL. A state x with a NaN or Inf: THREE_LINK_GRAVITY_VI_BAD_ARGUMENT. */
 THREE_LINK_GRAVITY_VI_API
 int three_link_gravity_vi_outputs(const double *x, double *phi, double *omega, double *energy,
                                   double *constraint_error,
                                   three_link_gravity_vi_workspace *workspace);
 
 /* Residual F(z; x0, dt)[NZ] of one step, and with it the Jacobian dF/dz[NZ*NZ]
- * (jacobian[i + j*NZ] = dF_i/dz_j). For verification; step() calls them itself. */
+ * (jacobian[i + j*NZ] = dF_i/dz_j). For verification; step() calls them itself. dt must be finite
+ * and > 0 (THREE_LINK_GRAVITY_VI_BAD_ARGUMENT otherwise). */
 THREE_LINK_GRAVITY_VI_API
 int three_link_gravity_vi_residual(const double *z, const double *x0, double dt, double *residual,
                                    three_link_gravity_vi_workspace *workspace);
@@ -266,7 +271,10 @@ int three_link_gravity_vi_step_sensitivities(const double *x0, double dt, double
                                              three_link_gravity_vi_workspace *workspace,
                                              int *iterations);
 
-/* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1. */
+/* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1;
+ * 0 when n_steps < 0 or every < 1; -1 when the rows would not fit in memory (rows * NSAMPLE
+ * beyond LONG_MAX, or their bytes beyond SIZE_MAX), which simulate refuses with
+ * THREE_LINK_GRAVITY_VI_BAD_ARGUMENT. */
 THREE_LINK_GRAVITY_VI_API
 long three_link_gravity_vi_sample_count(long n_steps, long every);
 
