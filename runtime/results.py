@@ -32,8 +32,9 @@ class SimulationResult:
     smallest_dt: float = 0.0
     largest_dt: float = 0.0
     adaptive: bool = False
-    #: The inputs of the actuated joints, row k held over step k (n_steps, nu): those given, or
-    #: those a controller chose; None for a scene without actuation.
+    #: The inputs of the actuated joints at the sampled steps, row j held over step j * every
+    #: (ceil(n_steps / every) rows, nu): those given, or those a controller chose (with every = 1,
+    #: every step's); None for a scene without actuation.
     torques: np.ndarray | None = field(default=None, repr=False)
     actuated_joints: tuple[int, ...] = ()
 
@@ -98,11 +99,9 @@ class SimulationResult:
         sample j (NaN on the last row of a run whose end is a sample: no step starts there)."""
         if self.torques is None:
             return None
-        rows = len(self.samples)
-        sampled = np.full((rows, self.torques.shape[1]), np.nan)
-        starts = np.arange(rows) * self.every
-        inside = starts < len(self.torques)
-        sampled[inside] = self.torques[starts[inside]]
+        sampled = np.full((len(self.samples), self.torques.shape[1]), np.nan)
+        rows = min(len(self.samples), len(self.torques))
+        sampled[:rows] = self.torques[:rows]      # row j: the step j * every, sample j's
         return sampled
 
     def to_dataframe(self):

@@ -366,14 +366,17 @@ class Solver:
         """Run n_steps steps from joint space (phi0, omega0) in one C call.
 
         torques: (n_steps, nu) inputs of the actuated joints, row k held over step k (zero if
-        None). controller (actuated scenes, instead of torques): closes the loop inside the C
-        run, called before every `hold`-th step with the state there. Either a Python callable
-        controller(t, phi, omega) -> the nu torques (phi, omega: copies, as in a sample row),
-        or a C function of the package's <prefix>_controller type (a ctypes function pointer
-        or its address, with `controller_context` its context pointer, an int or None), which
-        costs a function call a step (the header documents it). An exception raised by a
-        Python controller stops the run and propagates. result.torques records the inputs of
-        every step, given or chosen.
+        None, without allocating them). controller (actuated scenes, instead of torques):
+        closes the loop inside the C run, called before every `hold`-th step with the state
+        there. Either a Python callable controller(t, phi, omega) -> the nu torques (phi,
+        omega: copies, as in a sample row), or a C function of the package's
+        <prefix>_controller type (a ctypes function pointer or its address, with
+        `controller_context` its context pointer, an int or None), which costs a function
+        call a step (the header documents it). An exception raised by a
+        Python controller stops the run and propagates. result.torques: the inputs at the
+        sampled steps, given or chosen, row j held over step j * every (ceil(n_steps / every)
+        rows; with every = 1 every step's, and simulate(..., torques=result.torques) replays
+        the run bit for bit).
         progress: called as progress(steps_done) about 20 times a second during the run
         and once at its end (the run's samples do not depend on it). Ctrl-C, or an exception
         raised by progress, stops the run within a step and propagates (KeyboardInterrupt, or
@@ -390,7 +393,8 @@ class Solver:
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
                              f"{n_steps}, {every}")
-        held = n_steps if self.nu and (controller is not None or torques is None) else 0
+        sampled = -(-n_steps // every)      # the steps 0, every, 2 every, ... before n_steps
+        held = sampled if self.nu and (controller is not None or torques is None) else 0
         needed = 8 * ((n_steps // every + 1) * self.nsample + held * self.nu)
         if needed > MAX_SAMPLE_BYTES:
             raise ValueError(f"simulate: {n_steps} steps sampled every {every} would hold "
@@ -406,15 +410,16 @@ class Solver:
             if not (isinstance(hold, int) and 1 <= hold < 2 ** 63):
                 raise ValueError(f"hold must be an integer >= 1 (steps per controller call), "
                                  f"got {hold!r}")
-            recorded = np.zeros((n_steps, self.nu))
+            recorded = np.zeros((sampled, self.nu))     # C writes the sampled steps' inputs
             address, callback = controller_address(controller, self.n, self.nu, errors)
+        elif self.nu and torques is None:      # u = NULL: zero torques, none held per step
+            recorded = np.zeros((sampled, self.nu))
         elif self.nu:
-            recorded = (np.zeros((n_steps, self.nu)) if torques is None
-                        else np.ascontiguousarray(torques, dtype=np.float64))
-            if recorded.shape != (n_steps, self.nu):
+            given = np.ascontiguousarray(torques, dtype=np.float64)
+            if given.shape != (n_steps, self.nu):
                 raise ValueError(f"torques must have shape ({n_steps}, {self.nu}) (steps, "
-                                 f"actuated joints), got {recorded.shape}")
-            inputs = _pointer(recorded)
+                                 f"actuated joints), got {given.shape}")
+            inputs, recorded = _pointer(given), given[::every]
         elif torques is not None:
             raise ValueError(f"{self.prefix} has no actuated joints; torques must be None")
         self._p(parameters)    # checks them
@@ -465,7 +470,7 @@ class Solver:
             accepted_steps=int(stats.accepted_steps), rejected_steps=int(stats.rejected_steps),
             smallest_dt=float(stats.smallest_dt), largest_dt=float(stats.largest_dt),
             adaptive=bool(c_options.rtol > 0 or c_options.atol > 0),
-            torques=None if recorded is None else recorded[:int(stats.steps)],
+            torques=None if recorded is None else recorded[:-(-int(stats.steps) // every)],
             actuated_joints=self.actuated_joints)
         if errors:
             raise errors[0]

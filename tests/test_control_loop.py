@@ -252,7 +252,7 @@ def test_results_as_dataframe_and_xarray(actuated):
     frame = result.to_dataframe()
     assert list(frame.index) == pytest.approx([0.0, 0.05, 0.1, 0.15, 0.2])
     assert {"phi1", "omega3", "energy", "u1", "u3"} <= set(frame.columns)
-    np.testing.assert_array_equal(frame["u2"].to_numpy()[:4], result.torques[::5, 1])
+    np.testing.assert_array_equal(frame["u2"].to_numpy()[:4], result.torques[:, 1])
     assert np.isnan(frame["u2"].to_numpy()[4])        # no step starts at the last sample
     assert frame.attrs["method"] == solver.manifest["method"]
     dataset = result.to_xarray()
