@@ -635,7 +635,7 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
 {
     double *rhs;
     int i, j, k, status;
-    if (!x1 || !ds_ds || !ds_du || !(dt > 0.0)) {
+    if (!x1 || !ds_ds || !ds_du || !(dt > 0.0) || !isfinite(dt)) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
     }
     status = solve_step(x0, u, dt, options, workspace, iterations);

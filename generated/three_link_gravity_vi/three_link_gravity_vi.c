@@ -590,7 +590,7 @@ int three_link_gravity_vi_step_sensitivities(const double *x0, double dt, double
 {
     double *rhs;
     int i, j, k, status;
-    if (!x1 || !ds_ds || !(dt > 0.0)) {
+    if (!x1 || !ds_ds || !(dt > 0.0) || !isfinite(dt)) {
         return THREE_LINK_GRAVITY_VI_BAD_ARGUMENT;
     }
     status = solve_step(x0, dt, options, workspace, iterations);

@@ -609,7 +609,7 @@ int three_link_mono_midpoint_step_sensitivities(const double *x0, double dt, dou
 {
     double *rhs;
     int i, j, k, status;
-    if (!x1 || !ds_ds || !(dt > 0.0)) {
+    if (!x1 || !ds_ds || !(dt > 0.0) || !isfinite(dt)) {
         return THREE_LINK_MONO_MIDPOINT_BAD_ARGUMENT;
     }
     status = solve_step(x0, dt, options, workspace, iterations);

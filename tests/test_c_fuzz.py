@@ -1,0 +1,92 @@
+"""A fuzz test of a generated package's C entry points under the sanitizers.
+
+A package with every feature (inputs, energy flows, springs, step sensitivities, the energy
+check, a composed step of order 4, run-time parameters) is built with
+-fsanitize=address,undefined, and tests/c_driver.py's driver calls every entry point with numbers
+hypothesis draws: NaN, Inf, zero and negative dt, parameters the scene format refuses, step
+counts and strides up to LONG_MAX, holds below 1. Each status must be the one c_driver.expected
+gives (a refusal where the numbers are bad, any status where they are good), simulate's u NULL
+must be zero torques, simulate_controlled's torques must fill exactly the rows the header gives,
+and the sanitizers must report nothing (-fno-sanitize-recover: a report ends the driver).
+
+The default run draws FUZZ_EXAMPLES batches of up to BATCH cases.
+"""
+from __future__ import annotations
+
+import math
+
+import pytest
+from c_driver import LONG_MAX, Case, build_driver, generate, mismatches, run_driver
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
+
+from helpers import require_tools
+
+pytestmark = pytest.mark.tools
+
+SANITIZE = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer",
+            "-fno-sanitize-recover=all", "-g", "-O1"]
+PARAMETERS = ("links[0].mass", "links[1].inertia", "links[3].length", "links[2].com",
+              "springs[0].stiffness", "springs[1].rest_length", "gravity", "links[2].damping",
+              "base.fastening")
+FUZZ_EXAMPLES = 100
+BATCH = 25
+LONG_MIN = -LONG_MAX - 1
+
+HOSTILE = [math.nan, math.inf, -math.inf, 0.0, -0.0, -1.0, 5e-324, -5e-324, 1e300, -1e300]
+hostile = st.sampled_from(HOSTILE)
+huge = st.one_of(st.integers(LONG_MIN, LONG_MAX),
+                 st.sampled_from([LONG_MAX, LONG_MIN, LONG_MAX - 1, 0, -1, 1, 2, 3]))
+
+
+@pytest.fixture(scope="module")
+def package(tmp_path_factory):
+    require_tools("gcc")
+    directory = tmp_path_factory.mktemp("fuzz") / "package"
+    generate(directory, "four_link_actuated", "midpoint", 4, PARAMETERS)
+    return build_driver(directory, SANITIZE)
+
+
+@st.composite
+def cases(draw, defaults: tuple) -> Case:
+    stop = draw(st.booleans())
+    return Case(
+        dt=draw(st.one_of(hostile, st.floats(1e-4, 0.05))),
+        t0=draw(st.one_of(st.just(0.0), hostile, st.floats(-1e3, 1e3))),
+        n_steps=draw(huge if stop else st.integers(-3, 24)),
+        every=draw(huge if stop else st.one_of(st.integers(-2, 30), huge)),
+        hold=draw(st.one_of(st.integers(-2, 30), huge)),
+        stop=stop,
+        poison=draw(st.one_of(st.just(0.0), hostile)),
+        phi=tuple(draw(st.one_of(st.floats(-3.5, 3.5), hostile)) for _ in range(4)),
+        u=tuple(draw(st.one_of(st.floats(-50.0, 50.0), hostile)) for _ in range(4)),
+        p=tuple(draw(st.one_of(st.just(value), st.just(value), hostile,
+                               st.floats(-1e3, 1e3)))
+                for value in defaults),
+    )
+
+
+def test_every_entry_point_under_the_sanitizers(package):
+    defaults = tuple(package.defaults)
+    nan, inf = math.nan, math.inf
+    corners = [  # the issue's cases, always run
+        Case(0.01, 0.0, LONG_MAX, 1, 1, True, 0.0, (0.3, 0.2, 0.1, 0.0), (0.0,) * 4, defaults),
+        Case(0.0, 0.0, 10, 3, 2, False, 0.0, (0.3, 0.2, 0.1, 0.0), (0.0,) * 4, defaults),
+        Case(-0.01, 0.0, 10, 3, 2, False, nan, (nan,) * 4, (inf,) * 4, defaults),
+        Case(nan, nan, LONG_MIN, LONG_MIN, LONG_MIN, True, inf, (0.0,) * 4, (0.0,) * 4,
+             (0.0,) * len(defaults)),
+        Case(0.01, 0.0, 20, 3, 2, False, 0.0, (0.3, 0.2, 0.1, 0.0), (1.0, -1.0, 0.5, 0.0),
+             defaults),
+    ]
+
+    @settings(max_examples=FUZZ_EXAMPLES, deadline=None,
+              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+    @given(st.lists(cases(defaults), min_size=1, max_size=BATCH))
+    @example(corners)
+    def check(batch):
+        results, process = run_driver(package, batch)
+        assert process.returncode == 0 and "runtime error" not in process.stderr \
+            and "Sanitizer" not in process.stderr, process.stderr[-4000:]
+        assert mismatches(package, batch, results) == []
+
+    check()
