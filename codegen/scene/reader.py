@@ -16,13 +16,8 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from ..errors import SceneError
-from ..runtime.contract import (
-    ADAPTIVE_TOLERANCE_RULE,
-    ADAPTIVE_TOLERANCES,
-    MAX_SCENE_NAME_LENGTH,
-    NUMBER_BOUNDS,
-    is_adaptive_tolerance,
-)
+from ..runtime import contract
+from ..runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from . import kinematics
 from .values import METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
 
@@ -195,9 +190,9 @@ class SceneReader:
         return result
 
     def bounded(self, path: str, value: Any, meaning: str) -> float:
-        """A number within the lower bound of its key (NUMBER_BOUNDS: stated once, for C too)."""
+        """A number within its key's lower bound (contract.NUMBER_BOUNDS, C's too)."""
         result = self.number(path, value, meaning)
-        bound = NUMBER_BOUNDS[path.rsplit(".", 1)[-1]]
+        bound = contract.NUMBER_BOUNDS[path.rsplit(".", 1)[-1]]
         if not bound.admits(result):
             self.fail(path, f"must be {bound.rule} ({meaning})", result)
         return result
@@ -229,22 +224,23 @@ class SceneReader:
         if not NAME_PATTERN.fullmatch(value):
             self.fail("name", "must start with a letter and contain only letters, digits, "
                               "'_' and '-' (it prefixes generated C names)", value)
-        if len(value) > MAX_SCENE_NAME_LENGTH:
-            self.fail("name", f"must be at most {MAX_SCENE_NAME_LENGTH} characters long (it "
-                              f"prefixes generated C and file names), not {len(value)}")
+        longest = contract.MAX_SCENE_NAME_LENGTH
+        if len(value) > longest:
+            self.fail("name", f"must be at most {longest} characters long (it prefixes "
+                              f"generated C and file names), not {len(value)}")
         return value
 
     def default_scene_name(self) -> str:
         name = self.default_name
-        if NAME_PATTERN.fullmatch(name) and len(name) <= MAX_SCENE_NAME_LENGTH:
+        if NAME_PATTERN.fullmatch(name) and len(name) <= contract.MAX_SCENE_NAME_LENGTH:
             return name
         suggestion = re.sub(r"[^A-Za-z0-9_-]", "_", name)
         if not suggestion[:1].isalpha():
             suggestion = "scene_" + suggestion
-        suggestion = suggestion[:MAX_SCENE_NAME_LENGTH]
+        suggestion = suggestion[:contract.MAX_SCENE_NAME_LENGTH]
         self.fail("name", "not set, and the default (the file's stem) is not a valid scene name "
                           "(a letter, then letters, digits, '_' or '-', at most "
-                          f"{MAX_SCENE_NAME_LENGTH} in all); set it in the file, "
+                          f"{contract.MAX_SCENE_NAME_LENGTH} in all); set it in the file, "
                           f"e.g. name = {json.dumps(suggestion)}", name)
 
     # -- sections -------------------------------------------------------------------------
