@@ -3,7 +3,10 @@
 It needs neither SymPy nor CasADi, and imports nothing of the rest of chaingen: a generated
 package directory is all it reads. `contract` states the C interface once; `interface` makes
 ctypes of it; `build` compiles a package into the cache; `solver` loads and drives it;
-`trajectory` writes and reads trajectory files; `files` writes all or nothing.
+`workspaces` gives each running call a C workspace of its own; `runs` watches a running
+simulate (progress, Ctrl-C, StopSignal); `stepper` steps a control loop; `keypaths` spells
+each key path of a scene's numbers one way; `trajectory` writes and reads trajectory files;
+`files` writes all or nothing.
 """
 from .build import build_shared_library, cache_directory
 from .contract import JACOBIAN_ACROSS_STEPS, JACOBIAN_EVERY_ITERATE, JACOBIAN_PER_STEP
