@@ -8,6 +8,13 @@ from pathlib import Path
 
 from .runtime import contract
 from .scene import METHODS, ORDERS
+from .scene.values import GALERKIN_ORDER
+from .symbolic.composition import GALERKIN_MIN_QUADRATURE
+
+#: The orders of the step each method takes (chaingen.symbolic.composition), said once.
+ORDERS_TAKEN = (f"every method: {', '.join(map(str, ORDERS[:-1]))} and {ORDERS[-1]}; es at "
+                f"{GALERKIN_ORDER} composes its k = 1 Galerkin step and needs K >= "
+                f"{GALERKIN_MIN_QUADRATURE}")
 
 
 def positive_int(text: str, bits: int = 64) -> int:
@@ -46,7 +53,8 @@ def add_scheme_options(parser: argparse.ArgumentParser,
                              "(default: the scene's)")
     parser.add_argument("--order", type=int, choices=ORDERS,
                         help="order of the step: 2 (the scheme's), 4 or 6 (a symmetric "
-                             f"composition of its steps; es: 4 at most) (default: {order_default})")
+                             f"composition of its steps; {ORDERS_TAKEN}) (default: "
+                             f"{order_default})")
 
 
 def paths(text: str) -> tuple[str, ...]:
@@ -59,10 +67,13 @@ def add_parameters_option(parser: argparse.ArgumentParser) -> None:
                              "(e.g. springs[0].stiffness,links[1].mass), or all of them: all")
 
 
-def add_newton_options(parser: argparse.ArgumentParser) -> None:
-    """The Newton options of the contract, each overriding the package's default."""
+def add_newton_options(parser: argparse.ArgumentParser, *, adaptive: bool = True) -> None:
+    """The Newton options of the contract, each overriding the package's default; without
+    the adaptive tolerances for a command whose steps are fixed (adaptive=False)."""
     group = parser.add_argument_group("Newton options (default: the package's)")
     for field in contract.NEWTON_OPTIONS:
+        if not adaptive and field.name in contract.ADAPTIVE_TOLERANCES:
+            continue
         flag = "--" + field.name.replace("_", "-")
         if field.name == "reuse_jacobian":
             group.add_argument(flag, choices=JACOBIAN_CHOICES, metavar="MODE",
@@ -114,6 +125,17 @@ def newton_overrides(args) -> dict:
             value = value == "on"
         overrides[field.name] = value
     return overrides
+
+
+def seed(text: str) -> int:
+    """A random seed: an integer from 0 to 2^64 - 1 (numpy's generators take no other)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+    if not 0 <= value < 2 ** 64:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 2^64 - 1, got {value}")
+    return value
 
 
 def dimension(text: str) -> int:

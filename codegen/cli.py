@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .arguments import (
+    ORDERS_TAKEN,
     add_newton_options,
     add_parameters_option,
     add_scheme_options,
@@ -16,10 +17,12 @@ from .arguments import (
     newton_overrides,
     number,
     positive_int,
+    seed,
 )
 from .errors import ChaingenError, NewtonError, SettingsError, UnsupportedSceneError
-from .runtime.files import check_output_file
+from .runtime.files import check_output_directory, check_output_file, reported_write
 from .scene import load_scene
+from .scene.shipped import scene_file
 from .version import VERSION
 
 EXIT_BAD_INPUT = 2
@@ -128,16 +131,18 @@ def parser() -> argparse.ArgumentParser:
     add_parameters_option(check)
     check.add_argument("--samples", type=positive_int, default=5, metavar="N",
                        help="random states to check at (default 5)")
-    check.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    check.add_argument("--seed", type=seed, default=0,
+                       help="random seed, 0 to 2^64 - 1 (default 0)")
     check.add_argument("--dt", type=number, help="step in s (default: the scene's)")
 
     order = command(
         "order", help="time-step study: energy, angle and rate error per dt, fitted orders",
-        description="The time-step study (docs/model.md, section 8) of every order option the "
-                    "method takes (es: 2 and 4; vi, midpoint: 2, 4 and 6), each on its own step "
-                    "sizes, then a summary of the fitted orders; with --order N only order N.")
+        description="The time-step study (docs/model.md, section 8) of every order of the step "
+                    f"({ORDERS_TAKEN}), each on its own step sizes, then a summary of the fitted "
+                    "orders; with --order N only order N. Its steps are fixed: it takes no "
+                    "adaptive tolerances.")
     add_scheme_options(order, order_default="every order the method takes")
-    add_newton_options(order)
+    add_newton_options(order, adaptive=False)
     order.add_argument("--t-end", type=number, default=10.0,
                        help="duration of each run in s (default 10)")
     order.add_argument("--plot", type=Path, metavar="FILE.png",
@@ -180,6 +185,7 @@ def command_generate(args) -> int:
     )
 
     target = args.output or Path(package_prefix(scene, settings.method))
+    check_output_directory(target, "-o", [args.scene])
     check_package_target(target)
     package = generate_package(scene, settings.method, settings.quadrature,
                                sensitivities=args.sensitivities, parameters=args.parameters,
@@ -205,7 +211,8 @@ def command_export(args) -> int:
         text = mjcf_from_scene(scene, dt=dt, integrator=args.integrator, export=True)
     except ValueError as error:               # what MuJoCo cannot represent (J = 0)
         raise SettingsError(f"{args.scene}: {error}") from None
-    write_text(args.mjcf, text)
+    with reported_write(args.mjcf, "the MJCF"):
+        write_text(args.mjcf, text)
     motors = f", motors on joints {list(scene.actuated_joints)}" if scene.actuated_joints else ""
     print(f"wrote {args.mjcf}: {scene.n} links, {len(scene.springs)} spring tendons{motors}, "
           f"dt {dt:g} s, {args.integrator}")
@@ -242,9 +249,6 @@ def command_order(args) -> int:
     if args.plot is not None:
         check_output_file(args.plot, "--plot", [args.scene])
     overrides = newton_overrides(args)
-    if overrides.get("rtol") or overrides.get("atol"):
-        raise SettingsError("--rtol/--atol: chaingen order fits the error of fixed steps; "
-                            "leave out the adaptive tolerances")
     orders = (args.order,) if args.order is not None else allowed_orders(settings.method)
     studies = order_studies(scene, settings.method, settings.quadrature, orders=orders,
                             t_end=settings.t_end, overrides=overrides)
@@ -278,24 +282,30 @@ def command_simulate(args) -> int:
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                             dt=args.dt, t_end=args.t_end, every=args.every, order=args.order,
                             rtol=args.rtol, atol=args.atol, source=str(args.scene))
+    figure = None
+    if args.plot is not None:   # before anything is written: the figure needs matplotlib
+        from .views.figure import require_matplotlib
+        require_matplotlib("simulate --plot")
     if args.out is not None:
         check_output_file(args.out, "--out", [args.scene])
         check_output_file(metadata_path(args.out), "--out", [args.scene])
-    figure = None
     if args.plot is not None:
         from .views.plots import check_png_path
         figure = check_png_path(Path(args.plot) if args.plot else (
             args.out.with_suffix(".png") if args.out is not None
             else Path(f"{args.scene.stem}_{settings.method}.png")), "--plot")
-        check_output_file(figure, "--plot", [args.scene] + ([args.out] if args.out else []))
+        check_output_file(figure, "--plot", [args.scene] + (
+            [args.out, metadata_path(args.out)] if args.out else []))
+    options = newton_overrides(args)
     try:
-        result = simulate_scene(scene, settings, options=newton_overrides(args))
+        result = simulate_scene(scene, settings, options=options)
     except NewtonError as error:
         print(f"chaingen: error: simulation of {args.scene} failed: {error}; no trajectory "
               "written", file=sys.stderr)
         return EXIT_FAILED
     if args.out is not None:
-        write_trajectory(result, args.out)
+        with reported_write(args.out, "the trajectory"):
+            write_trajectory(result, args.out)
     print(summary(result, settings, args.out))
     if figure is not None:
         from .views.plots import plot_result
@@ -355,8 +365,9 @@ def command_animate(args) -> int:
 
     scene = load_scene(args.scene)
     check_fps(args.fps)
-    check_output_file(args.output, "-o", [args.scene] + ([args.trajectory]
-                                                         if args.trajectory else []))
+    from .runtime.trajectory import metadata_path
+    check_output_file(args.output, "-o", [args.scene] + (
+        [args.trajectory, metadata_path(args.trajectory)] if args.trajectory else []))
     if args.t_end is not None and not (np.isfinite(args.t_end) and args.t_end > 0):
         raise ChaingenError(f"--t-end: must be > 0 and finite, got {args.t_end}")
     if args.trajectory is not None:
@@ -432,6 +443,8 @@ def main(argv: list[str] | None = None) -> int:
     (bad input) or 1 (a run that failed); Ctrl-C exits with 130; an unexpected error is one
     line too, with the way to its traceback (--debug or CHAINGEN_DEBUG=1 shows it)."""
     args = parser().parse_args(argv)
+    if getattr(args, "scene", None) is not None:
+        args.scene = scene_file(args.scene)    # a shipped scene's name: its installed file
     from .progress import set_quiet
     set_quiet(args.quiet)
     debug = args.debug or os.environ.get("CHAINGEN_DEBUG", "") not in ("", "0")

@@ -11,16 +11,26 @@ no-op, so the work's output (tables, files) is the same whether or not anyone wa
 
     with Progress("generate", total=5) as progress:
         progress.stage("deriving the model")   # one step of a staged job
+        with progress.phase("compiling"):      # work that reports nothing until it ends
+            compile()
+
+During a phase the bar shows the phase and its running time, redrawn by a thread of its own,
+and no time left (the phase's end says nothing about the rest of the work).
 """
 from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TextIO
 
 #: Seconds between redraws: a bar costs nothing measurable at this rate.
 REDRAW_SECONDS = 0.1
+#: Seconds between redraws of a phase (work that reports nothing until it ends).
+PHASE_REDRAW_SECONDS = 0.5
 BAR_WIDTH = 28
 
 _quiet = False
@@ -75,6 +85,8 @@ class Progress:
         self.started = time.monotonic()
         self._drawn_at = -1.0
         self._width = 0
+        self._phase_started: float | None = None   # a phase runs (no time left is shown)
+        self._lock = threading.Lock()
 
     # -- the work reports -------------------------------------------------------------------
 
@@ -97,6 +109,30 @@ class Progress:
         if self.enabled:
             self._draw(time.monotonic())
 
+    @contextmanager
+    def phase(self, note: str) -> Iterator[None]:
+        """Work that reports nothing until it ends (a C compile): the bar names it with its
+        running time, redrawn twice a second, and shows no time left until the block ends."""
+        self.note = note
+        self._phase_started = time.monotonic()
+        stop = threading.Event()
+        ticker = None
+        if self.enabled:
+            self._draw(time.monotonic())
+
+            def tick() -> None:
+                while not stop.wait(PHASE_REDRAW_SECONDS):
+                    self._draw(time.monotonic())
+            ticker = threading.Thread(target=tick, name=f"progress: {note}", daemon=True)
+            ticker.start()
+        try:
+            yield
+        finally:
+            stop.set()
+            if ticker is not None:
+                ticker.join()
+            self._phase_started = None
+
     # -- drawing ----------------------------------------------------------------------------
 
     def line(self, now: float | None = None) -> str:
@@ -110,6 +146,8 @@ class Progress:
             text += f"  {_duration(elapsed)}"
         else:   # open-ended work: what it is doing and for how long
             text = f"{self.label} [{_duration(elapsed)}]"
+        if self._phase_started is not None:      # a phase: its own time, no time left
+            return text + f"  {self.note} ({_duration(now - self._phase_started)})"
         if 0 < self.done < self.total:
             text += f", {_duration(elapsed * (self.total - self.done) / self.done)} left"
         if self.note:
@@ -117,19 +155,21 @@ class Progress:
         return text
 
     def _draw(self, now: float) -> None:
-        text = self.line(now)
-        padding = " " * max(0, self._width - len(text))
-        self.stream.write("\r" + text + padding)
-        self.stream.flush()
-        self._width = len(text)
-        self._drawn_at = now
+        with self._lock:      # a phase's thread and the work may both draw
+            text = self.line(now)
+            padding = " " * max(0, self._width - len(text))
+            self.stream.write("\r" + text + padding)
+            self.stream.flush()
+            self._width = len(text)
+            self._drawn_at = now
 
     def close(self) -> None:
         """Erase the bar: what stays on the terminal is the work's own output."""
-        if self.enabled and self._width:
-            self.stream.write("\r" + " " * self._width + "\r")
-            self.stream.flush()
-            self._width = 0
+        with self._lock:
+            if self.enabled and self._width:
+                self.stream.write("\r" + " " * self._width + "\r")
+                self.stream.flush()
+                self._width = 0
 
     def __enter__(self) -> Progress:
         if self.enabled:

@@ -140,8 +140,9 @@ def build_solver(scene: Scene, method: str | None = None, quadrature: int | None
                   unit="stages") as progress:
         package = generate_package(scene, method, quadrature, sensitivities=sensitivities,
                                    parameters=parameters, order=order, progress=progress)
-        progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
-        solver = Solver.from_files(package.files)
+        progress.update(GENERATE_STAGES)
+        with progress.phase("compiling (or loading the cached build)"):
+            solver = Solver.from_files(package.files)
     with contextlib.suppress(OSError):      # an index that cannot be written only costs time
         remember(key, BuiltLibrary(solver.library_path, solver.build_hash), solver.manifest)
     return solver

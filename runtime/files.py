@@ -17,7 +17,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from .errors import ChaingenError
+from .errors import ChaingenError, RunFailedError
 
 
 def current_umask() -> int:
@@ -133,15 +133,22 @@ def _replace_directory(target: Path, parent: Path, files: dict[str, str]) -> Pat
 
 def check_output_file(path: str | os.PathLike, option: str, inputs=()) -> Path:
     """An output file a command may write, checked before any work is done; ChaingenError
-    (exit status 2) naming the option and saying why not.
+    (exit status 2) naming the option and saying why not. Every output file of every command
+    goes through this check (the README's list of what the commands refuse).
 
-    Refused: a directory; a missing or unwritable parent directory; an existing node that is
-    not a regular file (a device, a FIFO, a socket: replacing it would be wrong, writing to it
-    is not a file); and any of `inputs` (the same file, by inode too: a hard link or another
-    spelling of its path), which would be overwritten.
+    Refused: a symbolic link (the write would replace the link, not what it points to); a
+    directory; a missing or unwritable parent directory; an existing node that is not a regular
+    file (a device, a FIFO, a socket: replacing it would be wrong, writing to it is not a
+    file); any of `inputs` (the same file, by inode too: a hard link or another spelling of
+    its path) and any path inside an input that is a directory, which would be overwritten.
+    An existing regular file that is none of these is replaced whole: the new file is staged
+    beside it and renamed over it (staged_file), never written into.
     """
     path = Path(path)
     parent = path.parent if str(path.parent) else Path(".")
+    if path.is_symlink():
+        raise ChaingenError(f"{option}: {path} is a symbolic link; writing would replace the "
+                            "link, not what it points to: give another file name")
     if path.is_dir():
         raise ChaingenError(f"{option}: {path} is a directory; give a file name")
     if not parent.is_dir():
@@ -153,11 +160,58 @@ def check_output_file(path: str | os.PathLike, option: str, inputs=()) -> Path:
         if not stat_module.S_ISREG(status.st_mode):
             raise ChaingenError(f"{option}: {path} exists and is not a regular file (a device, "
                                 "FIFO or socket); give a file name")
-        for source in inputs:
-            try:
-                if os.path.samefile(path, source):
-                    raise ChaingenError(f"{option}: {path} is the input {source}; writing it "
-                                        "would overwrite the input")
-            except FileNotFoundError:
-                continue
+    _refuse_inputs(path, option, inputs)
     return path
+
+
+def check_output_directory(path: str | os.PathLike, option: str, inputs=()) -> Path:
+    """An output directory a command replaces whole (a generated package), checked like
+    check_output_file: refused when it is a symbolic link, an existing node that is not a
+    directory, an input, inside an input directory, or holds an input (which replacing it
+    would delete). What else it may hold is the writer's rule (check_package_target)."""
+    path = Path(path)
+    if path.is_symlink():
+        raise ChaingenError(f"{option}: {path} is a symbolic link; replacing it would replace "
+                            "the link, not what it points to: give another directory")
+    if os.path.lexists(path) and not path.is_dir():
+        raise ChaingenError(f"{option}: {path} exists and is not a directory")
+    _refuse_inputs(path, option, inputs)
+    if path.is_dir():
+        inside = path.resolve()
+        for source in inputs:
+            source_path = Path(source).resolve()
+            if os.path.lexists(source) and inside in source_path.parents:
+                raise ChaingenError(f"{option}: {path} holds the input {source}; replacing it "
+                                    "would delete the input")
+    return path
+
+
+def _refuse_inputs(path: Path, option: str, inputs) -> None:
+    """ChaingenError when `path` is one of `inputs` or lies inside one that is a directory."""
+    resolved = path.resolve()
+    for source in inputs:
+        source = Path(source)
+        if not os.path.lexists(source):
+            continue
+        try:
+            same = os.path.lexists(path) and os.path.samefile(path, source)
+        except OSError:
+            same = False
+        if same or resolved == source.resolve():
+            raise ChaingenError(f"{option}: {path} is the input {source}; writing it would "
+                                "overwrite the input")
+        if source.is_dir() and source.resolve() in resolved.parents:
+            raise ChaingenError(f"{option}: {path} is inside the input {source}; writing there "
+                                "would change the input")
+
+
+@contextlib.contextmanager
+def reported_write(path: str | os.PathLike, what: str = "the file") -> Iterator[None]:
+    """An OSError while writing `path` (a full disk, an I/O error, a file system gone
+    read-only) as one line, RunFailedError (exit status 1): the input was good, the write
+    failed, and the staged write left nothing behind."""
+    try:
+        yield
+    except OSError as error:
+        raise RunFailedError(f"{path}: cannot write {what}: {error.strerror or error}; nothing "
+                             "written") from None

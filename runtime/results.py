@@ -32,6 +32,8 @@ class SimulationResult:
     smallest_dt: float = 0.0
     largest_dt: float = 0.0
     adaptive: bool = False
+    rtol: float = 0.0           # the adaptive tolerances the run took (0: fixed steps)
+    atol: float = 0.0
     #: The inputs of the actuated joints at the sampled steps, row j held over step j * every
     #: (ceil(n_steps / every) rows, nu): those given, or those a controller chose (with every = 1,
     #: every step's); None for a scene without actuation.

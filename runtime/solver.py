@@ -470,6 +470,7 @@ class Solver:
             accepted_steps=int(stats.accepted_steps), rejected_steps=int(stats.rejected_steps),
             smallest_dt=float(stats.smallest_dt), largest_dt=float(stats.largest_dt),
             adaptive=bool(c_options.rtol > 0 or c_options.atol > 0),
+            rtol=float(c_options.rtol), atol=float(c_options.atol),
             torques=None if recorded is None else recorded[:-(-int(stats.steps) // every)],
             actuated_joints=self.actuated_joints)
         if errors:

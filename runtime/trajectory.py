@@ -1,8 +1,9 @@
 """The trajectory file (docs/scene-format.md): a header row, then one row per sample.
 
-Beside it, FILE.csv.json records the run that wrote it (scene, method, quadrature, dt, every,
-steps): the CSV stays exactly the contract's columns, and `chaingen plot` and `animate` label
-their figures from the metadata.
+Beside it, FILE.csv.json records the run that wrote it (scene, method, quadrature, order, dt,
+every, steps, the adaptive tolerances and, for adaptive steps, their counters): the CSV stays
+exactly the contract's columns, and `chaingen plot` and `animate` label their figures from the
+metadata.
 """
 from __future__ import annotations
 
@@ -24,7 +25,8 @@ def metadata_path(path) -> Path:
 def run_metadata(result: SimulationResult) -> dict:
     metadata = {"scene": result.scene, "method": result.method, "quadrature": result.quadrature,
                 "order": result.order, "dt": result.dt, "every": result.every,
-                "n_steps": result.n_steps, "columns": list(result.columns)}
+                "n_steps": result.n_steps, "rtol": result.rtol, "atol": result.atol,
+                "columns": list(result.columns)}
     if result.adaptive:
         metadata["adaptive_steps"] = {
             "accepted": result.accepted_steps, "rejected": result.rejected_steps,

@@ -76,8 +76,9 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
     export (`chaingen export --mjcf`): also what a user of the file sees and drives: a capsule
     geom along each link (no contacts, no mass: the <inertial> stays the only mass), visible
     sites and tendons, and a motor (gear 1, no control limits) on each actuated joint, in the
-    scene's order, so that data.ctrl[j] is the torque of the j-th actuated joint. The
-    dynamics are those of the reference model.
+    scene's order, so that data.ctrl[j] is the torque of the j-th actuated joint, and a
+    keyframe "initial" (key 0) holding the scene's initial angles and velocities as qpos and
+    qvel. The dynamics are those of the reference model.
 
     Raises ValueError for a link with J_i = 0 (MuJoCo cannot represent a moving body without
     rotational inertia), for dt that is not positive and finite, and for an unknown integrator.
@@ -161,6 +162,12 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
                          f"joint={quoteattr(joint_name(j))} gear=\"1\"/>\n"
                          for j in scene.actuated_joints)
         actuator_block = f"  <actuator>\n{motors}  </actuator>\n"
+    keyframe_block = ""
+    if export:   # the scene's initial state: mj_resetDataKeyframe(model, data, 0) starts there
+        keyframe_block = (
+            f"  <keyframe>\n    <key name=\"initial\" "
+            f"qpos={quoteattr(_vector(*scene.initial_angles))} "
+            f"qvel={quoteattr(_vector(*scene.initial_velocities))}/>\n  </keyframe>\n")
     return (
         f"<mujoco model={quoteattr(scene.name)}>\n"
         f"  <compiler angle=\"radian\"/>\n"
@@ -174,5 +181,6 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
         f"  </worldbody>\n"
         f"{tendon_block}"
         f"{actuator_block}"
+        f"{keyframe_block}"
         f"</mujoco>\n"
     )

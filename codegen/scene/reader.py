@@ -19,6 +19,7 @@ from ..errors import SceneError
 from ..runtime import contract
 from ..runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from . import kinematics
+from .shipped import scene_file
 from .values import METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
 
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
@@ -40,8 +41,9 @@ _SHOW_LIMIT = 120
 
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
-    """Read and validate the scene file at `path`; its default name is the file's stem."""
-    source = os.fspath(path)
+    """Read and validate the scene file at `path` (a bare name of a shipped scene: its file,
+    scene_file); its default name is the file's stem."""
+    source = os.fspath(scene_file(path))
     try:
         data = Path(source).read_bytes()
     except OSError as error:

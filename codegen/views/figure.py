@@ -8,28 +8,37 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import ChaingenError
-from ..runtime.files import staged_file
+from ..runtime.files import reported_write, staged_file
 
-INSTALL_HINT = "pip install 'chaingen[plot]'"
+#: chaingen is installed from its source tree (it is not published on a package index).
+INSTALL_HINT = "in the chaingen source tree: pip install -e '.[plot]'"
+
+
+def require_matplotlib(what: str) -> None:
+    """ChaingenError (exit status 2) unless matplotlib imports: checked before a command
+    writes anything, so that a missing extra leaves no files behind."""
+    try:
+        import matplotlib  # noqa: F401
+        from matplotlib.backends import backend_agg  # noqa: F401
+    except ImportError:
+        raise ChaingenError(f"{what} needs matplotlib, which is not installed "
+                            f"({INSTALL_HINT})") from None
 
 
 def matplotlib_figure(size: tuple[float, float], dpi: float, what: str):
     """A matplotlib Figure on an Agg canvas; `what` names the view for the missing-dependency
     message."""
-    try:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-    except ImportError:
-        raise ChaingenError(f"{what} needs matplotlib, which is not installed "
-                            f"({INSTALL_HINT})") from None
+    require_matplotlib(what)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
     figure = Figure(figsize=size, dpi=dpi)
     FigureCanvasAgg(figure)
     return figure
 
 
 def save_png(figure, path: str | Path) -> Path:
-    """Write `figure` as PNG to `path` all or nothing."""
+    """Write `figure` as PNG to `path` all or nothing (a failed write: RunFailedError)."""
     path = Path(path)
-    with staged_file(path, suffix=".png") as temporary:
+    with reported_write(path, "the figure"), staged_file(path, suffix=".png") as temporary:
         figure.savefig(temporary, format="png")
     return path

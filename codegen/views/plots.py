@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import PlotError
 from ..runtime.files import check_output_file
 from ..runtime.trajectory import metadata_path, read_trajectory
+from ..scene import ORDERS
 from .figure import matplotlib_figure, save_png
 
 #: Figure size in inches and resolution: 1500 x 1200 pixels.
@@ -124,13 +125,12 @@ def load_run(path) -> TrajectoryRun:
         steps = np.diff(rows[:, 0])
         dt = float(np.median(steps)) if np.allclose(steps, steps[0], rtol=1e-9) else None
     quadrature = meta.get("quadrature")
-    order = meta.get("order")
     return TrajectoryRun(path=path, columns=tuple(columns), rows=rows, n=n,
                          scene=meta.get("scene"),
                          method=meta.get("method"),
                          quadrature=int(quadrature) if quadrature is not None else None,
                          dt=float(dt) if dt is not None else None,
-                         order=order if isinstance(order, int) else 2)
+                         order=meta.get("order", 2))
 
 
 def run_from_result(result, source) -> TrajectoryRun:
@@ -155,13 +155,54 @@ def check_png_path(path: Path, option: str) -> Path:
     return path
 
 
+def _is_integer(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and math.isfinite(value))
+
+
+#: The metadata keys the views read (docs/scene-format.md, section 12): (check, what it must be).
+METADATA_KEYS = {
+    "scene": (lambda v: isinstance(v, str), "a string"),
+    "method": (lambda v: isinstance(v, str), "a string"),
+    "quadrature": (lambda v: v is None or (_is_integer(v) and v >= 1), "an integer >= 1 or null"),
+    "order": (lambda v: _is_integer(v) and v in ORDERS,
+              "one of " + ", ".join(map(str, ORDERS))),
+    "dt": (lambda v: _is_number(v) and v > 0, "a number > 0"),
+    "every": (lambda v: _is_integer(v) and v >= 1, "an integer >= 1"),
+    "n_steps": (lambda v: _is_integer(v) and v >= 0, "an integer >= 0"),
+    "rtol": (lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    "atol": (lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+}
+
+
 def read_metadata(path: Path) -> dict:
-    """The metadata file beside a trajectory, or {} when there is none or it is unreadable."""
+    """The metadata file beside a trajectory, {} when there is none; PlotError naming the file
+    and the key when it is not a JSON object or a key the views read has the wrong type."""
+    meta_file = metadata_path(path)
     try:
-        meta = json.loads(metadata_path(path).read_text())
-    except (OSError, ValueError):
+        text = meta_file.read_text()
+    except FileNotFoundError:
         return {}
-    return meta if isinstance(meta, dict) else {}
+    except (OSError, UnicodeDecodeError) as error:
+        raise PlotError(f"{meta_file}: cannot read the trajectory's metadata: "
+                        f"{getattr(error, 'strerror', None) or error}") from None
+    try:
+        meta = json.loads(text)
+    except ValueError as error:
+        raise PlotError(f"{meta_file}: not JSON (scene-format.md, section 12): {error}") from None
+    if not isinstance(meta, dict):
+        raise PlotError(f"{meta_file}: must be a JSON object (scene-format.md, section 12), "
+                        f"got {type(meta).__name__}")
+    for key, (valid, wanted) in METADATA_KEYS.items():
+        if key in meta and not valid(meta[key]):
+            shown = json.dumps(meta[key])
+            shown = shown if len(shown) <= 60 else shown[:57] + "..."
+            raise PlotError(f"{meta_file}: key {key!r} must be {wanted}, got {shown}")
+    return meta
 
 
 def broken_at_wraps(angle: np.ndarray) -> np.ndarray:
@@ -218,17 +259,30 @@ def title_of(runs: list[TrajectoryRun]) -> str:
     return f"{scenes}: {len(runs)} runs compared"
 
 
+#: The line styles of the first joints in an overlay; further joints get dash patterns of their
+#: own (joint_line_style), so that no two joints of a run look alike.
+LINE_STYLES = ("-", "--", ":", "-.")
+
+
+def joint_line_style(joint: int):
+    """The line style of joint `joint` (0-based) in an overlay, different for every joint:
+    the four named styles, then dashes of 6 lengths followed by 1, 2, ... dots."""
+    if joint < len(LINE_STYLES):
+        return LINE_STYLES[joint]
+    rank, length = divmod(joint - len(LINE_STYLES), 6)
+    return (0, (2.0 + 1.5 * length, 1.5) + (1.0, 1.5) * (rank + 1))
+
+
 def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
     """Draw the figure of `runs` to the PNG file `out` (written atomically); returns it."""
     figure = matplotlib_figure(FIGURE_SIZE, DPI, "chaingen plot")
     angles, energy, constraint = figure.subplots(3, 1, sharex=True)
     single = len(runs) == 1
-    line_styles = ("-", "--", ":", "-.")
     for run, style in zip(runs, _styles(len(runs))):
         for joint in range(run.n):
             angles.plot(run.t, broken_at_wraps(run.phi[:, joint]),
                         color=f"C{joint % 10}" if single else style["color"],
-                        linestyle="-" if single else line_styles[joint % 4], linewidth=1.0,
+                        linestyle="-" if single else joint_line_style(joint), linewidth=1.0,
                         label=f"phi{joint + 1}" if single else None)
     if single:
         angles.legend(fontsize=8, loc="upper right", ncol=min(4, runs[0].n))
@@ -236,8 +290,9 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
         from matplotlib.lines import Line2D
         handles = [Line2D([], [], **style, label=run.label)
                    for run, style in zip(runs, _styles(len(runs)))]
-        handles += [Line2D([], [], color="0.3", linestyle=line_styles[joint % 4],
-                           label=f"phi{joint + 1}") for joint in range(min(4, runs[0].n))]
+        handles += [Line2D([], [], color="0.3", linestyle=joint_line_style(joint),
+                           label=f"phi{joint + 1}")
+                    for joint in range(max(run.n for run in runs))]
         angles.legend(handles=handles, fontsize=7, loc="upper right", ncol=2)
     angles.set_ylabel("joint angle phi_i [rad]")
     angles.grid(True, alpha=0.3)

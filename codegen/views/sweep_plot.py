@@ -15,10 +15,15 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PlotError
+from ..runtime.files import check_output_file
 from ..studies.sweep.runs import metric_columns
+from ..studies.sweep.store import (
+    PARTS,
+    RUNS,
+    SPEC_FILE,
+    TRAJECTORIES,
+)
 from .figure import matplotlib_figure, save_png
-
-SPEC_FILE = "sweep.json"
 
 
 def check_metric(metric: str, n: int, axes, trajectories: bool) -> None:
@@ -48,17 +53,48 @@ def _metric(out: Path, runs, name: str) -> np.ndarray:
     return runs[name].to_numpy(dtype=float)
 
 
+def sweep_inputs(out: Path, record: dict) -> list[Path]:
+    """What a figure of the sweep in `out` must not overwrite: its record, table, parts and
+    trajectories, and the spec and scene files the record names."""
+    inputs = [out / name for name in (SPEC_FILE, RUNS, PARTS, TRAJECTORIES)]
+    inputs += [Path(record[key]) for key in ("source", "scene")
+               if isinstance(record.get(key), str) and record[key]]
+    return inputs
+
+
+def figure_path(out: Path, metric: str, path: str | Path | None) -> Path:
+    """Where the figure of `metric` goes: `path` (a .png file, or else an existing directory
+    to put <metric>.png in, as `chaingen plot -o` takes them), by default OUT/<metric>.png."""
+    name = re.sub(r"[^\w.-]", "_", metric) + ".png"
+    if path is None:
+        return out / name
+    path = Path(path)
+    if path.suffix.lower() == ".png":
+        return path
+    if not path.is_dir() or path.is_symlink():
+        raise PlotError(f"-o: {path}: give a .png file name or an existing directory")
+    return path / name
+
+
 def plot_sweep(out: str | Path, metric: str, path: str | Path | None = None) -> Path:
     """Draw `metric` of the sweep in `out` against its axes; PNG at `path` (default
-    OUT/<metric>.png)."""
+    OUT/<metric>.png), checked like every output (check_output_file) before anything is
+    read."""
     import pandas as pd
 
     out = Path(out)
     record_path = out / SPEC_FILE
-    if not record_path.is_file() or not (out / "runs.parquet").is_file():
+    if not record_path.is_file() or not (out / RUNS).is_file():
         raise PlotError(f"{out}: not a completed sweep directory (no {SPEC_FILE} or "
-                        "runs.parquet)")
-    record = json.loads(record_path.read_text())
+                        f"{RUNS})")
+    try:
+        record = json.loads(record_path.read_text())
+    except (OSError, ValueError) as error:
+        raise PlotError(f"{record_path}: cannot read the sweep record: {error}") from None
+    if not isinstance(record, dict) or not isinstance(record.get("axes"), list):
+        raise PlotError(f"{record_path}: not a sweep record (no list of axes)")
+    target = check_output_file(figure_path(out, metric, path), "-o" if path is not None
+                               else "--plot", sweep_inputs(out, record))
     axes = record["axes"]
     spacing = record.get("spacing", {})
     units = record.get("units", {})
@@ -69,8 +105,6 @@ def plot_sweep(out: str | Path, metric: str, path: str | Path | None = None) -> 
     n = sum(1 for column in runs.columns if re.fullmatch(r"phi\d+", column))
     check_metric(metric, n, axes, (out / "trajectories.zarr").exists())
     values = _metric(out, runs, metric)
-    safe_name = re.sub(r"[^\w.-]", "_", metric)
-    target = Path(path) if path is not None else out / f"{safe_name}.png"
     figure = matplotlib_figure((7.5, 5.5), 120, "the sweep plot")
     axis = figure.add_subplot()
     title = f"{record.get('method', '')}: {metric} over {len(runs)} runs"

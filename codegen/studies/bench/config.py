@@ -248,6 +248,9 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
         raise BenchError(f"--figures: {figures} exists and is not a directory")
     if not figures.exists() and not figures.parent.is_dir():
         raise BenchError(f"--figures: directory {figures.parent} does not exist")
+    if figures.is_dir():   # the figures it will write, checked as every output is
+        for name in (*scenes, "scaling"):
+            check_output_file(figures / f"bench_{name}.png", "--figures", [out])
 
     command = ["chaingen", "bench"]
     command += ["--quick"] if quick else []
