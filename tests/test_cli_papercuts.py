@@ -260,3 +260,15 @@ def test_the_exported_mjcf_has_the_scene_s_initial_state_as_keyframe(tmp_path):
     np.testing.assert_array_equal(data.qpos, scene.initial_angles)
     np.testing.assert_array_equal(data.qvel, scene.initial_velocities)
     assert any(scene.initial_velocities)
+
+
+@pytest.mark.compile
+def test_an_adaptive_run_records_its_tolerances(tmp_path):
+    """simulate --rtol: the metadata holds the tolerances the C loop took, beside its counters."""
+    result = chaingen_in_process("simulate", MONO, "--rtol", "1e-6", "--atol", "1e-7",
+                                 "--t-end", "0.2", "--out", tmp_path / "run.csv", "--quiet",
+                                 cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    meta = json.loads((tmp_path / "run.csv.json").read_text())
+    assert (meta["rtol"], meta["atol"]) == (1e-6, 1e-7)
+    assert meta["adaptive_steps"]["accepted"] >= meta["n_steps"]

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import PlotError
 from ..progress import Progress
-from ..runtime.files import staged_file
+from ..runtime.files import reported_write, staged_file
 from ..scene import Scene
 from ..scene.kinematics import chain_geometry, spring_geometry
 from .figure import matplotlib_figure
@@ -245,7 +245,7 @@ def animate(scene: Scene, run: TrajectoryRun, out: Path, *, fps: float | None = 
     phis = run.phi[plan.indices]
     drawing = ChainDrawing(scene, pixels=pixels, stretch_limit=stretch_limit(scene, phis),
                            title=f"{scene.name}: {run.label}")
-    with staged_file(out, suffix=suffix) as temporary, \
+    with reported_write(out, "the animation"), staged_file(out, suffix=suffix) as temporary, \
             Progress("animate", total=len(plan.indices), unit="frames") as progress:
         frames = _frames(drawing, run, plan, progress)
         if suffix == ".gif":
