@@ -190,13 +190,29 @@ CASES = [(flag, hazard, source) for flag in FLAGS for hazard in HAZARDS
          and not (hazard == "hard link to an input" and source.startswith(IN_INPUT_DIRECTORIES))]
 
 
-@settings(max_examples=60, deadline=None, derandomize=True,
+#: Ways to spell the target's path: as is, through ./, through a directory and back, absolute.
+SPELLINGS = ("plain", "dot", "down and up", "absolute")
+
+
+def spelled(target: Path, spelling: str, work: Path) -> Path:
+    if spelling == "dot":
+        return Path(".") / target if target.parts[0] != "." else target
+    if spelling == "down and up":
+        (work / "sub").mkdir(exist_ok=True)
+        return Path("sub") / ".." / target
+    if spelling == "absolute":
+        return work / target
+    return target
+
+
+@settings(max_examples=80, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(case=st.sampled_from(CASES))
-def test_no_output_flag_overwrites_anything(no_work, case):
-    """Drawn from every flag x hazard x input (60 of the cases a run; test_every_case below
-    takes them all): exit status 2, one line, and every entry of the directory as before."""
-    check_case(*case)
+@given(case=st.sampled_from(CASES), spelling=st.sampled_from(SPELLINGS))
+def test_no_output_flag_overwrites_anything(no_work, case, spelling):
+    """Drawn from every flag x hazard x input x spelling of the path (80 of them a run;
+    test_every_case below takes every case, spelled plainly): exit status 2, one line, and
+    every entry of the directory as before."""
+    check_case(*case, spelling=spelling)
 
 
 @pytest.mark.parametrize("flag, hazard, source", CASES,
@@ -205,11 +221,11 @@ def test_every_case(no_work, flag, hazard, source):
     check_case(flag, hazard, source)
 
 
-def check_case(flag: Flag, hazard: str, source: str) -> None:
+def check_case(flag: Flag, hazard: str, source: str, spelling: str = "plain") -> None:
     with tempfile.TemporaryDirectory() as scratch:
         work = Path(scratch)
         write_inputs(work)
-        target = make_hazard(work, flag, hazard, source)
+        target = spelled(make_hazard(work, flag, hazard, source), spelling, work)
         before = snapshot(work)
         with time_limit(60):
             result = chaingen_in_process(*command_for(flag, target), "--quiet", cwd=work)
