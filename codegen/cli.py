@@ -143,6 +143,8 @@ def parser() -> argparse.ArgumentParser:
                     "adaptive tolerances.")
     add_scheme_options(order, order_default="every order the method takes")
     add_newton_options(order, adaptive=False)
+    for flag in ("--rtol", "--atol"):     # not offered; given, they get the reason below
+        order.add_argument(flag, type=number, help=argparse.SUPPRESS)
     order.add_argument("--t-end", type=number, default=10.0,
                        help="duration of each run in s (default 10)")
     order.add_argument("--plot", type=Path, metavar="FILE.png",
@@ -249,6 +251,9 @@ def command_order(args) -> int:
     if args.plot is not None:
         check_output_file(args.plot, "--plot", [args.scene])
     overrides = newton_overrides(args)
+    if args.rtol is not None or args.atol is not None:
+        raise SettingsError("--rtol/--atol: chaingen order fits the error of fixed steps; "
+                            "leave out the adaptive tolerances")
     orders = (args.order,) if args.order is not None else allowed_orders(settings.method)
     studies = order_studies(scene, settings.method, settings.quadrature, orders=orders,
                             t_end=settings.t_end, overrides=overrides)
