@@ -248,7 +248,9 @@ def command_order(args) -> int:
     # Without --order every order the method takes runs, whatever the scene's simulation.order.
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                             t_end=args.t_end, order=args.order or 2, source=str(args.scene))
-    if args.plot is not None:
+    if args.plot is not None:   # before the study: the plot needs matplotlib
+        from .views.figure import require_matplotlib
+        require_matplotlib("order --plot")
         check_output_file(args.plot, "--plot", [args.scene])
     overrides = newton_overrides(args)
     if args.rtol is not None or args.atol is not None:
