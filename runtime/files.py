@@ -91,22 +91,68 @@ def directory_lock(directory: str | os.PathLike, *, wait: bool = True):
         os.close(handle)
 
 
-def write_directory(target: str | os.PathLike, files: dict[str, str]) -> Path:
+def write_directory(target: str | os.PathLike, files: dict[str, str], *,
+                    written_before=None, last: str | None = None) -> Path:
     """Write `files` ({name: text}) as the directory `target`, all or nothing. Writers of one
-    parent directory take turns (directory_lock), so concurrent writers of one target each
-    replace it whole.
+    parent directory take turns (directory_lock).
 
-    The files are written into a temporary sibling, which then takes the place of `target`.
-    An existing `target` is first moved aside (a rename) and deleted only after the new one is
-    in place; if anything fails before that, it is moved back. A reader never sees a partly
-    written directory, only the old one, the new one or, for the moment between the two
-    renames, none.
+    A new or empty `target` is written into a temporary sibling, which then takes its place:
+    a reader never sees a partly written directory. With `written_before` (a function of the
+    existing directory giving the names an earlier write put there), an existing `target` is
+    updated instead (update_directory): files it did not write are kept.
+    Without it, an existing `target` is replaced whole: moved aside (a rename) and deleted
+    only after the new one is in place; if anything fails before that, it is moved back.
     """
     target = Path(target)
     parent = target.parent if str(target.parent) else Path(".")
     parent.mkdir(parents=True, exist_ok=True)
     with directory_lock(parent):
+        if (written_before is not None and target.is_dir() and not target.is_symlink()
+                and any(target.iterdir())):
+            return update_directory(target, files, set(written_before(target)), last=last)
         return _replace_directory(target, parent, files)
+
+
+def update_directory(target: Path, files: dict[str, str], written_before: set[str], *,
+                     last: str | None = None) -> Path:
+    """Update the directory `target` to hold `files`, keeping what an earlier write did not
+    put there: every new file is staged in `target` first, then each is renamed over its old
+    version (`last` the last of them), then the files of `written_before` that `files` no
+    longer has are removed. A failed write (a full disk) leaves the old files as they were.
+
+    ChaingenError (nothing written) when a name of `files` is already taken by something the
+    earlier write did not put there (a user's file is never overwritten) or by a directory."""
+    for name in files:
+        existing = target / name
+        if not os.path.lexists(existing):
+            continue
+        if existing.is_dir() and not existing.is_symlink():
+            raise ChaingenError(f"{existing}: is a directory where the package writes a file; "
+                                "move it away or choose another directory")
+        if name not in written_before:
+            raise ChaingenError(f"{existing}: exists and was not written by the package there "
+                                "(its manifest does not list it); move it away or choose "
+                                "another directory")
+    order = sorted(files, key=lambda name: name == last)
+    staged: dict[str, Path] = {}
+    try:
+        for name in order:
+            handle, temporary = tempfile.mkstemp(prefix=f".{name}.", dir=target)
+            os.close(handle)
+            staged[name] = Path(temporary)
+            staged[name].write_text(files[name])
+            os.chmod(temporary, 0o666 & ~current_umask())
+        for name in order:
+            os.replace(staged.pop(name), target / name)
+    finally:
+        for temporary in staged.values():
+            temporary.unlink(missing_ok=True)
+    for name in sorted(written_before - set(files)):
+        stale = target / name
+        if (name == Path(name).name and name not in ("", ".", "..")
+                and (stale.is_symlink() or stale.is_file())):
+            stale.unlink(missing_ok=True)
+    return target
 
 
 def _replace_directory(target: Path, parent: Path, files: dict[str, str]) -> Path:
@@ -142,9 +188,16 @@ def check_output_file(path: str | os.PathLike, option: str, inputs=()) -> Path:
     file); any of `inputs` (the same file, by inode too: a hard link or another spelling of
     its path) and any path inside an input that is a directory, which would be overwritten.
     An existing regular file that is none of these is replaced whole: the new file is staged
-    beside it and renamed over it (staged_file), never written into.
+    beside it and renamed over it (staged_file), never written into. An OSError of these
+    checks (a name too long, a loop of links) is bad input too: ChaingenError, one line.
     """
     path = Path(path)
+    with _path_checked(path, option):
+        _check_output_file(path, option, inputs)
+    return path
+
+
+def _check_output_file(path: Path, option: str, inputs) -> None:
     parent = path.parent if str(path.parent) else Path(".")
     if path.is_symlink():
         raise ChaingenError(f"{option}: {path} is a symbolic link; writing would replace the "
@@ -152,6 +205,8 @@ def check_output_file(path: str | os.PathLike, option: str, inputs=()) -> Path:
     if path.is_dir():
         raise ChaingenError(f"{option}: {path} is a directory; give a file name")
     if not parent.is_dir():
+        if os.path.lexists(parent):
+            os.stat(parent)          # a loop of links: OSError, reported as such
         raise ChaingenError(f"{option}: directory {parent} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ChaingenError(f"{option}: directory {parent} is not writable")
@@ -161,15 +216,36 @@ def check_output_file(path: str | os.PathLike, option: str, inputs=()) -> Path:
             raise ChaingenError(f"{option}: {path} exists and is not a regular file (a device, "
                                 "FIFO or socket); give a file name")
     _refuse_inputs(path, option, inputs)
-    return path
+
+
+@contextlib.contextmanager
+def _path_checked(path: Path, option: str) -> Iterator[None]:
+    """An OSError of a check of `path` (a name too long, a loop of links, a file where a
+    directory is wanted, no permission to look) as the bad input it is: ChaingenError."""
+    shown = str(path) if len(str(path)) <= 80 else str(path)[:77] + "..."
+    try:
+        yield
+    except RuntimeError:                # pathlib's resolve() of a loop of links
+        raise ChaingenError(f"{option}: {shown}: cannot be used as an output: a loop of "
+                            "symbolic links") from None
+    except OSError as error:
+        raise ChaingenError(f"{option}: {shown}: cannot be used as an output: "
+                            f"{error.strerror or error}") from None
 
 
 def check_output_directory(path: str | os.PathLike, option: str, inputs=()) -> Path:
-    """An output directory a command replaces whole (a generated package), checked like
+    """An output directory a command writes (a generated package), checked like
     check_output_file: refused when it is a symbolic link, an existing node that is not a
     directory, an input, inside an input directory, or holds an input (which replacing it
-    would delete). What else it may hold is the writer's rule (check_package_target)."""
+    would delete). What else it may hold is the writer's rule (check_package_target,
+    write_package). An OSError of these checks (a name too long) is bad input too."""
     path = Path(path)
+    with _path_checked(path, option):
+        _check_output_directory(path, option, inputs)
+    return path
+
+
+def _check_output_directory(path: Path, option: str, inputs) -> None:
     if path.is_symlink():
         raise ChaingenError(f"{option}: {path} is a symbolic link; replacing it would replace "
                             "the link, not what it points to: give another directory")
@@ -183,7 +259,6 @@ def check_output_directory(path: str | os.PathLike, option: str, inputs=()) -> P
             if os.path.lexists(source) and inside in source_path.parents:
                 raise ChaingenError(f"{option}: {path} holds the input {source}; replacing it "
                                     "would delete the input")
-    return path
 
 
 def _refuse_inputs(path: Path, option: str, inputs) -> None:

@@ -93,13 +93,20 @@ FLAGS = (
 
 HAZARDS = ("input", "hard link to an input", "directory", "fifo", "device",
            "symlink to an input", "symlink to a directory", "symlink to a fifo",
-           "dangling symlink")
+           "dangling symlink", "name too long", "in a loop of symlinks")
+#: Hazards of the path itself: a flag whose output name is fixed cannot be given them.
+PATH_HAZARDS = ("name too long", "in a loop of symlinks")
 
 
 def make_hazard(work: Path, flag: Flag, hazard: str, source: str) -> Path:
     """Put `hazard` where `flag` writes; returns the target path (relative to `work`)."""
     if hazard == "input":
         return Path(source)
+    if hazard == "name too long":       # ENAMETOOLONG from the first look at it
+        return Path("a" * 300 + Path(flag.fresh).suffix)
+    if hazard == "in a loop of symlinks":   # ELOOP
+        (work / "loop").symlink_to("loop")
+        return Path("loop") / flag.fresh
     target = Path(flag.fresh)
     where = work / target
     if hazard == "hard link to an input":
@@ -186,7 +193,7 @@ CASES = [(flag, hazard, source) for flag in FLAGS for hazard in HAZARDS
          for source in (flag.inputs if hazard in ("input", "hard link to an input",
                                                   "symlink to an input")
                         else ("",))
-         if not (hazard == "input" and "TARGET" not in flag.arguments)
+         if not (hazard in ("input", *PATH_HAZARDS) and "TARGET" not in flag.arguments)
          and not (hazard == "hard link to an input" and source.startswith(IN_INPUT_DIRECTORIES))]
 
 
@@ -246,6 +253,20 @@ def test_a_package_directory_holding_the_scene_is_not_replaced(tmp_path, no_work
     result = chaingen_in_process("generate", package / "scene.toml", "-o", package,
                                  cwd=tmp_path)
     assert result.returncode == 2 and "holds the input" in result.stderr, result.stderr
+    assert snapshot(tmp_path) == before
+
+
+def test_a_name_whose_metadata_name_is_too_long_is_bad_input(tmp_path, no_work):
+    """simulate --out NAME.csv where NAME.csv fits in 255 bytes but NAME.csv.json does not:
+    one line naming --out, exit status 2 (it was an internal error, exit 1), nothing written."""
+    shutil.copy(MONO, tmp_path / "scene.toml")
+    name = "a" * 250 + ".csv"
+    before = snapshot(tmp_path)
+    result = chaingen_in_process("simulate", "scene.toml", "--out", name, cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("chaingen: error: --out: "), result.stderr
+    assert "File name too long" in lines[0] and "internal error" not in lines[0]
     assert snapshot(tmp_path) == before
 
 

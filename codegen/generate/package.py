@@ -19,11 +19,12 @@ import casadi
 import jinja2
 import sympy
 
-from ..errors import PackageWriteError, SceneError
+from ..errors import ChaingenError, PackageWriteError, RunFailedError, SceneError
 from ..runtime import contract
 from ..runtime.contract import Features
 from ..runtime.files import write_directory
 from ..scene import Scene
+from ..scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE, ZERO_SEGMENT_RELATIVE_TOLERANCE
 from ..symbolic.schemes import DiscreteScheme, build_scheme
 from ..version import VERSION
 from .casadi_functions import chains_state, scheme_functions
@@ -179,6 +180,9 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     context = {
         "nu": nu, "actuated_joints": scene.actuated_joints, "flows": features.flows,
         "sensitivities": sensitivities, "segments": len(scheme.segment_tolerances),
+        # A start state's segments are measured against the scene reader's tolerance.
+        "zero_segment_relative_tolerance": repr(ZERO_SEGMENT_RELATIVE_TOLERANCE),
+        "run_segment_relative_tolerance": repr(RUN_SEGMENT_RELATIVE_TOLERANCE),
         "energy_check": features.energy_check,
         "nsens": 2 * n + nu + n_p,
         # The state the stages of a composed step chain their Jacobians in: x (es) or s.
@@ -317,11 +321,33 @@ def check_package_target(directory: str | os.PathLike) -> Path:
 
 
 def write_package(package: GeneratedPackage, directory: str | os.PathLike) -> Path:
-    """Write the package's files into `directory`, all or nothing (chaingen.runtime.files),
-    where check_package_target allows it."""
+    """Write the package's files into `directory`, where check_package_target allows it.
+    A new or empty directory is written all or nothing (chaingen.runtime.files). An existing
+    package is updated: the files its manifest lists are replaced or, if the new package has
+    them no longer, removed, the manifest last; every other file (a user's source, the
+    build/ of its README's CMake commands) is kept, and a file of the new package whose name
+    such a file takes is refused (PackageWriteError, nothing written). A write that fails (a
+    full disk) is RunFailedError, exit status 1, leaving the old files."""
     target = check_package_target(directory)
     try:
-        return write_directory(target, package.files)
+        return write_directory(target, package.files, written_before=_written_before,
+                               last=contract.MANIFEST)
+    except ChaingenError as error:
+        raise PackageWriteError(str(error)) from None
     except OSError as error:
-        raise PackageWriteError(f"{target}: cannot write the package: "
-                                f"{error.strerror or error}") from None
+        raise RunFailedError(f"{target}: cannot write the package: "
+                             f"{error.strerror or error}; nothing written") from None
+
+
+def _written_before(directory: Path) -> set[str]:
+    """The files an earlier write of a package put in `directory`: those its manifest lists
+    (plain names only), and the manifest itself."""
+    names = {contract.MANIFEST}
+    try:
+        listed = json.loads((directory / contract.MANIFEST).read_text()).get("files", [])
+    except (OSError, ValueError, AttributeError):
+        return names
+    if isinstance(listed, list):
+        names.update(name for name in listed
+                     if isinstance(name, str) and name == Path(name).name)
+    return names
