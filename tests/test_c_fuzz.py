@@ -7,7 +7,8 @@ hypothesis draws: NaN, Inf, zero and negative dt, parameters the scene format re
 counts and strides up to LONG_MAX, holds below 1. Each status must be the one c_driver.expected
 gives (a refusal where the numbers are bad, any status where they are good), simulate's u NULL
 must be zero torques, simulate_controlled's torques must fill exactly the rows the header gives,
-and the sanitizers must report nothing (-fno-sanitize-recover: a report ends the driver).
+a start whose spring segment has zero length is refused (one fixed case), and the sanitizers
+must report nothing (-fno-sanitize-recover: a report ends the driver).
 
 The default run draws FUZZ_EXAMPLES batches of up to BATCH cases.
 """
@@ -77,6 +78,10 @@ def test_every_entry_point_under_the_sanitizers(package):
              (0.0,) * len(defaults)),
         Case(0.01, 0.0, 20, 3, 2, False, 0.0, (0.3, 0.2, 0.1, 0.0), (1.0, -1.0, 0.5, 0.0),
              defaults),
+        # A start whose spring segment s_1 has zero length (base.fastening last):
+        # SEGMENT_COLLAPSED from every entry point that takes it.
+        Case(0.01, 0.0, 20, 3, 2, False, 0.0, (math.atan2(1.0, 0.3), 0.2, 0.1, 0.0),
+             (1.0, -1.0, 0.5, 0.0), defaults[:-1] + (math.hypot(1.0, 0.3),), collapsed=True),
     ]
 
     @settings(max_examples=FUZZ_EXAMPLES, deadline=None,

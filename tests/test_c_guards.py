@@ -5,6 +5,9 @@
   point that takes p.
 - NaN or Inf where a state or posture goes in, dt <= 0 or not finite, step counts whose sample
   rows cannot exist (sample_count -1, no signed overflow): BAD_ARGUMENT.
+- A start state or posture the scene reader refuses (a spring segment of zero length):
+  SEGMENT_COLLAPSED from initial_state, holding_torques, step, step_sensitivities and simulate,
+  whatever the round-off of the angles; outputs does not refuse it.
 - simulate takes u NULL as zero torques; simulate_controlled records its torques once a sample.
 - Scene names up to the format's longest generate and build; longer ones are refused.
 - A cache index entry whose manifest was altered is not trusted.
@@ -19,6 +22,7 @@ import json
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -30,6 +34,7 @@ from c_driver import (
     INTERRUPTED,
     LONG_MAX,
     OK,
+    SEGMENT_COLLAPSED,
     Case,
     build_driver,
     generate,
@@ -139,6 +144,60 @@ def test_the_scene_reader_uses_the_same_bounds():
         else:
             with pytest.raises(SceneError, match=re.escape(f"must be {bound.rule}")):
                 with_values(scene, {path: bound.value})
+
+
+# --- A start state the scene reader refuses: a spring segment of zero length --------------------
+
+#: four_link_actuated's segment s_1 runs from P_1 = (0, b) (base.fastening b) to
+#: P_2 = X_2 + 0.3 n_1; at phi_1 = atan2(1, 0.3) P_2 = (0, hypot(1, 0.3)): with that b, it has
+#: zero length.
+COLLAPSE_PHI1 = math.atan2(1.0, 0.3)
+COLLAPSE_FASTENING = math.hypot(1.0, 0.3)
+#: The angle and its neighbouring doubles: whether the start is refused must not hang on round-off.
+COLLAPSE_ANGLES = (COLLAPSE_PHI1, math.nextafter(COLLAPSE_PHI1, 0.0),
+                   math.nextafter(COLLAPSE_PHI1, 4.0))
+
+
+def collapsing(package, phi1: float, shift: float = 0.0, **changes) -> Case:
+    return case(package, phi=(phi1,) + PHI[1:],
+                p=with_parameter(package, "base.fastening", COLLAPSE_FASTENING + shift),
+                collapsed=shift == 0.0, **changes)
+
+
+def test_the_collapsing_start_is_one_the_scene_reader_refuses():
+    from chaingen import load_reference_scene
+    from chaingen.errors import SceneError
+    from chaingen.scene.parameters import with_values
+
+    scene = load_reference_scene("four_link_actuated")
+    angles = {f"initial.angles[{i}]": value for i, value in enumerate(PHI[1:], start=1)}
+    for phi1 in COLLAPSE_ANGLES:
+        with pytest.raises(SceneError, match="segment s_1 .* has zero length at the initial"):
+            with_values(scene, {"base.fastening": COLLAPSE_FASTENING,
+                                "initial.angles[0]": phi1, **angles})
+        # 1e-7 m away: far above the reader's limit (1e-9 of the geometry's size, ~5 nm).
+        with_values(scene, {"base.fastening": COLLAPSE_FASTENING + 1e-7,
+                            "initial.angles[0]": phi1, **angles})
+
+
+@pytest.mark.compile
+def test_every_entry_point_refuses_a_start_whose_spring_segment_has_zero_length(package):
+    """Before: initial_state and holding_torques returned OK (joint-1 torques of either sign
+    for neighbouring doubles of phi_1), step and simulate ran from that state (checking only
+    each step's new state), finishing OK or not by round-off."""
+    cases = [collapsing(package, phi1, stop=stop) for phi1 in COLLAPSE_ANGLES
+             for stop in (False, True)]
+    started = ("initial_state", "holding_torques", "step", "step_sensitivities", "simulate",
+               "simulate_null_u", "simulate_controlled")
+    for result in drive(package, cases):
+        assert {column: result[column] for column in started} \
+            == dict.fromkeys(started, SEGMENT_COLLAPSED)
+        assert result["outputs"] == OK     # a state's outputs are defined at zero length
+    # A segment 1e-7 m long, which the scene reader accepts, is a start (its first step may
+    # still stop, under the run's limit of 1e-6 of the size).
+    for result in drive(package, [collapsing(package, phi1, shift=1e-7)
+                                  for phi1 in COLLAPSE_ANGLES]):
+        assert result["initial_state"] == result["holding_torques"] == OK
 
 
 # --- Point 12: hostile numbers ------------------------------------------------------------------
@@ -301,3 +360,42 @@ def test_cmake_without_a_build_type_compiles_every_source_optimised(tmp_path):
                                                       .read_text())
              if entry["file"].endswith("_model.c")]
     assert "-O2" not in model[0].split() and "-g" in model[0].split()
+
+
+def optimisation_of(build: Path, name: str) -> list[list[str]]:
+    """The -O and -g words of each compile command of the source `name` (one per configuration)."""
+    commands = json.loads((build / "compile_commands.json").read_text())
+    return [[word for word in entry["command"].split() if re.fullmatch(r"-O[0-3s]?|-g", word)]
+            for entry in commands if Path(entry["file"]).name == name]
+
+
+@pytest.mark.tools
+def test_cmake_build_types_keep_their_flags_and_the_solver_gets_O3_where_they_optimise(tmp_path):
+    """Before: the solver got -O3 in every build type, Debug included, though the comment said a
+    build type keeps its own flags. Now: -O3 with no build type, Release and RelWithDebInfo;
+    Debug and MinSizeRel keep theirs; a multi-configuration generator alike, per configuration."""
+    require_tools("cmake")
+    source = ROOT / "generated" / "three_link_mono_es"
+    solver, model = "three_link_mono_es.c", "three_link_mono_es_model.c"
+    wanted = {"": ["-O2", "-O3"], "Release": ["-O3", "-O3"], "RelWithDebInfo": ["-O2", "-g", "-O3"],
+              "Debug": ["-g"], "MinSizeRel": ["-Os"]}
+    for build_type, flags in wanted.items():
+        build = tmp_path / (build_type or "none")
+        result = subprocess.run(["cmake", "-S", str(source), "-B", str(build),
+                                 f"-DCMAKE_BUILD_TYPE={build_type}",
+                                 "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON"], capture_output=True,
+                                text=True)
+        assert result.returncode == 0, result.stdout + result.stderr
+        assert optimisation_of(build, solver) == [flags], build_type
+        # The model file: the build type's own flags (-O2 of the Makefile's with none).
+        assert optimisation_of(build, model) == [flags[:-1] if flags[-1] == "-O3" else flags]
+    if shutil.which("ninja"):
+        build = tmp_path / "multi"
+        subprocess.run(["cmake", "-S", str(source), "-B", str(build), "-G", "Ninja Multi-Config",
+                        "-DCMAKE_CONFIGURATION_TYPES=Debug;Release;RelWithDebInfo;MinSizeRel",
+                        "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON"], capture_output=True, check=True)
+        assert optimisation_of(build, solver) == [wanted[name] for name in
+                                                  ("Debug", "Release", "RelWithDebInfo",
+                                                   "MinSizeRel")]
+    text = (source / "CMakeLists.txt").read_text()
+    assert "Debug and MinSizeRel keep their own flags for every file." in text

@@ -79,17 +79,68 @@ static int evaluate(int (*function)(const double **, double **, long long int *,
     return function(ws->arg, ws->res, ws->iw, ws->w, 0) ? FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED : FOUR_LINK_ACTUATED_ES_OK;
 }
 
+/* A start state's segments, measured as the scene reader measures the initial angles: each at
+ * least ZERO_SEGMENT_RELATIVE_TOLERANCE of the geometry's size G long (G at the scene's own
+ * numbers, as in the run's check). In margins (length / RUN_SEGMENT_RELATIVE_TOLERANCE G) that is
+ * START_MARGIN. */
+#define START_MARGIN (1e-09 / 1e-06)
+
+/* Whether every spring segment of the state x (finite) is long enough to start from: OK, or
+ * SEGMENT_COLLAPSED where one is of (numerically) zero length and its direction undefined. A
+ * step checks its new state itself; this is for the states a caller hands in (q derived). The
+ * length alone: a segment has no turn within one state (and a huge finite one, whose squared
+ * length overflows, is long, not collapsed). */
+static int start_segments(const double *x, four_link_actuated_es_workspace *workspace)
+{
+    double margins[2 * NSEGMENT];
+    int i;
+    workspace->arg[0] = x;
+    workspace->arg[1] = x;
+    workspace->res[0] = margins;
+    if (evaluate(four_link_actuated_es_model_segment_margins, workspace)) {
+        return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
+    }
+    for (i = 0; i < NSEGMENT; ++i) {
+        if (!(margins[i] >= START_MARGIN)) {
+            return FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED;
+        }
+    }
+    return FOUR_LINK_ACTUATED_ES_OK;
+}
+
+/* The state of posture phi at rest into x[NX], its segments checked (start_segments). */
+static int posture_state(const double *phi, double *x, four_link_actuated_es_workspace *workspace)
+{
+    const double rest[N_JOINTS] = {0.0};
+    workspace->arg[0] = phi;
+    workspace->arg[1] = rest;
+    workspace->res[0] = x;
+    if (evaluate(four_link_actuated_es_model_initial_state, workspace)) {
+        return FOUR_LINK_ACTUATED_ES_EVALUATION_FAILED;
+    }
+    return all_finite(x, NX) ? start_segments(x, workspace) : FOUR_LINK_ACTUATED_ES_NONFINITE;
+}
+
 int four_link_actuated_es_initial_state(const double *phi, const double *phidot, double *x,
                                         four_link_actuated_es_workspace *workspace)
 {
+    double state[NX];
+    int status;
     if (!phi || !phidot || !x || !workspace || !all_finite(phi, N_JOINTS)
         || !all_finite(phidot, N_JOINTS)) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
     }
     workspace->arg[0] = phi;
     workspace->arg[1] = phidot;
-    workspace->res[0] = x;
-    return evaluate(four_link_actuated_es_model_initial_state, workspace);
+    workspace->res[0] = state;
+    status = evaluate(four_link_actuated_es_model_initial_state, workspace);
+    if (status == FOUR_LINK_ACTUATED_ES_OK) {
+        status = all_finite(state, NX) ? start_segments(state, workspace) : FOUR_LINK_ACTUATED_ES_NONFINITE;
+    }
+    if (status == FOUR_LINK_ACTUATED_ES_OK) {
+        memcpy(x, state, sizeof state);
+    }
+    return status;
 }
 
 int four_link_actuated_es_outputs(const double *x, double *phi, double *omega, double *energy,
@@ -124,6 +175,13 @@ int four_link_actuated_es_holding_torques(const double *phi, double *tau,
 {
     if (!phi || !tau || !workspace || !all_finite(phi, N_JOINTS)) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
+    }
+    {
+        double state[NX];
+        const int intact = posture_state(phi, state, workspace);
+        if (intact != FOUR_LINK_ACTUATED_ES_OK) {
+            return intact;
+        }
     }
     workspace->arg[0] = phi;
     workspace->res[0] = tau;
@@ -620,6 +678,14 @@ int four_link_actuated_es_step(const double *x0, const double *u, double dt, dou
         workspace->step_fallbacks = 0;
         workspace->step_splits = 0;
     }
+    /* The start state's segments (a run checks its start once: each later step starts where the
+     * one before ended, checked as its x1). */
+    if (x0 && workspace && all_finite(x0, NX)) {
+        status = start_segments(x0, workspace);
+        if (status != FOUR_LINK_ACTUATED_ES_OK) {
+            return status;
+        }
+    }
     status = advance(x0, u, dt, x1, flows, options, workspace, &spent, 0);
     if (iterations) {
         *iterations = spent;
@@ -637,6 +703,10 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
     int i, j, k, status;
     if (!x1 || !ds_ds || !ds_du || !(dt > 0.0) || !isfinite(dt)) {
         return FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT;
+    }
+    status = x0 && workspace && all_finite(x0, NX) ? start_segments(x0, workspace) : FOUR_LINK_ACTUATED_ES_OK;
+    if (status != FOUR_LINK_ACTUATED_ES_OK) {
+        return status;
     }
     status = solve_step(x0, u, dt, options, workspace, iterations);
     if (status == FOUR_LINK_ACTUATED_ES_OK) {
@@ -954,6 +1024,9 @@ static int run(const double *x0, double t0, double dt, long n_steps, long every,
     next = workspace->state[1];
     memcpy(current, x0, sizeof(double) * NX);
     status = write_sample(current, t0, totals, samples, workspace);
+    if (status == FOUR_LINK_ACTUATED_ES_OK) {   /* the start; every later state is a step's checked x1 */
+        status = start_segments(current, workspace);
+    }
     if (control && control->stop && status == FOUR_LINK_ACTUATED_ES_OK) {
         status = FOUR_LINK_ACTUATED_ES_INTERRUPTED;   /* stopped before it began: no step */
     }

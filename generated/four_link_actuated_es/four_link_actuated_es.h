@@ -110,8 +110,10 @@ extern "C" {
 #define FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                                    * geometry's size of zero length, or passed
                                                    * through it (turned by 90 degrees or more in
-                                                   * one step): its direction is undefined there
-                                                   * (docs/model.md, section 2) */
+                                                   * one step), or a start state or posture has
+                                                   * one of zero length (under 1e-9 of that size,
+                                                   * the scene reader's limit): its direction is
+                                                   * undefined there (docs/model.md, section 2) */
 #define FOUR_LINK_ACTUATED_ES_INTERRUPTED 7       /* simulate_observed or simulate_controlled:
                                                    * the observer, the controller or
                                                    * control->stop asked to stop */
@@ -257,14 +259,17 @@ FOUR_LINK_ACTUATED_ES_API
 void four_link_actuated_es_default_options(four_link_actuated_es_options *options);
 
 /* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s), all
- * finite (FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT otherwise). */
+ * finite (FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT otherwise). A posture with a spring segment of zero length,
+ * under the scene reader's limit (1e-9 of the geometry's size, at the scene's own numbers), where
+ * the segment's direction is undefined: FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED, x untouched. */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_initial_state(const double *phi, const double *phidot, double *x,
                                         four_link_actuated_es_workspace *workspace);
 
 /* Joint space and diagnostics of a state: phi[N_JOINTS] wrapped to (-pi, pi], omega[N_JOINTS],
  * energy H = T + V, and the largest structural error of the state's coordinates. Any output
- * pointer may be NULL. A state x with a NaN or Inf: FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT. */
+ * pointer may be NULL. A state x with a NaN or Inf: FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT. Its spring
+ * segments are not checked: these need their lengths only, defined at zero length too. */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_outputs(const double *x, double *phi, double *omega, double *energy,
                                   double *constraint_error,
@@ -272,7 +277,8 @@ int four_link_actuated_es_outputs(const double *x, double *phi, double *omega, d
 
 /* The joint torques tau[N_JOINTS] (N m) that hold the chain still at posture phi[N_JOINTS]
  * (finite, FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT otherwise): dV/dphi, gravity and springs. A controller's
- * feed-forward (the example uses it). */
+ * feed-forward (the example uses it). A posture initial_state refuses (a spring segment of
+ * zero length, where dV/dphi is undefined): FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED. */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_holding_torques(const double *phi, double *tau,
                                           four_link_actuated_es_workspace *workspace);
@@ -290,7 +296,8 @@ int four_link_actuated_es_residual_jacobian(const double *z, const double *x0, c
 
 /* One step of length dt > 0 from x0 to x1 (x1 may not alias x0), with the inputs u[NU] held over the step. options may be NULL
  * (defaults). iterations (may be NULL) receives the Newton iterations spent. flows (may be
- * NULL) receives the step's energy flows (layout above). On failure x1 is untouched. */
+ * NULL) receives the step's energy flows (layout above). On failure x1 is untouched.
+ * An x0 with a spring segment initial_state refuses: FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED. */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_step(const double *x0, const double *u, double dt, double *x1,
                                double *flows, const four_link_actuated_es_options *options,
@@ -301,7 +308,8 @@ int four_link_actuated_es_step(const double *x0, const double *u, double dt, dou
  *   ds_ds[8 * 8]  ds_ds[i + j*8] = d s1_i / d s0_j
  *   ds_du[8 * NU]  ds_du[i + j*8] = d s1_i / d u_j
  * by the implicit function theorem: one LU factorisation of dF/dz at the converged z, solved
- * for 12 right-hand sides. x0 is taken as the state of s0 = outputs(x0). */
+ * for 12 right-hand sides. x0 is taken as the state of s0 = outputs(x0). x0 is
+ * checked as step() checks it (FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED). */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, double dt,
                                              double *x1, double *ds_ds, double *ds_du,
@@ -321,6 +329,8 @@ long four_link_actuated_es_sample_count(long n_steps, long every);
  * `every`-th step into samples[sample_count(n_steps, every) * NSAMPLE], the final state into
  * x_final[NX] (may be NULL) and counters into stats (may be NULL). On a failed step it stops and
  * returns the step's status; stats->steps tells how many steps (and so which rows) are valid.
+ * x0 is checked as step() checks it, once (every later state is a step's checked x1): a spring
+ * segment of zero length there returns FOUR_LINK_ACTUATED_ES_SEGMENT_COLLAPSED after row 0, with no step.
  *
  * With options->rtol > 0 or options->atol > 0 the steps adapt: each interval of length dt (a
  * "step" above: the inputs' and the samples' grid) is covered by steps whose lengths an error

@@ -76,17 +76,55 @@ static int evaluate(int (*function)(const double **, double **, long long int *,
     return function(ws->arg, ws->res, ws->iw, ws->w, 0) ? THREE_LINK_MONO_MIDPOINT_EVALUATION_FAILED : THREE_LINK_MONO_MIDPOINT_OK;
 }
 
+/* A start state's segments, measured as the scene reader measures the initial angles: each at
+ * least ZERO_SEGMENT_RELATIVE_TOLERANCE of the geometry's size G long (G at the scene's own
+ * numbers, as in the run's check). In margins (length / RUN_SEGMENT_RELATIVE_TOLERANCE G) that is
+ * START_MARGIN. */
+#define START_MARGIN (1e-09 / 1e-06)
+
+/* Whether every spring segment of the state x (finite) is long enough to start from: OK, or
+ * SEGMENT_COLLAPSED where one is of (numerically) zero length and its direction undefined. A
+ * step checks its new state itself; this is for the states a caller hands in (q derived). The
+ * length alone: a segment has no turn within one state (and a huge finite one, whose squared
+ * length overflows, is long, not collapsed). */
+static int start_segments(const double *x, three_link_mono_midpoint_workspace *workspace)
+{
+    double margins[2 * NSEGMENT];
+    int i;
+    workspace->arg[0] = x;
+    workspace->arg[1] = x;
+    workspace->res[0] = margins;
+    if (evaluate(three_link_mono_midpoint_model_segment_margins, workspace)) {
+        return THREE_LINK_MONO_MIDPOINT_EVALUATION_FAILED;
+    }
+    for (i = 0; i < NSEGMENT; ++i) {
+        if (!(margins[i] >= START_MARGIN)) {
+            return THREE_LINK_MONO_MIDPOINT_SEGMENT_COLLAPSED;
+        }
+    }
+    return THREE_LINK_MONO_MIDPOINT_OK;
+}
+
 int three_link_mono_midpoint_initial_state(const double *phi, const double *phidot, double *x,
                                            three_link_mono_midpoint_workspace *workspace)
 {
+    double state[NX];
+    int status;
     if (!phi || !phidot || !x || !workspace || !all_finite(phi, N_JOINTS)
         || !all_finite(phidot, N_JOINTS)) {
         return THREE_LINK_MONO_MIDPOINT_BAD_ARGUMENT;
     }
     workspace->arg[0] = phi;
     workspace->arg[1] = phidot;
-    workspace->res[0] = x;
-    return evaluate(three_link_mono_midpoint_model_initial_state, workspace);
+    workspace->res[0] = state;
+    status = evaluate(three_link_mono_midpoint_model_initial_state, workspace);
+    if (status == THREE_LINK_MONO_MIDPOINT_OK) {
+        status = all_finite(state, NX) ? start_segments(state, workspace) : THREE_LINK_MONO_MIDPOINT_NONFINITE;
+    }
+    if (status == THREE_LINK_MONO_MIDPOINT_OK) {
+        memcpy(x, state, sizeof state);
+    }
+    return status;
 }
 
 int three_link_mono_midpoint_outputs(const double *x, double *phi, double *omega, double *energy,
@@ -594,6 +632,14 @@ int three_link_mono_midpoint_step(const double *x0, double dt, double *x1,
         workspace->step_fallbacks = 0;
         workspace->step_splits = 0;
     }
+    /* The start state's segments (a run checks its start once: each later step starts where the
+     * one before ended, checked as its x1). */
+    if (x0 && workspace && all_finite(x0, NX)) {
+        status = start_segments(x0, workspace);
+        if (status != THREE_LINK_MONO_MIDPOINT_OK) {
+            return status;
+        }
+    }
     status = advance(x0, dt, x1, options, workspace, &spent, 0);
     if (iterations) {
         *iterations = spent;
@@ -611,6 +657,10 @@ int three_link_mono_midpoint_step_sensitivities(const double *x0, double dt, dou
     int i, j, k, status;
     if (!x1 || !ds_ds || !(dt > 0.0) || !isfinite(dt)) {
         return THREE_LINK_MONO_MIDPOINT_BAD_ARGUMENT;
+    }
+    status = x0 && workspace && all_finite(x0, NX) ? start_segments(x0, workspace) : THREE_LINK_MONO_MIDPOINT_OK;
+    if (status != THREE_LINK_MONO_MIDPOINT_OK) {
+        return status;
     }
     status = solve_step(x0, dt, options, workspace, iterations);
     if (status == THREE_LINK_MONO_MIDPOINT_OK) {
@@ -883,6 +933,9 @@ static int run(const double *x0, double t0, double dt, long n_steps, long every,
     next = workspace->state[1];
     memcpy(current, x0, sizeof(double) * NX);
     status = write_sample(current, t0, samples, workspace);
+    if (status == THREE_LINK_MONO_MIDPOINT_OK) {   /* the start; every later state is a step's checked x1 */
+        status = start_segments(current, workspace);
+    }
     if (control && control->stop && status == THREE_LINK_MONO_MIDPOINT_OK) {
         status = THREE_LINK_MONO_MIDPOINT_INTERRUPTED;   /* stopped before it began: no step */
     }

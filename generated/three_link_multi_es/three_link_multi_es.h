@@ -88,8 +88,10 @@ extern "C" {
 #define THREE_LINK_MULTI_ES_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                                  * geometry's size of zero length, or passed
                                                  * through it (turned by 90 degrees or more in
-                                                 * one step): its direction is undefined there
-                                                 * (docs/model.md, section 2) */
+                                                 * one step), or a start state or posture has one
+                                                 * of zero length (under 1e-9 of that size, the
+                                                 * scene reader's limit): its direction is
+                                                 * undefined there (docs/model.md, section 2) */
 #define THREE_LINK_MULTI_ES_INTERRUPTED 7       /* simulate_observed or simulate_controlled: the
                                                  * observer, the controller or control->stop
                                                  * asked to stop */
@@ -229,14 +231,17 @@ THREE_LINK_MULTI_ES_API
 void three_link_multi_es_default_options(three_link_multi_es_options *options);
 
 /* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s), all
- * finite (THREE_LINK_MULTI_ES_BAD_ARGUMENT otherwise). */
+ * finite (THREE_LINK_MULTI_ES_BAD_ARGUMENT otherwise). A posture with a spring segment of zero length,
+ * under the scene reader's limit (1e-9 of the geometry's size, at the scene's own numbers), where
+ * the segment's direction is undefined: THREE_LINK_MULTI_ES_SEGMENT_COLLAPSED, x untouched. */
 THREE_LINK_MULTI_ES_API
 int three_link_multi_es_initial_state(const double *phi, const double *phidot, double *x,
                                       three_link_multi_es_workspace *workspace);
 
 /* Joint space and diagnostics of a state: phi[N_JOINTS] wrapped to (-pi, pi], omega[N_JOINTS],
  * energy H = T + V, and the largest structural error of the state's coordinates. Any output
- * pointer may be NULL. A state x with a NaN or Inf: THREE_LINK_MULTI_ES_BAD_ARGUMENT. */
+ * pointer may be NULL. A state x with a NaN or Inf: THREE_LINK_MULTI_ES_BAD_ARGUMENT. Its spring
+ * segments are not checked: these need their lengths only, defined at zero length too. */
 THREE_LINK_MULTI_ES_API
 int three_link_multi_es_outputs(const double *x, double *phi, double *omega, double *energy,
                                 double *constraint_error, three_link_multi_es_workspace *workspace);
@@ -253,7 +258,8 @@ int three_link_multi_es_residual_jacobian(const double *z, const double *x0, dou
                                           three_link_multi_es_workspace *workspace);
 
 /* One step of length dt > 0 from x0 to x1 (x1 may not alias x0). options may be NULL
- * (defaults). iterations (may be NULL) receives the Newton iterations spent. On failure x1 is untouched. */
+ * (defaults). iterations (may be NULL) receives the Newton iterations spent. On failure x1 is untouched.
+ * An x0 with a spring segment initial_state refuses: THREE_LINK_MULTI_ES_SEGMENT_COLLAPSED. */
 THREE_LINK_MULTI_ES_API
 int three_link_multi_es_step(const double *x0, double dt, double *x1,
                              const three_link_multi_es_options *options,
@@ -263,7 +269,8 @@ int three_link_multi_es_step(const double *x0, double dt, double *x1,
  * s = (phi[N_JOINTS], omega[N_JOINTS]) a controller sees (6 entries):
  *   ds_ds[6 * 6]  ds_ds[i + j*6] = d s1_i / d s0_j
  * by the implicit function theorem: one LU factorisation of dF/dz at the converged z, solved
- * for 6 right-hand sides. x0 is taken as the state of s0 = outputs(x0). */
+ * for 6 right-hand sides. x0 is taken as the state of s0 = outputs(x0). x0 is
+ * checked as step() checks it (THREE_LINK_MULTI_ES_SEGMENT_COLLAPSED). */
 THREE_LINK_MULTI_ES_API
 int three_link_multi_es_step_sensitivities(const double *x0, double dt, double *x1, double *ds_ds,
                                            const three_link_multi_es_options *options,
@@ -281,6 +288,8 @@ long three_link_multi_es_sample_count(long n_steps, long every);
  * `every`-th step into samples[sample_count(n_steps, every) * NSAMPLE], the final state into
  * x_final[NX] (may be NULL) and counters into stats (may be NULL). On a failed step it stops and
  * returns the step's status; stats->steps tells how many steps (and so which rows) are valid.
+ * x0 is checked as step() checks it, once (every later state is a step's checked x1): a spring
+ * segment of zero length there returns THREE_LINK_MULTI_ES_SEGMENT_COLLAPSED after row 0, with no step.
  *
  * With options->rtol > 0 or options->atol > 0 the steps adapt: each interval of length dt (a
  * "step" above: the inputs' and the samples' grid) is covered by steps whose lengths an error
