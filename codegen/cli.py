@@ -123,7 +123,8 @@ def parser() -> argparse.ArgumentParser:
     animate.add_argument("--every", type=positive_int, metavar="N",
                          help="draw every N-th sample (default: real time at --fps)")
     animate.add_argument("--size", type=dimension, default=480, metavar="PIXELS",
-                         help="width and height of the frames (default 480)")
+                         help="width and height of the frames (default 480; 100 to 4000, "
+                              "200 at least for a scene with springs)")
 
     check = command(
         "check", help="compare the generated functions with finite differences and SymPy")
@@ -284,6 +285,7 @@ def command_simulate(args) -> int:
     from .runtime import write_trajectory
     from .runtime.trajectory import metadata_path
     from .simulation import run_settings, simulate_scene
+    from .views.run_summary import run_summary
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
@@ -313,7 +315,7 @@ def command_simulate(args) -> int:
     if args.out is not None:
         with reported_write(args.out, "the trajectory"):
             write_trajectory(result, args.out)
-    print(summary(result, settings, args.out))
+    print(run_summary(result, settings, args.out))
     if figure is not None:
         from .views.plots import plot_result
         print(f"  figure                 {plot_result(result, figure)}")
@@ -402,47 +404,6 @@ def command_animate(args) -> int:
     print(f"wrote {out}: {plan.indices.size} frames at {plan.fps:g} fps, every "
           f"{plan.every} samples ({plan.playback_speed:g} x real time)")
     return 0
-
-
-def summary(result, settings, out: Path | None) -> str:
-    label = f"method {result.method}"
-    if result.quadrature is not None:
-        label += f", quadrature {result.quadrature}"
-    if result.order != 2:
-        label += f", order {result.order}"
-    per_step = result.wall_time / max(result.n_steps, 1)
-    # Adaptive steps cover each interval dt with steps of their own (counted below).
-    step = "interval" if result.adaptive else "step"
-    lines = [
-        f"{result.scene}: {label}, dt {settings.dt:g} s, t_end {result.n_steps * settings.dt:g} s",
-        f"  {step + 's':<22} {result.n_steps} ({len(result.samples)} samples, "
-        f"every {result.every})",
-        f"  wall time (C loop)     {result.wall_time:.4g} s ({per_step * 1e6:.3g} us/{step})",
-        f"  t_realtime             {result.t_realtime:.3g}",
-        f"  max |energy error|     {np.abs(result.energy_error).max():.3e} J",
-    ]
-    if "dissipated" in result.columns:
-        lines += [
-            f"  input work, dissipated {result.input_work[-1]:.6g} J, "
-            f"{result.dissipated[-1]:.6g} J",
-            f"  max |balance error|    {np.abs(result.balance_error).max():.3e} J "
-            "(H - H_0 - work + dissipated)",
-        ]
-    lines += [
-        f"  max |constraint error| {result.constraint_error.max():.3e}",
-        f"  Newton iterations      mean {result.mean_newton_iterations:.2f}, "
-        f"max {result.max_newton_iterations}",
-    ]
-    if result.full_newton_fallbacks or result.split_steps:
-        lines.append(f"  Newton fallbacks       {result.full_newton_fallbacks} steps by full "
-                     f"Newton, {result.split_steps} steps split into halves")
-    if result.adaptive:
-        lines.append(f"  adaptive steps         {result.accepted_steps} accepted, "
-                     f"{result.rejected_steps} rejected, dt from {result.smallest_dt:.3g} to "
-                     f"{result.largest_dt:.3g} s (rtol {settings.rtol:g}, atol {settings.atol:g})")
-    if out is not None:
-        lines.append(f"  trajectory             {out}")
-    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:

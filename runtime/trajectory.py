@@ -1,7 +1,8 @@
 """The trajectory file (docs/scene-format.md): a header row, then one row per sample.
 
 Beside it, FILE.csv.json records the run that wrote it (scene, method, quadrature, order, dt,
-every, steps, the adaptive tolerances and, for adaptive steps, their counters): the CSV stays
+every, steps, the adaptive tolerances and, for adaptive steps, their counters, the run-time
+parameters' values): the CSV stays
 exactly the contract's columns, and `chaingen plot` and `animate` label their figures from the
 metadata.
 """
@@ -27,6 +28,8 @@ def run_metadata(result: SimulationResult) -> dict:
                 "order": result.order, "dt": result.dt, "every": result.every,
                 "n_steps": result.n_steps, "rtol": result.rtol, "atol": result.atol,
                 "columns": list(result.columns)}
+    if result.parameters:          # a solver's run-time parameters: the values the run took
+        metadata["parameters"] = {path: float(value) for path, value in result.parameters.items()}
     if result.adaptive:
         metadata["adaptive_steps"] = {
             "accepted": result.accepted_steps, "rejected": result.rejected_steps,

@@ -24,8 +24,10 @@ import numpy as np
 from ..errors import PlotError
 from ..progress import Progress
 from ..runtime.files import reported_write, staged_file
+from ..runtime.trajectory import metadata_path
 from ..scene import Scene
 from ..scene.kinematics import chain_geometry, spring_geometry
+from ..scene.parameters import with_values
 from .figure import matplotlib_figure
 from .plots import TrajectoryRun
 
@@ -214,6 +216,14 @@ def check_matches(scene: Scene, run: TrajectoryRun) -> None:
                         f"not {scene.name!r}")
 
 
+def run_scene(scene: Scene, run: TrajectoryRun) -> Scene:
+    """The scene as the run had it: its run-time parameters' values (the metadata's) in place
+    of the scene file's numbers; SceneError naming the file and path of one it cannot take."""
+    if not run.parameters:
+        return scene
+    return with_values(scene, run.parameters, where=f"{metadata_path(run.path)}: parameters")
+
+
 def check_output(out: Path) -> str | None:
     """Refuse an output the animation cannot write; returns ffmpeg's path for an .mp4."""
     out = Path(out)
@@ -237,10 +247,13 @@ def animate(scene: Scene, run: TrajectoryRun, out: Path, *, fps: float | None = 
     out = Path(out)
     suffix = out.suffix.lower()
     ffmpeg = check_output(out)
-    if pixels < 100 or pixels > 4000:
-        raise PlotError(f"--size: must be between 100 and 4000 pixels, got {pixels}")
+    smallest = 200 if scene.springs else 100    # the springs' colour bar takes 104 pixels
+    if pixels < smallest or pixels > 4000:
+        raise PlotError(f"--size: must be between {smallest} and 4000 pixels"
+                        f"{' for a scene with springs' if scene.springs else ''}, got {pixels}")
     pixels += pixels % 2
     check_matches(scene, run)
+    scene = run_scene(scene, run)
     plan = frame_plan(run.t, fps=fps, every=every, gif=suffix == ".gif")
     phis = run.phi[plan.indices]
     drawing = ChainDrawing(scene, pixels=pixels, stretch_limit=stretch_limit(scene, phis),

@@ -47,6 +47,9 @@ class TrajectoryRun:
     quadrature: int | None
     dt: float | None
     order: int = 2        # of the step (metadata; 2 where it has none)
+    #: The run-time parameters' values (metadata: path -> value), and those the label names.
+    parameters: dict = dataclasses.field(default_factory=dict)
+    named: tuple[str, ...] = ()
 
     def column(self, name: str) -> np.ndarray:
         return self.rows[:, self.columns.index(name)]
@@ -92,7 +95,18 @@ class TrajectoryRun:
             parts[0] += f" order {self.order}"
         if self.dt is not None:
             parts.append(f"dt = {self.dt:g} s")
+        parts += [f"{path} = {self.parameters[path]:g}" for path in self.named
+                  if path in self.parameters]
         return ", ".join(parts)
+
+
+def named_parameters(runs: list[TrajectoryRun]) -> list[TrajectoryRun]:
+    """`runs` labelled with the run-time parameters whose values differ between them (an
+    overlay of runs of one solver with other masses, lengths, ...)."""
+    paths = sorted({path for run in runs for path in run.parameters})
+    differing = tuple(path for path in paths
+                      if len({run.parameters.get(path) for run in runs}) > 1)
+    return [dataclasses.replace(run, named=differing) for run in runs]
 
 
 def load_run(path) -> TrajectoryRun:
@@ -130,7 +144,9 @@ def load_run(path) -> TrajectoryRun:
                          method=meta.get("method"),
                          quadrature=int(quadrature) if quadrature is not None else None,
                          dt=float(dt) if dt is not None else None,
-                         order=meta.get("order", 2))
+                         order=meta.get("order", 2),
+                         parameters={path: float(value)
+                                     for path, value in meta.get("parameters", {}).items()})
 
 
 def run_from_result(result, source) -> TrajectoryRun:
@@ -139,7 +155,8 @@ def run_from_result(result, source) -> TrajectoryRun:
     return TrajectoryRun(path=Path(source), columns=tuple(result.columns),
                          rows=np.asarray(result.samples), n=n, scene=result.scene,
                          method=result.method, quadrature=result.quadrature,
-                         dt=result.dt, order=result.order)
+                         dt=result.dt, order=result.order,
+                         parameters=dict(result.parameters))
 
 
 def plot_result(result, out: Path) -> Path:
@@ -176,6 +193,9 @@ METADATA_KEYS = {
     "n_steps": (lambda v: _is_integer(v) and v >= 0, "an integer >= 0"),
     "rtol": (lambda v: _is_number(v) and v >= 0, "a number >= 0"),
     "atol": (lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    "parameters": (lambda v: isinstance(v, dict) and all(isinstance(path, str) and _is_number(value)
+                                                         for path, value in v.items()),
+                   "an object of numbers by key path"),
 }
 
 
@@ -275,6 +295,7 @@ def joint_line_style(joint: int):
 
 def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
     """Draw the figure of `runs` to the PNG file `out` (written atomically); returns it."""
+    runs = named_parameters(runs) if len(runs) > 1 else runs
     figure = matplotlib_figure(FIGURE_SIZE, DPI, "chaingen plot")
     angles, energy, constraint = figure.subplots(3, 1, sharex=True)
     single = len(runs) == 1
