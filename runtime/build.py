@@ -16,8 +16,12 @@ The cache trusts nothing by its name alone:
   loader would trust for the sizes of every buffer, is a broken entry, generated again;
 - builders of one library take turns (a lock file beside it): the first compiles, the others
   wait and load its result;
-- each build works in a directory of its own, locked while it runs; a directory left by a build
-  that was killed is removed by the next build;
+- each build works in a directory of its own (`build-<prefix>-<random>.chaingen`), whose
+  marker file, written first, is locked while it runs; a directory left by a build that was
+  killed is removed by the next build, and only such a directory: the name chaingen gives, a
+  real directory (not a link), its marker a regular file with chaingen's text, unlocked, and
+  more than a minute old. Anything else in the cache directory (a user's `build-release/`) is
+  left alone;
 - the compiler processes die with the process that started them (Linux: PR_SET_PDEATHSIG).
 """
 from __future__ import annotations
@@ -30,6 +34,7 @@ import json
 import os
 import shutil
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -43,8 +48,13 @@ from .files import write_text
 #: Flags of every build: the generated code must stay clean under all of them.
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 DEFAULT_OPTIMISATION = ("-O2",)
-#: The lock file of a build directory (held while the build runs).
-BUILD_LOCK = ".building"
+#: A build directory's name: BUILD_PREFIX + the package prefix + "-" + random + BUILD_SUFFIX.
+BUILD_PREFIX = "build-"
+BUILD_SUFFIX = ".chaingen"
+#: The marker of a build directory, created first in it and locked while its build runs; only a
+#: directory holding it (a regular file with MARKER_TEXT) is ever removed as stale.
+BUILD_MARKER = ".chaingen-build"
+MARKER_TEXT = b"chaingen build directory: removed once its build is over\n"
 
 
 class CacheError(ChaingenError):
@@ -192,19 +202,53 @@ def locked(path: Path):
 STALE_AFTER_SECONDS = 60.0
 
 
-def remove_stale_builds(cache: Path) -> None:
-    """Remove build directories whose build is no longer running (their lock is free)."""
-    now = time.time()
-    for directory in cache.glob("build-*"):
-        lock = directory / BUILD_LOCK
+@contextlib.contextmanager
+def build_directory(cache: Path, prefix: str):
+    """A new build directory in `cache`, its marker written and locked first; removed on
+    leaving."""
+    workdir = Path(tempfile.mkdtemp(prefix=f"{BUILD_PREFIX}{prefix}-", suffix=BUILD_SUFFIX,
+                                    dir=cache))
+    try:
+        marker = os.open(workdir / BUILD_MARKER,
+                         os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
         try:
-            if now - directory.stat().st_mtime < STALE_AFTER_SECONDS:
+            fcntl.flock(marker, fcntl.LOCK_EX)
+            os.write(marker, MARKER_TEXT)
+            yield workdir
+        finally:
+            os.close(marker)     # releases the lock
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
+
+
+def remove_stale_builds(cache: Path) -> None:
+    """Remove the build directories chaingen made whose build is no longer running: named as
+    build_directory names them, a directory itself (no link is followed), more than
+    STALE_AFTER_SECONDS old, holding the marker (a regular file with MARKER_TEXT) unlocked.
+    Nothing is created in a directory that is not removed."""
+    now = time.time()
+    for directory in cache.glob(f"{BUILD_PREFIX}*{BUILD_SUFFIX}"):
+        try:
+            status = os.lstat(directory)
+            if (not stat.S_ISDIR(status.st_mode)
+                    or now - status.st_mtime < STALE_AFTER_SECONDS):
                 continue
-            with open(lock, "a") as handle:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            marker = os.open(directory / BUILD_MARKER,
+                             os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        except OSError:
+            continue     # no marker: not chaingen's; or removed meanwhile
+        try:
+            if not stat.S_ISREG(os.fstat(marker).st_mode):
+                continue
+            fcntl.flock(marker, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.pread(marker, len(MARKER_TEXT) + 1, 0) != MARKER_TEXT:
+                continue
+            if stat.S_ISDIR(os.lstat(directory).st_mode):
                 shutil.rmtree(directory, ignore_errors=True)
-        except (BlockingIOError, FileNotFoundError, NotADirectoryError):
-            continue     # running, or removed meanwhile
+        except OSError:
+            continue     # running (locked), or removed meanwhile
+        finally:
+            os.close(marker)
 
 
 def _die_with_parent() -> None:
@@ -278,39 +322,35 @@ def build_shared_library(prefix: str, files: dict[str, str], sources: list[str],
 
 def _compile(prefix, files, sources, cc, common, flags, source_flags, digest, cache,
              library) -> None:
-    workdir = Path(tempfile.mkdtemp(prefix=f"build-{prefix}-", dir=cache))
     log = cache / f"lib{prefix}-{digest}.log"
-    try:
-        with locked(workdir / BUILD_LOCK):
-            for name, text in files.items():
-                (workdir / name).write_text(text)
-            define = f'-D{prefix.upper()}_BUILD_HASH="{digest}"'
-            commands = [[cc, *common, *source_flags.get(source, flags), define, "-c", source,
-                         "-o", f"{source}.o"] for source in sources]
-            processes = []
-            try:
-                for command in commands:
-                    processes.append(_start(command, workdir))
-                errors = [process.communicate()[1] for process in processes]
-            finally:
-                for process in processes:
-                    if process.poll() is None:
-                        process.kill()
-                        process.wait()
-            for command, process, stderr in zip(commands, processes, errors):
-                if process.returncode != 0:
-                    raise _failure(f"compiling {prefix}", command, process.returncode, stderr,
-                                   log)
-            output = workdir / library.name
-            command = [cc, "-shared", "-o", str(output),
-                       *(f"{source}.o" for source in sources), "-lm"]
-            linker = _start(command, workdir)
-            _, stderr = linker.communicate()
-            if linker.returncode != 0:
-                raise _failure(f"linking {prefix}", command, linker.returncode, stderr, log)
-            record = {"build_hash": digest, "size": output.stat().st_size,
-                      "sha256": file_digest(output)}
-            os.replace(output, library)   # atomic: a concurrent loader sees all or nothing
-            write_text(side_file(library), json.dumps(record) + "\n")
-    finally:
-        shutil.rmtree(workdir, ignore_errors=True)
+    with build_directory(cache, prefix) as workdir:
+        for name, text in files.items():
+            (workdir / name).write_text(text)
+        define = f'-D{prefix.upper()}_BUILD_HASH="{digest}"'
+        commands = [[cc, *common, *source_flags.get(source, flags), define, "-c", source,
+                     "-o", f"{source}.o"] for source in sources]
+        processes = []
+        try:
+            for command in commands:
+                processes.append(_start(command, workdir))
+            errors = [process.communicate()[1] for process in processes]
+        finally:
+            for process in processes:
+                if process.poll() is None:
+                    process.kill()
+                    process.wait()
+        for command, process, stderr in zip(commands, processes, errors):
+            if process.returncode != 0:
+                raise _failure(f"compiling {prefix}", command, process.returncode, stderr,
+                               log)
+        output = workdir / library.name
+        command = [cc, "-shared", "-o", str(output),
+                   *(f"{source}.o" for source in sources), "-lm"]
+        linker = _start(command, workdir)
+        _, stderr = linker.communicate()
+        if linker.returncode != 0:
+            raise _failure(f"linking {prefix}", command, linker.returncode, stderr, log)
+        record = {"build_hash": digest, "size": output.stat().st_size,
+                  "sha256": file_digest(output)}
+        os.replace(output, library)   # atomic: a concurrent loader sees all or nothing
+        write_text(side_file(library), json.dumps(record) + "\n")
