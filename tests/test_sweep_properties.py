@@ -3,10 +3,11 @@
 Compile tier: random sweep specs over the reference scenes (axes, modes, every, t_end, orders,
 adaptive steps), each row of runs.parquet and each kept trajectory checked against a single
 `simulate` of the same numbers with a solver built the same way: the final state, the metrics
-and the samples, bitwise. The solvers are few (SOLVERS: scene, method, order, parameters), built
-once each and shared by the examples, and every run is short, so 200 examples take about a
-minute. Fast tier: the numpy screen of a spec's runs (checks.py) passes no run that the scene
-reader refuses.
+and the samples, bitwise. Durations are drawn in whole steps (a t_end between steps is refused,
+docs/sweep-format.md section 5), now and then one between steps, which must be refused. The
+solvers are few (SOLVERS: scene, method, order, parameters), built once each and shared by the
+examples, and every run is short, so 200 examples take about a minute. Fast tier: the numpy
+screen of a spec's runs (checks.py) passes no run that the scene reader refuses.
 """
 from __future__ import annotations
 
@@ -37,7 +38,12 @@ SOLVERS = (("three_link_mono", "es", 2, None), ("three_link_mono", "es", 4, None
            ("three_link_gravity", "midpoint", 2, None), ("four_link_actuated", "vi", 2, None))
 
 RUN_AXES = {"initial.angles[0]": (-1.0, 1.0), "initial.velocities[1]": (-1.0, 1.0),
-            "simulation.dt": (0.004, 0.02), "simulation.t_end": (0.02, 0.2)}
+            "simulation.dt": (0.004, 0.02), "simulation.t_end": (0.04, 0.2)}
+#: dt and t_end values of whole steps: every dt here divides every t_end, and the midpoints of
+#: the t_ends (a range's values) too. OFF_GRID divides none and is divided by none.
+DTS = (0.004, 0.005, 0.01, 0.02)
+T_ENDS = (0.04, 0.08, 0.12, 0.2)
+OFF_GRID = 0.013
 
 _SINGLE: dict = {}
 
@@ -67,8 +73,22 @@ def sweep_specs(draw):
     value = st.floats(0.0, 1.0)
     count = draw(st.integers(1, 3))
     axes = {}
+    off_grid = draw(st.integers(0, 9)) == 0        # one spec in ten: a duration between steps
     for name in names:
         low, high = bounds[name]
+        if name in ("simulation.dt", "simulation.t_end"):
+            grid = DTS if name == "simulation.dt" else T_ENDS
+            values = [draw(st.sampled_from(grid)) for _ in range(count)]
+            if off_grid and not {"simulation.dt", "simulation.t_end"} & set(axes):
+                values[0] = OFF_GRID        # one axis only (0.013 s of 0.013 s is one step)
+            if mode == "sample":
+                axes[name] = {"from": values[0], "to": values[0]}
+            elif name == "simulation.t_end" and not off_grid and draw(st.booleans()):
+                axes[name] = {"from": values[0], "to": high,
+                              "num": count if mode == "zip" else draw(st.integers(1, 2))}
+            else:
+                axes[name] = values if mode == "zip" else values[:draw(st.integers(1, count))]
+            continue
         if mode == "sample":
             axes[name] = {"from": low, "to": low + draw(value) * (high - low)}
         elif draw(st.booleans()):
@@ -78,7 +98,9 @@ def sweep_specs(draw):
                           "num": count if mode == "zip" else draw(st.integers(1, 2))}
     document = {"scene": str(ROOT / "scenes" / f"{scene_name}.toml"), "method": method,
                 "order": order, "mode": mode, "axes": axes,
-                "t_end": draw(st.sampled_from([0.01, 0.05, 0.13, 0.2])),
+                "t_end": OFF_GRID if off_grid and not ({"simulation.dt", "simulation.t_end"}
+                                                       & set(axes))
+                else draw(st.sampled_from((0.02,) + T_ENDS)),
                 "every": draw(st.sampled_from([0, 1, 2, 3, 7, 40]))}
     if mode == "sample":
         document.update(samples=draw(st.integers(1, 4)),
@@ -86,7 +108,7 @@ def sweep_specs(draw):
                         seed=draw(st.integers(0, 99)))
     if draw(st.booleans()):
         document.update(rtol=1e-6, atol=1e-6)
-    return document
+    return document, off_grid
 
 
 def check_row(spec, row, data, index: int) -> None:
@@ -138,16 +160,20 @@ def check_row(spec, row, data, index: int) -> None:
 @pytest.mark.compile
 @settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-@given(document=sweep_specs())
-def test_every_sweep_row_is_the_single_run_of_its_numbers(document):
+@given(drawn=sweep_specs())
+def test_every_sweep_row_is_the_single_run_of_its_numbers(drawn):
     import xarray as xr
 
+    document, off_grid = drawn
     try:
         spec = parse_spec(document)
     except SweepError as error:
-        # a drawn value the scene format refuses (a spring segment of zero length)
-        assert "zero length" in str(error), error
+        # a drawn value the scene format refuses (a spring segment of zero length), or a
+        # duration drawn between steps
+        assert "zero length" in str(error) or (off_grid and "not a whole number" in str(error)), \
+            error
         assume(False)
+    assert not off_grid, f"a duration between steps was accepted: {document}"
     with tempfile.TemporaryDirectory(prefix="chaingen-sweep-property-") as directory:
         out = Path(directory) / "out"
         run_sweep(spec, out, workers=1)

@@ -531,8 +531,10 @@ def test_a_resumed_sweep_removes_its_own_leftovers_and_nothing_else(finished, tm
     out = copy_of(finished, tmp_path)
     record = json.loads((out / "sweep.json").read_text())
     (out / "parts" / "runs-000000003.parquet").unlink()
-    leftovers = [out / "parts" / ".runs-000000003.parquet.k2j4x9_q.parquet",
-                 out / ".runs.parquet.a8bq3x0z.parquet", out / ".sweep.json.z0y9x8w7"]
+    store = record["store"]
+    leftovers = [out / "parts" / f".runs-000000003.parquet.{store}.0a1b2c3d4e5f6789.parquet",
+                 out / f".runs.parquet.{store}.a8b03f00aa11bb22.parquet",
+                 out / f".sweep.json.{store}.00ff00ff00ff00ff"]
     for path in leftovers:
         path.write_bytes(b"half")
     staging = out / f".trajectories.zarr.{record['store']}.staging"

@@ -70,10 +70,24 @@ class Axis:
     low: float | None = None
     high: float | None = None
     spacing: str = "linear"
+    num: int = 0                  # a range of product or zip mode: its count (values not made)
 
     @property
     def path(self) -> str:
         return self.number.path
+
+    @property
+    def size(self) -> int:
+        """The axis's count of values, known before any is made."""
+        return self.num or len(self.values)
+
+    def grid(self) -> np.ndarray:
+        """The axis's values (a range's made now, after the run count is checked)."""
+        if not self.num:
+            return np.array(self.values, dtype=np.float64)
+        if self.spacing == "log":
+            return np.geomspace(self.low, self.high, self.num)
+        return np.linspace(self.low, self.high, self.num)
 
 
 class Runs(Sequence):
@@ -275,7 +289,7 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
                                                   f"({axis.path}); give each number once")
         named[axis.path] = key
     if mode == "zip":
-        lengths = {axis.path: len(axis.values) for axis in axes}
+        lengths = {axis.path: axis.size for axis in axes}
         if len(set(lengths.values())) > 1:
             raise fail("axes", "zip axes must have equal lengths, got "
                                + ", ".join(f"{path}: {count}" for path, count in lengths.items()))
@@ -340,19 +354,19 @@ def _axis(scene: Scene, path: str, value, mode: str, source: str) -> Axis:
     if num > MAX_RUNS:
         raise SweepError(f"{source}: {where}.num: {num} values, more than the {MAX_RUNS} runs "
                          "a sweep may have")
-    grid = (np.geomspace(low, high, num) if spacing == "log" else np.linspace(low, high, num))
-    return Axis(number, values=tuple(grid.tolist()), spacing=spacing)
+    return Axis(number, low=float(low), high=float(high), spacing=spacing, num=num)
 
 
 def _expand(axes, mode, samples, sampler, seed, source) -> Runs:
     if mode == "product":
-        count = math.prod(len(axis.values) for axis in axes)
+        # The count from the axes' lengths, before any range's values are made.
+        count = math.prod(axis.size for axis in axes)
         if count > MAX_RUNS:
             raise SweepError(f"{source}: axes: {count} runs, more than {MAX_RUNS}")
-        grids = np.meshgrid(*[np.array(axis.values) for axis in axes], indexing="ij")
+        grids = np.meshgrid(*[axis.grid() for axis in axes], indexing="ij")
         return Runs({axis.path: grid.ravel() for axis, grid in zip(axes, grids)})
     if mode == "zip":
-        return Runs({axis.path: np.array(axis.values) for axis in axes})
+        return Runs({axis.path: axis.grid() for axis in axes})
     from scipy.stats import qmc
 
     if sampler == "sobol":
@@ -385,6 +399,45 @@ def _check_values(spec: SweepSpec) -> None:
     check_runs(spec.scene, runs.columns, spec.source, describe, SweepError)
 
 
+#: t_end / dt is a whole number of steps when it is within this relative distance of one (the
+#: round-off of the division and of the two numbers' decimal spellings, with a wide margin).
+WHOLE_STEPS_RTOL = 1e-9
+
+
+def _check_whole_steps(spec: SweepSpec, dts: np.ndarray, ends: np.ndarray,
+                       ratio: np.ndarray) -> None:
+    """Every run's t_end a whole number of its steps of dt (to round-off): a run takes
+    round(t_end / dt) steps, as `chaingen simulate` does, so any other t_end would be a number
+    the table records and the run did not use. The first other is named with its run and the
+    whole-step values near it (of the t_end axis, or else of the dt axis, or else of t_end)."""
+    with np.errstate(all="ignore"):
+        steps = np.maximum(np.rint(ratio), 1.0)
+        off = np.flatnonzero(~(np.abs(ratio - steps) <= WHOLE_STEPS_RTOL * steps))
+    if not len(off):
+        return
+    index = int(off[0])
+    dt, t_end, r = float(dts[index]), float(ends[index]), float(ratio[index])
+    below, above = max(1, math.floor(r)), max(1, math.floor(r)) + (r >= 1)
+    counts = sorted({below, above})
+    axes = spec.runs.columns
+    if "simulation.t_end" in axes or "simulation.dt" not in axes:
+        key = 'axes."simulation.t_end"' if "simulation.t_end" in axes else "t_end"
+        near = " or ".join(f"{count * dt:.12g} ({_steps(count)})" for count in counts)
+        what = f"t_end values near it that are whole steps: {near}"
+    else:
+        key = 'axes."simulation.dt"'
+        near = " or ".join(f"{t_end / count:.12g} ({_steps(count)})" for count in counts)
+        what = f"dt values near it that divide t_end: {near}"
+    run = f"run {index}: " if key.startswith("axes") else ""
+    raise SweepError(f"{spec.source}: {key}: {run}t_end = {t_end:.12g} s is {r:.6g} steps of "
+                     f"dt = {dt:.12g} s, not a whole number (a run takes round(t_end / dt) "
+                     f"steps); {what}")
+
+
+def _steps(count: int) -> str:
+    return f"{count} step{'s' if count != 1 else ''}"
+
+
 def _check_sizes(spec: SweepSpec) -> None:
     """Step counts and sample sizes within simulate's limits (MAX_STEPS, MAX_SAMPLE_BYTES):
     a run's steps, the samples a chunk of runs holds in memory, the trajectories on disk."""
@@ -401,6 +454,7 @@ def _check_sizes(spec: SweepSpec) -> None:
         raise SweepError(f"{spec.source}: {key}: run {index}: t_end / dt = {ratio[index]:.3g} "
                          f"steps, more than the {MAX_STEPS:.0e} a run may take (dt = "
                          f"{dts[index]:g} s, t_end = {ends[index]:g} s)")
+    _check_whole_steps(spec, dts, ends, ratio)
     if not spec.every:
         return
     samples = spec.sample_count()

@@ -15,7 +15,13 @@ spec into the same OUT is refused (its digest differs).
 
 OUT never loses a file the sweep did not write: an OUT that holds anything the sweep does not
 know as its own (or a symbolic link) is refused before any work, and the sweep removes only
-what it wrote (its own staged leftovers).
+what it wrote: its own staged leftovers, whose names carry this OUT's store id and a random
+token (`.sweep.json.<store id>.<token>`), never a name a user could have chosen alike.
+
+Every part file records a digest of the trajectory rows its chunk wrote (the samples as they
+were written); a resumed sweep, and assembly, read each stored chunk's rows back and compare,
+so a lost or garbled zarr chunk is found (one line saying what to remove), never a run marked
+done whose trajectory reads back NaN.
 """
 from __future__ import annotations
 
@@ -23,7 +29,6 @@ import contextlib
 import json
 import os
 import platform
-import re
 import shutil
 import stat
 import time
@@ -33,21 +38,27 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import ChaingenError, RunFailedError
-from ...runtime.files import directory_lock, staged_file, write_text
-from ...version import VERSION
+from ...runtime.files import directory_lock
+from .outfiles import (
+    FIGURE,
+    PART_NAME,
+    PARTS,
+    RUNS,
+    SPEC_FILE,
+    TRAJECTORIES,
+    enclosing_sweep,
+    leftover,
+    lexists,
+    removed_on_failure,
+    staged,
+    trajectory_digest,
+    versions,
+)
 from .runs import ChunkResult, sample_count
 from .spec import SweepSpec
 
-SPEC_FILE = "sweep.json"
-PARTS = "parts"
-RUNS = "runs.parquet"
-TRAJECTORIES = "trajectories.zarr"
-#: A part file's name, and the leftovers of writes killed half-way (staged_file's names).
-PART_NAME = re.compile(r"runs-([0-9]{9})\.parquet")
-PART_LEFTOVER = re.compile(r"\.runs-[0-9]{9}\.parquet\.[A-Za-z0-9_]+\.parquet")
-TOP_LEFTOVER = re.compile(r"\.(?:sweep\.json\.[A-Za-z0-9_]+|runs\.parquet\.[A-Za-z0-9_]+"
-                          r"\.parquet)")
-FIGURE = re.compile(r"[\w.-]+\.png|\.[\w.-]+\.png\.[A-Za-z0-9_]+(?:\.png)?")
+__all__ = ["PARTS", "RUNS", "SPEC_FILE", "TRAJECTORIES", "IncompleteSweepError", "StoreError",
+           "StoreWriteError", "SweepStore"]
 #: The key of a part file's metadata: which sweep (digest) and which OUT (store id) wrote it.
 PART_KEY = b"chaingen_sweep"
 
@@ -65,19 +76,6 @@ class IncompleteSweepError(RunFailedError):
     """Assembly found a chunk missing or not this sweep's: no runs.parquet is written."""
 
 
-def _versions() -> dict:
-    import importlib.metadata
-
-    versions = {"chaingen": VERSION, "python": platform.python_version()}
-    for package in ("numpy", "sympy", "casadi", "pyarrow", "xarray", "zarr", "dask",
-                    "distributed"):
-        try:
-            versions[package] = importlib.metadata.version(package)
-        except importlib.metadata.PackageNotFoundError:
-            pass
-    return versions
-
-
 @contextlib.contextmanager
 def writes(path: Path, what: str):
     """OSError while writing `path` (ENOSPC, EIO, a read-only file system) -> StoreWriteError,
@@ -88,20 +86,6 @@ def writes(path: Path, what: str):
         raise StoreWriteError(f"{path}: cannot write {what}: {error.strerror or error}; "
                               "nothing of it is kept (free space and run the sweep again "
                               "to resume)") from None
-
-
-@contextlib.contextmanager
-def _removed_on_failure(directory: Path):
-    """The directory being built, removed if the block fails."""
-    try:
-        yield
-    except BaseException:
-        shutil.rmtree(directory, ignore_errors=True)
-        raise
-
-
-def _lexists(path: Path) -> bool:
-    return os.path.lexists(path)
 
 
 class SweepStore:
@@ -122,9 +106,13 @@ class SweepStore:
         sweep does not know as its own; and OUT (or where it will be made) is writable.
         Writes nothing."""
         out = self.out
+        enclosing = enclosing_sweep(out)
+        if enclosing is not None:
+            raise StoreError(f"{out}: lies inside the sweep directory {enclosing} (it holds "
+                             f"{SPEC_FILE}); give an OUT outside every sweep's OUT")
         if os.path.islink(out) and not out.is_dir():
             raise StoreError(f"{out}: is a symbolic link to no directory; give a directory")
-        if _lexists(out) and not out.is_dir():
+        if lexists(out) and not out.is_dir():
             raise StoreError(f"{out}: exists and is not a directory")
         if not out.exists():
             parent = out.parent
@@ -177,7 +165,7 @@ class SweepStore:
             for part in sorted(path.iterdir()):
                 part_mode = os.lstat(part).st_mode
                 if not (stat.S_ISREG(part_mode) and (PART_NAME.fullmatch(part.name)
-                                                     or PART_LEFTOVER.fullmatch(part.name))):
+                                                     or self._part_leftover(part.name))):
                     raise StoreError(f"{part}: was not written by this sweep; move it out of "
                                      f"{path} or give another OUT")
             return
@@ -191,7 +179,7 @@ class SweepStore:
             return
         if name == self._staging_name() and directory:
             return
-        if regular and (name in (SPEC_FILE, RUNS) or TOP_LEFTOVER.fullmatch(name)
+        if regular and (name in (SPEC_FILE, RUNS) or self._top_leftover(name)
                         or FIGURE.fullmatch(name)):
             return
         raise StoreError(f"{path}: was not written by this sweep; move it out of {self.out} "
@@ -199,6 +187,19 @@ class SweepStore:
 
     def _staging_name(self) -> str:
         return f".{TRAJECTORIES}.{self.store_id}.staging"
+
+    def _top_leftover(self, name: str) -> bool:
+        return bool(leftover(self.store_id, r"sweep\.json|runs\.parquet").fullmatch(name))
+
+    def _part_leftover(self, name: str) -> bool:
+        return bool(leftover(self.store_id, r"runs-[0-9]{9}\.parquet").fullmatch(name))
+
+    def _staged(self, path: Path, suffix: str = ""):
+        return staged(path, self.store_id, suffix)
+
+    def _write_text(self, path: Path, text: str) -> None:
+        with self._staged(path) as temporary:
+            temporary.write_text(text)
 
     @contextlib.contextmanager
     def writing(self):
@@ -231,12 +232,12 @@ class SweepStore:
                       "spacing": {axis.path: axis.spacing for axis in self.spec.axes},
                       "units": {axis.path: axis.number.unit for axis in self.spec.axes},
                       "runs": len(self.spec.runs), "solver": build_hash,
-                      "versions": _versions(), "machine": platform.platform(),
+                      "versions": versions(), "machine": platform.platform(),
                       "processor": platform.processor() or platform.machine(),
                       "engine": engine, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
             # The record first: it marks OUT as this sweep's; what follows is its own.
             with writes(record_path, "the sweep record"):
-                write_text(record_path, json.dumps(record, indent=2, default=str) + "\n")
+                self._write_text(record_path, json.dumps(record, indent=2, default=str) + "\n")
         self._remove_leftovers()
         with writes(self.out / PARTS, "the parts directory"):
             (self.out / PARTS).mkdir(exist_ok=True)
@@ -244,6 +245,8 @@ class SweepStore:
         if self.spec.every:
             if (self.out / TRAJECTORIES).is_dir():
                 self._check_trajectories()
+                for first in sorted(stored):
+                    self._verify_rows(first, dict(self.chunks())[first])
             elif stored:
                 raise StoreError(f"{self.out / TRAJECTORIES}: missing while {len(stored)} "
                                  f"chunks are stored; remove {self.out / PARTS} to compute "
@@ -253,10 +256,13 @@ class SweepStore:
         return stored
 
     def _remove_leftovers(self) -> None:
-        """What this sweep wrote half-way before it was killed (its staged files)."""
-        for path in list(self.out.iterdir()) + list((self.out / PARTS).glob(".runs-*")):
-            if path.is_file() and not path.is_symlink() and (
-                    PART_LEFTOVER.fullmatch(path.name) or TOP_LEFTOVER.fullmatch(path.name)):
+        """What this sweep wrote half-way before it was killed (its staged files, named by this
+        OUT's store id: never a file of the user's)."""
+        candidates = [(path, self._top_leftover) for path in self.out.iterdir()]
+        if (self.out / PARTS).is_dir():
+            candidates += [(path, self._part_leftover) for path in (self.out / PARTS).iterdir()]
+        for path, ours in candidates:
+            if ours(path.name) and path.is_file() and not path.is_symlink():
                 path.unlink()
         staging = self.out / self._staging_name()
         if staging.is_dir() and not staging.is_symlink():
@@ -277,7 +283,7 @@ class SweepStore:
             firsts.add(first)
         return firsts
 
-    def _verify_part(self, path: Path, first: int, count: int | None) -> None:
+    def _verify_part(self, path: Path, first: int, count: int | None) -> dict:
         import pyarrow.parquet as pq
 
         try:
@@ -294,6 +300,33 @@ class SweepStore:
         if key.get("store") != self.store_id:
             raise StoreError(f"{path}: was written for another OUT (store "
                              f"{key.get('store')}); remove it and run the sweep again")
+        if self.spec.every and not isinstance(key.get("trajectories"), str):
+            raise StoreError(f"{path}: records no digest of its trajectories (written by an "
+                             "older chaingen, or without them); remove it and run the sweep "
+                             "again (its runs are computed anew)")
+        return key
+
+    def _verify_rows(self, first: int, count: int) -> None:
+        """The trajectory rows of a stored chunk read back as its part file says they were
+        written (the digest it records); else StoreError naming the part file to remove, so
+        that the chunk is computed and written again."""
+        import zarr
+
+        part = self.part_path(first)
+        key = self._verify_part(part, first, count)
+        path = self.out / TRAJECTORIES
+        remove = (f"remove {part} and run the sweep again (runs {first}..{first + count - 1} "
+                  "are computed and written anew)")
+        try:
+            group = zarr.open_group(path, mode="r")
+            rows = slice(first, first + count)
+            found = trajectory_digest({name: group[name][rows] for name in self._variables()})
+        except Exception as error:       # a lost or garbled chunk: zarr's, numcodecs' errors
+            raise StoreError(f"{path}: the trajectories of runs {first}..{first + count - 1} "
+                             f"are unreadable ({type(error).__name__}); {remove}") from None
+        if found != key["trajectories"]:
+            raise StoreError(f"{path}: the trajectories of runs {first}..{first + count - 1} "
+                             f"are not those the sweep wrote (a lost or altered chunk); {remove}")
 
     def chunks(self) -> list[tuple[int, int]]:
         """(first, count) of every chunk of the sweep."""
@@ -313,7 +346,7 @@ class SweepStore:
         spec, n = self.spec, self.spec.scene.n
         runs, samples = len(spec.runs), sample_count(spec)
         staging = self.out / self._staging_name()
-        with writes(self.out / TRAJECTORIES, "the trajectories"), _removed_on_failure(staging):
+        with writes(self.out / TRAJECTORIES, "the trajectories"), removed_on_failure(staging):
             group = zarr.open_group(staging, mode="w-", zarr_format=3)
             group.attrs.update({"scene": spec.scene.name, "method": spec.method,
                                 "sweep_digest": self.digest,
@@ -379,12 +412,14 @@ class SweepStore:
         if self._group is None:
             self._group = zarr.open_group(self.out / TRAJECTORIES, mode="r+")
         rows = slice(result.first, result.first + len(result.rows))
-        arrays = {"phi": result.phi, "omega": result.omega, "energy": result.energy,
-                  "constraint_error": result.constraint_error}
-        if not self._shared_time():
-            arrays["time"] = result.time
-        for name, values in arrays.items():
+        for name, values in self._trajectory_arrays(result).items():
             self._group[name][rows] = values
+
+    def _trajectory_arrays(self, result: ChunkResult) -> dict[str, np.ndarray]:
+        """A chunk's rows of each trajectory variable (float64, as stored)."""
+        arrays = {"phi": result.phi, "omega": result.omega, "energy": result.energy,
+                  "constraint_error": result.constraint_error, "time": result.time}
+        return {name: np.asarray(arrays[name], dtype=np.float64) for name in self._variables()}
 
     def _shared_time(self) -> bool:
         return not any(axis.path.startswith("simulation.") for axis in self.spec.axes)
@@ -402,13 +437,14 @@ class SweepStore:
 
         path = self.part_path(result.first)
         with writes(path, f"runs {result.first}..{result.first + len(result.rows) - 1}"):
+            key = {"digest": self.digest, "store": self.store_id, "first": result.first}
             if self.spec.every and result.phi is not None:
                 self.write_trajectories(result)
+                key["trajectories"] = trajectory_digest(self._trajectory_arrays(result))
             table = pa.Table.from_pylist(result.rows)
-            key = {"digest": self.digest, "store": self.store_id, "first": result.first}
             table = table.replace_schema_metadata({**(table.schema.metadata or {}),
                                                    PART_KEY: json.dumps(key).encode()})
-            with staged_file(path, suffix=".parquet") as temporary:
+            with self._staged(path, suffix=".parquet") as temporary:
                 pq.write_table(table, temporary)
 
     def assemble(self) -> Path:
@@ -431,6 +467,8 @@ class SweepStore:
         for first, count in self.chunks():
             path = self.part_path(first)
             self._verify_part(path, first, count)
+            if self.spec.every:
+                self._verify_rows(first, count)
             table = pq.read_table(path)
             runs = table.column("run").to_numpy()
             if not np.array_equal(runs, np.arange(first, first + count)):
@@ -442,9 +480,9 @@ class SweepStore:
         target = self.out / RUNS
         record_path = self.out / SPEC_FILE
         with writes(target, "the runs table"):
-            with staged_file(target, suffix=".parquet") as temporary:
+            with self._staged(target, suffix=".parquet") as temporary:
                 pq.write_table(table, temporary)
             record = json.loads(record_path.read_text())
             record["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-            write_text(record_path, json.dumps(record, indent=2, default=str) + "\n")
+            self._write_text(record_path, json.dumps(record, indent=2, default=str) + "\n")
         return target
