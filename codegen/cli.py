@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import sys
 from pathlib import Path
@@ -27,6 +28,8 @@ from .version import VERSION
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
+#: OSErrors of a path no file can have: bad input wherever they are met (exit status 2).
+PATH_ERRORS = (errno.ENAMETOOLONG, errno.ELOOP)
 
 
 def parser() -> argparse.ArgumentParser:
@@ -411,8 +414,6 @@ def main(argv: list[str] | None = None) -> int:
     (bad input) or 1 (a run that failed); Ctrl-C exits with 130; an unexpected error is one
     line too, with the way to its traceback (--debug or CHAINGEN_DEBUG=1 shows it)."""
     args = parser().parse_args(argv)
-    if getattr(args, "scene", None) is not None:
-        args.scene = scene_file(args.scene)    # a shipped scene's name: its installed file
     from .progress import set_quiet
     set_quiet(args.quiet)
     debug = args.debug or os.environ.get("CHAINGEN_DEBUG", "") not in ("", "0")
@@ -421,6 +422,8 @@ def main(argv: list[str] | None = None) -> int:
                 "plot": command_plot, "animate": command_animate, "sweep": command_sweep,
                 "export": command_export}
     try:
+        if getattr(args, "scene", None) is not None:
+            args.scene = scene_file(args.scene)    # a shipped scene's name: its installed file
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take
         return _error(f"{getattr(args, 'scene', '')}: {error}", EXIT_BAD_INPUT)
@@ -435,6 +438,16 @@ def main(argv: list[str] | None = None) -> int:
         # The reader of our output went away (`chaingen ... | head`): nothing more to say.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_FAILED
+    except OSError as error:
+        if error.errno not in PATH_ERRORS:
+            if debug:
+                raise
+            return _unexpected(error)
+        # A path no file can have (a name too long, a loop of links), met where it is read
+        # or checked: bad input, wherever on the command line or in a file it was given.
+        name = str(error.filename)
+        name = name if len(name) <= 80 else name[:77] + "..."
+        return _error(f"{name}: {error.strerror}", EXIT_BAD_INPUT)
     except RecursionError:
         if debug:
             raise
@@ -442,8 +455,12 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as error:
         if debug:
             raise
-        return _error(f"internal error: {type(error).__name__}: {error} (run again with "
-                      "--debug or CHAINGEN_DEBUG=1 for the traceback)", EXIT_FAILED)
+        return _unexpected(error)
+
+
+def _unexpected(error: BaseException) -> int:
+    return _error(f"internal error: {type(error).__name__}: {error} (run again with "
+                  "--debug or CHAINGEN_DEBUG=1 for the traceback)", EXIT_FAILED)
 
 
 def _error(message: str, status: int) -> int:

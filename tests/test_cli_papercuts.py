@@ -272,3 +272,40 @@ def test_an_adaptive_run_records_its_tolerances(tmp_path):
     meta = json.loads((tmp_path / "run.csv.json").read_text())
     assert (meta["rtol"], meta["atol"]) == (1e-6, 1e-7)
     assert meta["adaptive_steps"]["accepted"] >= meta["n_steps"]
+
+
+# -- a path no file can have, given as an input: bad input, one line -------------------------------
+
+LONG = "b" * 300
+PATH_INPUTS = [
+    ("simulate", f"{LONG}.toml"), ("simulate", LONG), ("check", f"{LONG}.toml"),
+    ("generate", f"{LONG}.toml"), ("export", f"{LONG}.toml", "--mjcf", "x.xml"),
+    ("plot", f"{LONG}.csv"), ("animate", "SCENE", f"{LONG}.csv", "-o", "x.gif"),
+    ("bench", "--skip-reference", "--skip-scaling", "--skip-sweep", "--out", "r.md",
+     "--figures", LONG),
+    ("simulate", "loop/scene.toml"), ("plot", "loop/run.csv"),
+]
+
+
+@pytest.mark.parametrize("command", PATH_INPUTS, ids=[" ".join(command)[:40] + ("..." if
+                                                      LONG in " ".join(command) else "")
+                                                      for command in PATH_INPUTS])
+def test_a_path_no_file_can_have_is_bad_input(tmp_path, monkeypatch, command):
+    """A name too long (ENAMETOOLONG) or a loop of links (ELOOP) met where an input is read
+    or checked was an internal error (exit 1) or a traceback (a scene's name, looked up among
+    the shipped scenes): now one line, exit status 2, nothing written."""
+    import chaingen.studies.bench
+
+    def refused(*_, **__):
+        raise AssertionError("the command started its work")
+    monkeypatch.setattr(chaingen.studies.bench, "run_bench", refused)
+    (tmp_path / "loop").symlink_to("loop")
+    arguments = [str(MONO) if argument == "SCENE" else argument for argument in command]
+    result = chaingen_in_process(*arguments, "--quiet", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("chaingen: error: "), result.stderr
+    assert "internal error" not in lines[0]
+    assert ("File name too long" in lines[0] or "symbolic links" in lines[0]
+            or "no such" in lines[0].lower() or "cannot read" in lines[0]), lines[0]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["loop"]

@@ -24,6 +24,9 @@ def scene_file(path: str | os.PathLike[str]) -> Path:
         shipped = importlib.resources.files(SHIPPED_SCENES) / name
     except ModuleNotFoundError:
         return path
-    if isinstance(shipped, Path) and shipped.is_file():
-        return shipped
+    try:
+        if isinstance(shipped, Path) and shipped.is_file():
+            return shipped
+    except OSError:     # a name no file can have (too long): the argument, refused as given
+        pass
     return path
