@@ -98,6 +98,7 @@ class SweepStore:
         self.digest = spec.digest
         self.store_id = store_id    # this OUT's id (sweep.json), once read or set up
         self._group = None          # the zarr group of the trajectories, once opened
+        self._reader = None         # the same, opened to read back what is stored
 
     # -- opening ------------------------------------------------------------------------------
 
@@ -245,8 +246,9 @@ class SweepStore:
         if self.spec.every:
             if (self.out / TRAJECTORIES).is_dir():
                 self._check_trajectories()
+                counts = dict(self.chunks())
                 for first in sorted(stored):
-                    self._verify_rows(first, dict(self.chunks())[first])
+                    self._verify_rows(first, counts[first])
             elif stored:
                 raise StoreError(f"{self.out / TRAJECTORIES}: missing while {len(stored)} "
                                  f"chunks are stored; remove {self.out / PARTS} to compute "
@@ -318,8 +320,9 @@ class SweepStore:
         remove = (f"remove {part} and run the sweep again (runs {first}..{first + count - 1} "
                   "are computed and written anew)")
         try:
-            group = zarr.open_group(path, mode="r")
-            rows = slice(first, first + count)
+            if self._reader is None:
+                self._reader = zarr.open_group(path, mode="r")
+            group, rows = self._reader, slice(first, first + count)
             found = trajectory_digest({name: group[name][rows] for name in self._variables()})
         except Exception as error:       # a lost or garbled chunk: zarr's, numcodecs' errors
             raise StoreError(f"{path}: the trajectories of runs {first}..{first + count - 1} "
