@@ -94,8 +94,9 @@ STATUSES = (
            "start state or posture has one of zero length (under 1e-9 of that size, the scene "
            "reader's limit): its direction is undefined there (docs/model.md, section 2)",
            "a spring segment came within {segment_tolerance} of the geometry's size of zero "
-           "length or passed through it (turned by 90 degrees or more in one step), or the "
-           "start state or posture has one of zero length, where its direction is undefined",
+           "length or passed through it (turned by 90 degrees or more in one step), or one is "
+           "shorter than 1e-9 of that size in the start state or posture given, where its "
+           "direction is undefined",
            when="segments"),
     Status("INTERRUPTED", 7, "simulate_observed or simulate_controlled: the observer, the "
                              "controller or control->stop asked to stop",
