@@ -3,7 +3,8 @@
 It needs neither SymPy nor CasADi, and imports nothing of the rest of chaingen: a generated
 package directory is all it reads. `contract` states the C interface once; `interface` makes
 ctypes of it; `build` compiles a package into the cache; `solver` loads and drives it;
-`workspaces` gives each running call a C workspace of its own; `runs` watches a running
+`workspaces` gives each running call a C workspace of its own; `parameters` reads run-time
+parameter values (a mapping by name) and checks their ranges; `runs` watches a running
 simulate (progress, Ctrl-C, StopSignal); `stepper` steps a control loop; `keypaths` spells
 each key path of a scene's numbers one way; `trajectory` writes and reads trajectory files;
 `files` writes all or nothing.

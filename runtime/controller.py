@@ -11,6 +11,8 @@ import ctypes
 
 import numpy as np
 
+from .interface import real_array
+
 #: The C type of <prefix>_controller, for Python controllers; the arrays as plain addresses
 #: (ints), which ctypes passes without building pointer objects.
 _CONTROLLER = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_long, ctypes.c_double, ctypes.c_void_p,
@@ -53,7 +55,7 @@ def controller_address(controller, n: int, nu: int, errors: list):
     def call(step, t, phi, omega, u, context) -> int:
         try:
             value = controller(t, view(phi, n).copy(), view(omega, n).copy())
-            torques = np.asarray(value, dtype=np.float64)
+            torques = real_array(value, "controller: its torques")
             if torques.shape != (nu,) or not np.all(np.isfinite(torques)):
                 raise ValueError(f"controller: must return {nu} finite torques, got "
                                  f"{value!r} at t = {t:g} s")

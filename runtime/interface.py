@@ -1,15 +1,77 @@
-"""The contract's C types seen from Python: ctypes structures, signatures and NewtonOptions.
+"""The contract's C types seen from Python: ctypes structures, signatures, NewtonOptions, and
+the one conversion of a user's numbers to C doubles.
 
 Everything here is built from chaingen.runtime.contract (the fields of the options and stats
 structs) and from a package's manifest (the parameter list of each entry point it exports), so
-the loader never states a C signature of its own.
+the loader never states a C signature of its own. Every number a user gives the runtime for C
+(states, angles, rates, torques, parameter values, dt, tolerances) goes through `real_array` or
+`real_number`: numpy alone would take True as 1.0 and '2.0' as 2.0, and drop the imaginary part
+of a complex number with only a warning.
 """
 from __future__ import annotations
 
 import ctypes
 import dataclasses
+import operator
+
+import numpy as np
 
 from . import contract
+
+#: Values numpy would turn into a float that are no real number a user meant.
+_NOT_REAL = (bool, np.bool_, str, bytes, complex, np.complexfloating)
+
+
+def _not_real(values):
+    """The first value in `values` (nested lists, tuples, object arrays) that is a bool, a
+    complex number or a string, or None."""
+    if isinstance(values, np.ndarray):
+        if values.dtype.kind in "fiu":
+            return None
+        if values.dtype.kind != "O":
+            return values.flat[0] if values.size else values.dtype
+        values = values.flat
+    elif not isinstance(values, (list, tuple)):
+        return values if isinstance(values, _NOT_REAL) else None
+    for item in values:
+        found = _not_real(item)
+        if found is not None:
+            return found
+    return None
+
+
+def real_array(values, name: str, shape: tuple | None = None, *,
+               noun: str = "real numbers") -> np.ndarray:
+    """`values` as a contiguous float64 array (of `shape`, if given), `name` naming them in a
+    one-line error: real numbers only (a bool, complex number or string is a TypeError)."""
+    if not (type(values) is np.ndarray and values.dtype.kind in "fiu"):
+        found = _not_real(values)
+        if found is None and not isinstance(values, (list, tuple)):
+            found = _not_real(np.asarray(values))    # a Series, a 0-d array, ...
+        if found is not None:
+            what = found if isinstance(found, np.dtype) else f"{type(found).__name__} {found!r}"
+            raise TypeError(f"{name}: must be {noun}, got {what}")
+    try:
+        array = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise TypeError(f"{name}: must be {noun} ({error})") from None
+    if shape is not None or not array.flags.c_contiguous:
+        array = np.ascontiguousarray(array)      # with a shape: a scalar is one entry
+    if shape is not None and array.shape != shape:
+        raise ValueError(f"{name} must have {shape[0] if len(shape) == 1 else shape} entries, "
+                         f"got shape {array.shape}")
+    return array
+
+
+def real_number(value, name: str) -> float:
+    """`value` as a float, `name` naming it in a one-line error: a real number only."""
+    if type(value) is float:
+        return value
+    array = real_array(value, name, noun="a real number")
+    if array.shape != ():
+        raise TypeError(f"{name}: must be a real number, got {type(value).__name__} of shape "
+                        f"{array.shape}")
+    return float(array)
 
 _C_SCALARS = {"int": ctypes.c_int, "long": ctypes.c_long, "double": ctypes.c_double,
               "size_t": ctypes.c_size_t, "volatile int": ctypes.c_int,
@@ -74,21 +136,41 @@ def _newton_options_class():
     return options
 
 
+def _option_value(field, value):
+    """The value of an options field as its Python type: a switch True, False, 1 or 0, an int
+    field an integer, a double a real number; anything else (a string, 2.5 iterations) is
+    refused rather than converted."""
+    name = f"NewtonOptions.{field.name}"
+    if field.switch:
+        if isinstance(value, (bool, np.bool_)) or (
+                isinstance(value, (int, np.integer)) and value in (0, 1)):
+            return bool(value)
+        raise TypeError(f"{name}: must be True or False (or 1, 0), got {value!r}")
+    if field.python_type is int:
+        try:
+            value = operator.index(value)
+        except TypeError:
+            raise TypeError(f"{name}: must be an integer, got {value!r}") from None
+        if not -2 ** 31 <= value < 2 ** 31:     # a C int would wrap it silently
+            raise ValueError(f"{name}: must fit a C int, got {value!r}")
+        return value
+    return real_number(value, name)
+
+
 def _check_options(options) -> None:
-    for field in contract.NEWTON_OPTIONS:     # a C int would wrap a larger value silently
-        value = getattr(options, field.name)
-        if field.c_type == "int" and not -2 ** 31 <= value < 2 ** 31:
-            raise ValueError(f"NewtonOptions.{field.name}: must fit a C int, got {value!r}")
-    for name in contract.ADAPTIVE_TOLERANCES:
-        value = getattr(options, name)
-        if not contract.is_adaptive_tolerance(value):
-            raise ValueError(f"NewtonOptions.{name}: must be {contract.ADAPTIVE_TOLERANCE_RULE}, "
-                             f"got {value!r}")
     modes = tuple(mode.value for mode in contract.JACOBIAN_MODES)
     if options.reuse_jacobian not in modes:
         names = ", ".join(f"{mode.value} {mode.comment}" for mode in contract.JACOBIAN_MODES)
         raise ValueError(f"NewtonOptions.reuse_jacobian: must be one of {names}, got "
                          f"{options.reuse_jacobian!r}")
+    for field in contract.NEWTON_OPTIONS:     # frozen: set through object.__setattr__
+        object.__setattr__(options, field.name,
+                           _option_value(field, getattr(options, field.name)))
+    for name in contract.ADAPTIVE_TOLERANCES:
+        value = getattr(options, name)
+        if not contract.is_adaptive_tolerance(value):
+            raise ValueError(f"NewtonOptions.{name}: must be {contract.ADAPTIVE_TOLERANCE_RULE}, "
+                             f"got {value!r}")
 
 
 NewtonOptions = _newton_options_class()

@@ -34,8 +34,16 @@ from . import contract
 from .build import build_shared_library
 from .controller import context_address, controller_address
 from .errors import NewtonError
-from .interface import ControlStruct, NewtonOptions, StatsStruct, ctypes_type
-from .keypaths import spelling_error
+from .interface import (
+    ControlStruct,
+    NewtonOptions,
+    StatsStruct,
+    ctypes_type,
+    real_array,
+    real_number,
+)
+from .parameters import parameter_bounds as _parameter_bounds
+from .parameters import parameter_vector
 from .results import Sensitivities, SimulationResult, StepResult
 from .runs import StopSignal, run_watched
 from .stepper import Stepper
@@ -58,24 +66,11 @@ def _step_length(dt, what: str) -> float:
     if dt is None:
         raise TypeError(f"{what}() needs dt; the arguments are in C's order: {what}(x0, u, dt) "
                         f"(u=None for an unactuated scene), e.g. {what}(x0, dt=0.01)")
-    return float(dt)
-
-
-def _parameter_bounds(entries: list) -> tuple[np.ndarray, np.ndarray] | None:
-    """(lower bounds, whether each is allowed) of the run-time parameters from the manifest,
-    -inf where there is none; None for a manifest that records no ranges."""
-    if not all("lower" in entry and "lower_inclusive" in entry for entry in entries):
-        return None
-    return (np.array([-np.inf if entry["lower"] is None else float(entry["lower"])
-                      for entry in entries], dtype=float),
-            np.array([bool(entry["lower_inclusive"]) for entry in entries], dtype=bool))
+    return real_number(dt, "dt")
 
 
 def _vector(values, size: int, name: str) -> np.ndarray:
-    array = np.ascontiguousarray(values, dtype=np.float64)
-    if array.shape != (size,):
-        raise ValueError(f"{name} must have {size} entries, got shape {array.shape}")
-    return array
+    return real_array(values, name, (size,))
 
 
 class Solver:
@@ -148,8 +143,7 @@ class Solver:
         if unknown:
             raise ValueError(f"no Newton option {', '.join(sorted(unknown))} (known: "
                              f"{', '.join(fields)})")
-        return dataclasses.replace(self.default_options, **{
-            name: fields[name].python_type(value) for name, value in (options or {}).items()})
+        return dataclasses.replace(self.default_options, **(options or {}))   # checks them
 
     def has_entry_point(self, name: str) -> bool:
         return name in self._entry_points
@@ -219,38 +213,12 @@ class Solver:
 
     def parameter_values(self, parameters=None) -> np.ndarray:
         """The parameter vector p: the defaults, a full sequence in the order of
-        `self.parameters`, or a dict of paths (each in its one spelling, as `self.parameters`
-        has it: chaingen.runtime.keypaths) whose values replace the defaults. A value the
-        scene format refuses (a mass <= 0, a stiffness < 0, NaN, ...) is refused here too."""
-        if parameters is None:
-            return self.default_parameters.copy()
-        if isinstance(parameters, dict):
-            values = self.default_parameters.copy()
-            for path, value in parameters.items():
-                if path not in self.parameters:
-                    refused = spelling_error(path)
-                    raise ValueError(refused or f"{self.prefix} has no parameter {path!r} (its "
-                                     f"parameters: {', '.join(self.parameters) or 'none'})")
-                values[self.parameters.index(path)] = float(value)
-        else:
-            values = _vector(parameters, len(self.parameters), "parameters")
-        self._check_parameters(values)
-        return values
-
-    def _check_parameters(self, values: np.ndarray) -> None:
-        """ValueError naming the first value out of its range, as the scene reader words it."""
-        if self._bounds is None:
-            raise ValueError(f"{self.prefix}: its manifest gives no range of its parameters "
-                             "(made by an older chaingen): generate the package again")
-        lower, inclusive = self._bounds
-        good = np.isfinite(values) & ((values > lower) | (inclusive & (values == lower)))
-        if good.all():
-            return
-        index = int(np.argmin(good))
-        value = float(values[index])
-        rule = ("must be finite" if not np.isfinite(value) else
-                f"must be {'>=' if inclusive[index] else '>'} {float(lower[index]):g}")
-        raise ValueError(f"{self.parameters[index]}: {rule}, got {value!r}")
+        `self.parameters`, or a mapping of paths (a dict, a pandas Series indexed by path;
+        each path in its one spelling, as `self.parameters` has it: chaingen.runtime.keypaths)
+        whose values replace the defaults, read by name (runtime/parameters.py). A value the
+        scene format refuses (a mass <= 0, a stiffness < 0, NaN, a bool, ...) is refused."""
+        return parameter_vector(parameters, self.parameters, self.default_parameters,
+                                self._bounds, self.prefix)
 
     def _p(self, parameters):
         """The p argument: a pointer for a package with parameters, else None (none)."""
@@ -313,6 +281,16 @@ class Solver:
         the least cost, phi and omega updated in place (runtime/stepper.py)."""
         return Stepper(self, phi, omega, dt, options, parameters)
 
+    def _fixed_step_options(self, options, what: str):
+        """The C options of a step of the given dt (step, step_sensitivities, a Stepper):
+        adaptive tolerances, which only simulate's loop applies, are refused."""
+        chosen = self.newton_options(options)
+        if chosen.rtol or chosen.atol:
+            raise ValueError(f"{what}: rtol and atol (adaptive steps) apply to simulate only; "
+                             f"a step takes the dt it is given (got rtol={chosen.rtol:g}, "
+                             f"atol={chosen.atol:g})")
+        return chosen.as_c()
+
     def _step_failed(self, status: int, iterations: int) -> NewtonError:
         return NewtonError(f"step failed after {iterations} Newton iterations: "
                            f"{self.status_message(status)}", status=status)
@@ -324,7 +302,7 @@ class Solver:
         space, `stepper` costs less a step."""
         dt = _step_length(dt, "step")
         x1, iterations, flows = np.empty(self.nx), ctypes.c_int(0), np.zeros(2)
-        c_options = self.newton_options(options).as_c()
+        c_options = self._fixed_step_options(options, "step")
         status = self._leased("step", x0=_pointer(_vector(x0, self.nx, "x0")),
                               u=self._inputs(u), p=self._p(parameters),
                               dt=dt, x1=_pointer(x1), flows=_pointer(flows),
@@ -345,7 +323,7 @@ class Solver:
         ns, n_p = 2 * self.n, len(self.parameters)
         x1, iterations = np.empty(self.nx), ctypes.c_int(0)
         ds_ds, ds_du, ds_dp = np.empty(ns * ns), np.empty(ns * self.nu), np.empty(ns * n_p)
-        c_options = self.newton_options(options).as_c()
+        c_options = self._fixed_step_options(options, "step_sensitivities")
         status = self._leased("step_sensitivities",
                               x0=_pointer(_vector(x0, self.nx, "x0")),
                               u=self._inputs(u), p=self._p(parameters), dt=dt, x1=_pointer(x1),
@@ -393,6 +371,7 @@ class Solver:
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
                              f"{n_steps}, {every}")
+        dt = real_number(dt, "dt")
         sampled = -(-n_steps // every)      # the steps 0, every, 2 every, ... before n_steps
         held = sampled if self.nu and (controller is not None or torques is None) else 0
         needed = 8 * ((n_steps // every + 1) * self.nsample + held * self.nu)
@@ -415,7 +394,7 @@ class Solver:
         elif self.nu and torques is None:      # u = NULL: zero torques, none held per step
             recorded = np.zeros((sampled, self.nu))
         elif self.nu:
-            given = np.ascontiguousarray(torques, dtype=np.float64)
+            given = real_array(torques, "torques")
             if given.shape != (n_steps, self.nu):
                 raise ValueError(f"torques must have shape ({n_steps}, {self.nu}) (steps, "
                                  f"actuated joints), got {given.shape}")
@@ -424,6 +403,7 @@ class Solver:
             raise ValueError(f"{self.prefix} has no actuated joints; torques must be None")
         self._p(parameters)    # checks them
         p_values = self.parameter_values(parameters) if self.parameters else np.zeros(0)
+        phi0, omega0 = _vector(phi0, self.n, "phi0"), _vector(omega0, self.n, "omega0")
         x0 = self.initial_state(phi0, omega0, p_values)
         rows = self._call("sample_count", n_steps=n_steps, every=every)
         samples = np.zeros((rows, self.nsample))

@@ -8,15 +8,21 @@ step as in `simulate`), steps it in place and writes phi and omega, the energy a
 constraint error into arrays it owns. Its C calls are bound once, with their arguments.
 
 Threads: a Stepper has a C workspace of its own and is used by one thread at a time; make one
-per thread (they share the loaded library, which keeps no mutable state).
+per thread (they share the loaded library, which keeps no mutable state). A step or reset
+begun while another thread's is under way is refused with a RuntimeError (two at once would
+overwrite each other's workspace and state: wrong numbers, no error).
 """
 from __future__ import annotations
 
 import ctypes
+import threading
 
 import numpy as np
 
 from .errors import NewtonError
+from .interface import real_array, real_number
+
+_DOUBLE = np.dtype(np.float64)     # of a u taken as it is
 
 
 def _address(buffer) -> ctypes.c_void_p:
@@ -73,8 +79,10 @@ class Stepper:
         self._p_values = (solver.parameter_values(parameters) if solver.parameters
                           else np.zeros(0))
         self._workspace = ctypes.create_string_buffer(solver._workspace_size)
-        self._options = solver.newton_options(options).as_c()
-        self._dt = ctypes.c_double(float(dt))
+        self._options = solver._fixed_step_options(options, "Stepper")
+        self._lock = threading.Lock()     # held by the step or reset under way
+        self._acquire, self._release = self._lock.acquire, self._lock.release    # bound once
+        self._dt = ctypes.c_double(0.0)
         self.dt = dt
         self._iterations = ctypes.c_int(0)
         self._flowing = solver.energy_flows
@@ -105,9 +113,9 @@ class Stepper:
     def _set_inputs(self, value) -> None:
         """u = value: exactly nu torques (no scalar spread over the joints, as Solver.step)."""
         u = self._u
-        array = np.asarray(value, dtype=np.float64)
         if not u.shape[0]:
             raise ValueError(f"{self.solver.prefix} has no actuated joints; u must be None")
+        array = real_array(value, "u")
         if array.shape != u.shape:
             raise ValueError(f"u must have {u.shape[0]} entries (one per actuated joint), got "
                              f"shape {array.shape}")
@@ -120,11 +128,15 @@ class Stepper:
 
     @dt.setter
     def dt(self, value: float) -> None:
-        value = float(value)
+        value = real_number(value, "dt")
         if not (0.0 < value < np.inf):
             raise ValueError(f"dt: must be > 0 and finite, got {value!r}")
-        self._base, self._count = self.t, 0
-        self._dt.value = value
+        self._take()
+        try:
+            self._base, self._count = self.t, 0
+            self._dt.value = value
+        finally:
+            self._lock.release()
 
     @property
     def t(self) -> float:
@@ -136,11 +148,30 @@ class Stepper:
         """A copy of the scheme's internal state (for Solver.step, step_sensitivities)."""
         return self._states[self._current].copy()
 
+    def _take(self) -> None:
+        """Take the Stepper's lock without waiting (the caller releases it): a RuntimeError if
+        another thread's step, reset or change of dt is under way."""
+        if not self._lock.acquire(False):
+            raise self._busy()
+
+    def _busy(self) -> RuntimeError:
+        return RuntimeError(f"{self.solver.prefix} Stepper: used by two threads at once (a "
+                            "Stepper is for one thread at a time: make one per thread)")
+
     def reset(self, phi, omega, t: float = 0.0) -> None:
         """Start again from joint space (phi, omega) at time t, with no Newton history."""
+        t = real_number(t, "t")
+        self._take()
+        try:
+            self._reset(phi, omega, t)
+        finally:
+            self._lock.release()
+
+    def _reset(self, phi, omega, t: float) -> None:
         solver = self.solver
-        solver._call("workspace_init", workspace=self._workspace)
+        phi, omega = real_array(phi, "phi", (solver.n,)), real_array(omega, "omega", (solver.n,))
         x = solver.initial_state(phi, omega, self._p_values if solver.parameters else None)
+        solver._call("workspace_init", workspace=self._workspace)
         # _current: which of the two states is the chain's; the step from state c writes
         # state 1 - c, and _outputs_arguments[c] read state 1 - c.
         self._states[0][:] = x
@@ -150,7 +181,7 @@ class Stepper:
             raise NewtonError(f"{solver.prefix}_outputs: {solver.status_message(status)}",
                               status=status)
         self.energy, self.constraint_error = float(self._scalars[0]), float(self._scalars[1])
-        self._base, self._count = float(t), 0
+        self._base, self._count = t, 0
         self.input_work = self.dissipated = 0.0
         self.iterations = 0
 
@@ -158,27 +189,32 @@ class Stepper:
         """One step of dt with torques u (actuated scenes; None: keep `self.u`). Updates phi,
         omega, t and the rest in place; raises NewtonError if the step fails (the state is
         then that before the step)."""
-        if u is not None:
-            if type(u) is np.ndarray and u.shape == self._inputs_shape:
-                self._u[:] = u
-            else:
-                self._set_inputs(u)
-        current = self._current
-        status = self._step_function(*self._step_arguments[current])
-        if status:
-            solver = self.solver
-            raise NewtonError(f"step at t = {self.t:.6g} s failed after "
-                              f"{self._iterations.value} Newton iterations: "
-                              f"{solver.status_message(status)}", status=status)
-        self._current = 1 - current
-        self._count += 1
-        status = self._outputs_function(*self._outputs_arguments[current])
-        if status:
-            raise NewtonError(f"{self.solver.prefix}_outputs at t = {self.t:.6g} s: "
-                              f"{self.solver.status_message(status)}", status=status)
-        self.iterations = self._iterations.value
-        scalars = self._scalars
-        self.energy, self.constraint_error = scalars[0], scalars[1]
-        if self._flowing:
-            self.input_work += self._flows[0]
-            self.dissipated += self._flows[1]
+        if not self._acquire(False):     # another thread's step is under way
+            raise self._busy()
+        try:
+            if u is not None:
+                if type(u) is np.ndarray and u.dtype is _DOUBLE and u.shape == self._inputs_shape:
+                    self._u[:] = u
+                else:
+                    self._set_inputs(u)
+            current = self._current
+            status = self._step_function(*self._step_arguments[current])
+            if status:
+                solver = self.solver
+                raise NewtonError(f"step at t = {self.t:.6g} s failed after "
+                                  f"{self._iterations.value} Newton iterations: "
+                                  f"{solver.status_message(status)}", status=status)
+            self._current = 1 - current
+            self._count += 1
+            status = self._outputs_function(*self._outputs_arguments[current])
+            if status:
+                raise NewtonError(f"{self.solver.prefix}_outputs at t = {self.t:.6g} s: "
+                                  f"{self.solver.status_message(status)}", status=status)
+            self.iterations = self._iterations.value
+            scalars = self._scalars
+            self.energy, self.constraint_error = scalars[0], scalars[1]
+            if self._flowing:
+                self.input_work += self._flows[0]
+                self.dissipated += self._flows[1]
+        finally:
+            self._release()

@@ -1,0 +1,304 @@
+"""The Python runtime against an adversary's inputs (issue 30, the review after its first fixes):
+run-time parameters given as a mapping are read by name, never by position; a step of a given
+dt refuses the adaptive tolerances it would ignore; one Stepper stepped by two threads at once
+is a clear error, not wrong numbers; values that are no real numbers (complex, bool, strings)
+are refused wherever the runtime turns a user's values into C doubles, and the Newton options'
+switches take only a bool, 1 or 0."""
+from __future__ import annotations
+
+import threading
+import types
+
+import numpy as np
+import pytest
+
+from chaingen.runtime import NewtonOptions, Solver
+from chaingen.runtime.interface import real_array, real_number
+from chaingen.runtime.parameters import parameter_bounds
+
+from helpers import load
+
+DT = 0.01
+PATHS = ("springs[0].stiffness", "links[1].mass")
+
+
+def fake_solver(*, nu: int = 2) -> Solver:
+    """A Solver's Python checks without a compiled library: every refusal here comes before
+    C is called (a call that got through would fail on the missing library instead)."""
+    solver = Solver.__new__(Solver)
+    solver.prefix, solver.parameters = "fake", PATHS
+    solver.default_parameters = np.array([10.0, 1.0])
+    solver._bounds = parameter_bounds([{"path": path, "value": 1.0, "lower": 0.0,
+                                        "lower_inclusive": path.startswith("springs")}
+                                       for path in PATHS])
+    solver.n, solver.nx, solver.nz, solver.nu, solver.nsample = 3, 6, 6, nu, 11
+    solver.has_sensitivities, solver.energy_flows = True, False
+    solver._entry_points = {"holding_torques": None}
+    solver._workspace_size = 64
+    solver.default_options = NewtonOptions()
+    return solver
+
+
+# -- 1: a mapping of parameters is read by name ----------------------------------------------
+
+class KeysAndItems:
+    """Neither a dict nor a Mapping: keys() and [] by label, as many labelled containers."""
+
+    def __init__(self, values: dict):
+        self._values = values
+
+    def keys(self):
+        return list(self._values)
+
+    def __getitem__(self, key):
+        return self._values[key]
+
+    def __len__(self):
+        return len(self._values)
+
+    def __iter__(self):      # iterates its values, as a pandas Series does: a trap by position
+        return iter(self._values.values())
+
+
+def labelled_in_another_order():
+    pd = pytest.importorskip("pandas")
+    given = {"links[1].mass": 3.0, "springs[0].stiffness": 7.0}     # not PATHS' order
+    return [dict(given), pd.Series(given), types.MappingProxyType(given), KeysAndItems(given)]
+
+
+def test_a_series_or_mapping_of_parameters_is_read_by_name():
+    solver = fake_solver()
+    for given in labelled_in_another_order():
+        np.testing.assert_array_equal(solver.parameter_values(given), [7.0, 3.0],
+                                      err_msg=type(given).__name__)
+    pd = pytest.importorskip("pandas")
+    partial = pd.Series({"links[1].mass": 2.5})
+    np.testing.assert_array_equal(solver.parameter_values(partial), [10.0, 2.5])
+
+
+def test_labelled_parameters_that_cannot_be_read_by_name_are_refused():
+    pd = pytest.importorskip("pandas")
+    xr = pytest.importorskip("xarray")
+    solver = fake_solver()
+    twice = pd.Series([3.0, 4.0], index=["links[1].mass", "links[1].mass"])
+    with pytest.raises(ValueError, match=r"^parameters: links\[1\]\.mass given twice$"):
+        solver.parameter_values(twice)
+    with pytest.raises(ValueError, match=r"^fake has no parameter 0 "):
+        solver.parameter_values(pd.Series([7.0, 3.0]))      # labels 0, 1: no key paths
+    array = xr.DataArray([3.0, 7.0], coords={"path": ["links[1].mass", "springs[0].stiffness"]})
+    structured = np.array([(3.0, 7.0)], dtype=[("links[1].mass", float),
+                                               ("springs[0].stiffness", float)])[0]
+    for given in (array, structured):
+        with pytest.raises(TypeError, match="would be read by position, not by its labels"):
+            solver.parameter_values(given)
+    np.testing.assert_array_equal(solver.parameter_values((7.0, 3.0)), [7.0, 3.0])
+    np.testing.assert_array_equal(solver.parameter_values(np.array([7.0, 3.0])), [7.0, 3.0])
+
+
+@pytest.mark.compile
+def test_simulate_reads_a_series_of_parameters_by_name():
+    from chaingen import build_solver
+
+    scene = load("three_link_mono")
+    solver = build_solver(scene, "es", 3, sensitivities=False, parameters=list(PATHS))
+    phi0, omega0 = scene.initial_angles, scene.initial_velocities
+    by_dict = solver.simulate(phi0, omega0, dt=DT, n_steps=20,
+                              parameters={"springs[0].stiffness": 7.0, "links[1].mass": 3.0})
+    for given in labelled_in_another_order():
+        run = solver.simulate(phi0, omega0, dt=DT, n_steps=20, parameters=given)
+        assert run.parameters == {"springs[0].stiffness": 7.0, "links[1].mass": 3.0}
+        np.testing.assert_array_equal(run.samples, by_dict.samples)
+        stepper = solver.stepper(phi0, omega0, DT, parameters=given)
+        np.testing.assert_array_equal(stepper._p_values, [7.0, 3.0])
+
+
+# -- 2: a step of the given dt refuses adaptive tolerances ------------------------------------
+
+@pytest.mark.parametrize("options", [{"rtol": 1e-8}, {"atol": 1e-10},
+                                     NewtonOptions(rtol=1e-8, atol=1e-10)])
+def test_a_step_refuses_the_adaptive_tolerances_it_would_ignore(options):
+    solver = fake_solver()
+    x0, u = np.zeros(6), np.zeros(2)
+    calls = {"step": lambda: solver.step(x0, u, DT, options=options),
+             "step_sensitivities": lambda: solver.step_sensitivities(x0, u, DT, options=options),
+             "Stepper": lambda: solver.stepper(np.zeros(3), np.zeros(3), DT, options=options)}
+    for name, call in calls.items():
+        with pytest.raises(ValueError, match=rf"^{name}: rtol and atol \(adaptive steps\) apply "
+                                             r"to simulate only; .*\(got rtol="):
+            call()
+
+
+@pytest.mark.compile
+def test_a_real_step_and_stepper_refuse_tolerances_and_simulate_takes_them():
+    scene = load("three_link_mono")
+    solver = _plain_solver()
+    phi0, omega0 = scene.initial_angles, scene.initial_velocities
+    x0 = solver.initial_state(phi0, omega0)
+    tolerances = {"rtol": 1e-8, "atol": 1e-10}
+    with pytest.raises(ValueError, match="^step: rtol and atol"):
+        solver.step(x0, dt=0.5, options=tolerances)
+    with pytest.raises(ValueError, match="^Stepper: rtol and atol"):
+        solver.stepper(phi0, omega0, 0.5, options=tolerances)
+    fixed = solver.step(x0, dt=0.5, options={"rtol": 0.0, "atol": 0.0})
+    np.testing.assert_array_equal(fixed.x1, solver.step(x0, dt=0.5).x1)
+    adaptive = solver.simulate(phi0, omega0, dt=0.5, n_steps=1, options=tolerances)
+    assert adaptive.adaptive and adaptive.accepted_steps > 1
+
+
+def _plain_solver():
+    from chaingen import build_solver
+    return build_solver(load("three_link_mono"), "es", 3, sensitivities=False,
+                        parameters=["links[1].mass"])
+
+
+# -- 3: one Stepper, two threads at once ---------------------------------------------------
+
+@pytest.mark.compile
+def test_one_stepper_stepped_by_two_threads_at_once_is_an_error_not_wrong_numbers():
+    scene = load("three_link_mono")
+    solver = _plain_solver()
+    phi0, omega0 = scene.initial_angles, scene.initial_velocities
+    stepper = solver.stepper(phi0, omega0, DT)
+    start, errors = threading.Barrier(2), []
+
+    def work() -> None:
+        start.wait()
+        try:
+            for _ in range(50_000):
+                stepper.step()
+                if errors:
+                    return
+        except RuntimeError as error:
+            errors.append(error)
+
+    threads = [threading.Thread(target=work) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors, "two threads stepped one Stepper at once with no error"
+    assert str(errors[0]) == (f"{solver.prefix} Stepper: used by two threads at once (a Stepper "
+                              "is for one thread at a time: make one per thread)")
+    # The steps that were taken were taken one at a time: the numbers of one thread alone.
+    alone = solver.stepper(phi0, omega0, DT)
+    for _ in range(stepper._count):
+        alone.step()
+    np.testing.assert_array_equal(stepper.phi, alone.phi)
+    np.testing.assert_array_equal(stepper.omega, alone.omega)
+    assert stepper.t == alone.t
+    stepper.step()         # free again once the other thread is done
+
+
+# -- 4: values that are no real numbers --------------------------------------------------
+
+NOT_REAL = [(1 + 2j, "complex"), (np.complex128(1.0), "complex"), (True, "bool"),
+            (np.True_, "bool"), ("2.0", "str"), (b"2", "bytes")]
+
+
+@pytest.mark.parametrize("value, kind", NOT_REAL)
+def test_the_one_conversion_refuses_what_is_no_real_number(value, kind):
+    with pytest.raises(TypeError, match=rf"^dt: must be a real number, got .*{kind}") as refused:
+        real_number(value, "dt")
+    assert "\n" not in str(refused.value)
+    for values in ([0.5, value, 1.0], (0.5, [value]), np.array([0.5, value], dtype=object)):
+        with pytest.raises(TypeError, match=rf"^phi: must be real numbers, got .*{kind}"):
+            real_array(values, "phi")
+    with pytest.raises(TypeError, match="^phi: must be real numbers"):
+        real_array(np.array([value, value]), "phi")        # an array of that dtype
+    assert real_number(np.float32(0.5), "dt") == 0.5 and real_number(3, "dt") == 3.0
+    np.testing.assert_array_equal(real_array([1, 2.5, np.int8(3)], "phi"), [1.0, 2.5, 3.0])
+
+
+@pytest.mark.parametrize("value, kind", NOT_REAL)
+def test_every_entry_point_refuses_values_that_are_no_real_numbers(value, kind):
+    solver = fake_solver()
+    good, bad = np.zeros(3), [0.1, value, 0.3]
+    x0, z = np.zeros(6), np.zeros(6)
+    calls = {
+        "phi": [lambda: solver.initial_state(bad, good), lambda: solver.holding_torques(bad)],
+        "phi0": [lambda: solver.simulate(bad, good, dt=DT, n_steps=3)],
+        "omega0": [lambda: solver.simulate(good, bad, dt=DT, n_steps=3)],
+        "phidot": [lambda: solver.initial_state(good, bad)],
+        "x": [lambda: solver.outputs([0.0] * 5 + [value])],
+        "x0": [lambda: solver.step([0.0] * 5 + [value], dt=DT)],
+        "z": [lambda: solver.residual([value] * 6, x0, dt=DT),
+              lambda: solver.residual_jacobian([value] * 6, x0, dt=DT)],
+        "u": [lambda: solver.step(x0, [0.0, value], DT),
+              lambda: solver.step_sensitivities(x0, [0.0, value], DT)],
+        "torques": [lambda: solver.simulate(good, good, dt=DT, n_steps=2,
+                                            torques=[[0.0, 0.0], [value, 0.0]])],
+        "dt": [lambda: solver.step(x0, dt=value), lambda: solver.residual(z, x0, dt=value),
+               lambda: solver.simulate(good, good, dt=value, n_steps=3),
+               lambda: solver.stepper(good, good, value)],
+        "links\\[1\\].mass": [lambda: solver.parameter_values({"links[1].mass": value}),
+                              lambda: solver.step(x0, dt=DT,
+                                                  parameters={"links[1].mass": value})],
+        "parameters": [lambda: solver.parameter_values([10.0, value]),
+                       lambda: solver.initial_state(good, good, [value, 1.0])],
+    }
+    for name, refused in calls.items():
+        for call in refused:
+            with pytest.raises(TypeError, match=rf"^{name}: must be (real numbers|a real "
+                                                rf"number), got"):
+                call()
+
+
+@pytest.mark.parametrize("value", ["no", "off", "", 2, -1, 0.0, 1.0, None, [1]])
+def test_a_newton_switch_takes_a_bool_1_or_0(value):
+    with pytest.raises(TypeError, match=r"^NewtonOptions\.warm_start: must be True or False"):
+        NewtonOptions(warm_start=value)
+    with pytest.raises(TypeError, match=r"^NewtonOptions\.warm_start: must be True or False"):
+        fake_solver().newton_options({"warm_start": value})
+
+
+def test_newton_options_keep_their_types():
+    for value, expected in ((True, 1), (False, 0), (1, 1), (0, 0), (np.int64(0), 0)):
+        options = NewtonOptions(warm_start=value)
+        assert options.warm_start is bool(expected)
+        assert options.as_c().warm_start == expected
+    assert fake_solver().newton_options({"warm_start": 0}).warm_start is False
+    for bad in (2.5, "20", 20.0):
+        with pytest.raises(TypeError, match=r"^NewtonOptions\.max_iterations: must be an integer"):
+            fake_solver().newton_options({"max_iterations": bad})
+    for bad in (True, "1e-8", 1e-8 + 0j):
+        with pytest.raises(TypeError, match=r"^NewtonOptions\.residual_tol: must be a real"):
+            NewtonOptions(residual_tol=bad)
+    with pytest.raises(TypeError, match=r"^NewtonOptions\.rtol: must be a real"):
+        fake_solver().newton_options({"rtol": "1e-6"})
+    options = fake_solver().newton_options({"max_iterations": np.int32(7), "residual_tol": 1})
+    assert options.max_iterations == 7 and type(options.residual_tol) is float
+
+
+@pytest.mark.compile
+def test_a_stepper_and_a_controller_refuse_values_that_are_no_real_numbers():
+    from chaingen import build_solver
+    from chaingen.studies.bench.control import control_scene
+
+    scene = control_scene()
+    solver = build_solver(scene, "es", 3, sensitivities=False)
+    phi0, omega0 = np.array(scene.initial_angles), np.array(scene.initial_velocities)
+    stepper = solver.stepper(phi0, omega0, DT)
+    before = stepper.phi.copy()
+    for bad in (np.array([1.0, 2.0, 3.0 + 1j]), [1.0, True, 0.0], ["1", "2", "3"],
+                np.array([True, False, True])):
+        with pytest.raises(TypeError, match="^u: must be real numbers, got"):
+            stepper.step(bad)
+        with pytest.raises(TypeError, match="^u: must be real numbers, got"):
+            stepper.u = bad
+    for bad in (True, "0.01", 0.01 + 0j):
+        with pytest.raises(TypeError, match="^dt: must be a real number"):
+            stepper.dt = bad
+    with pytest.raises(TypeError, match="^t: must be a real number"):
+        stepper.reset(phi0, omega0, t=1j)
+    with pytest.raises(TypeError, match="^phi: must be real numbers"):
+        stepper.reset(phi0 + 0j, omega0)
+    np.testing.assert_array_equal(stepper.phi, before)
+    assert stepper.dt == DT and stepper.t == 0.0
+    stepper.step(np.array([1, 2, 3]))       # integers are real numbers
+    np.testing.assert_array_equal(stepper.u, [1.0, 2.0, 3.0])
+    with pytest.raises(TypeError, match="^controller: its torques: must be real numbers, got "
+                                        "complex"):
+        solver.simulate(phi0, omega0, dt=DT, n_steps=5,
+                        controller=lambda t, phi, omega: [0.0, 1j, 0.0])
+    with pytest.raises(TypeError, match="^omega0: must be real numbers"):
+        solver.simulate(phi0, omega0 * 1j, dt=DT, n_steps=5)
