@@ -364,10 +364,12 @@ class Solver:
         its `result`.
         """
         try:
+            if isinstance(n_steps, bool) or isinstance(every, bool) or isinstance(hold, bool):
+                raise TypeError("a bool is no count")
             n_steps, every = operator.index(n_steps), operator.index(every)
         except TypeError:
-            raise ValueError(f"n_steps and every must be integers, got {n_steps!r}, "
-                             f"{every!r}") from None
+            raise ValueError(f"n_steps, every and hold must be integers, got {n_steps!r}, "
+                             f"{every!r}, {hold!r}") from None
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
                              f"{n_steps}, {every}")

@@ -243,6 +243,14 @@ def test_every_entry_point_refuses_values_that_are_no_real_numbers(value, kind):
                 call()
 
 
+def test_counts_refuse_a_bool():
+    solver = fake_solver()
+    for counts in ({"n_steps": True}, {"n_steps": 3, "every": True},
+                   {"n_steps": 3, "hold": True}):
+        with pytest.raises(ValueError, match=r"^n_steps, every and hold must be integers, got"):
+            solver.simulate(np.zeros(3), np.zeros(3), dt=DT, **counts)
+
+
 @pytest.mark.parametrize("value", ["no", "off", "", 2, -1, 0.0, 1.0, None, [1]])
 def test_a_newton_switch_takes_a_bool_1_or_0(value):
     with pytest.raises(TypeError, match=r"^NewtonOptions\.warm_start: must be True or False"):
