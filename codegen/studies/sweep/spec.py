@@ -8,8 +8,9 @@
     "links[1].mass" = { from = 0.5, to = 2.0, num = 16 }
 
 As strict as a scene file: an unknown key, a path that names no number of the scene, a value
-out of the scene's own range (checked for every run's value), zip axes of unequal length: each
-a one-line SweepError naming the key, before anything runs or is written.
+out of the scene's own range (checked for every run's value), zip axes of unequal length, a
+t_end that is not a whole number of steps of dt: each a one-line SweepError naming the key,
+before anything runs or is written.
 """
 from __future__ import annotations
 
