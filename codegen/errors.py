@@ -29,6 +29,12 @@ __all__ = ["BenchError", "BuildError", "ChaingenError", "NewtonError", "OrderStu
            "SettingsError", "UnsupportedSceneError"]
 
 
+def install_hint(extra: str) -> str:
+    """How to install one of chaingen's extras: chaingen is installed from its source tree (it
+    is not published on a package index)."""
+    return f"in the chaingen source tree: pip install -e '.[{extra}]'"
+
+
 class SceneError(ChaingenError):
     """A scene file that cannot be used; the message names the file, the key and the line."""
 

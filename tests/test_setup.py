@@ -127,3 +127,19 @@ def test_the_bench_report_says_the_peers_were_not_run(monkeypatch):
     assert missing.startswith("numbalsoda's LSODA and DOP853 not run (numbalsoda and numba, "
                               "the `peers` extra, are not installed), CVODES of CasADi ")
     assert "not installed" not in installed or installed == missing
+
+
+def test_no_install_hint_names_a_package_index():
+    """chaingen is installed from its source tree: no message or page may tell a user to
+    install it (or an extra of it) from a package index, where it is not published."""
+    from chaingen.errors import install_hint
+
+    assert install_hint("sweep") == "in the chaingen source tree: pip install -e '.[sweep]'"
+    from_index = re.compile(r"pip install\s+(?:-\S+\s+)*['\"]?chaingen(?:\[|['\"\s]|$)")
+    offenders = []
+    for path in [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"),
+                 *(ROOT / "codegen").rglob("*.py"), *(ROOT / "runtime").rglob("*.py")]:
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            if from_index.search(line):
+                offenders.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
+    assert not offenders, "\n".join(offenders)

@@ -7,11 +7,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import ChaingenError
+from ..errors import ChaingenError, install_hint
 from ..runtime.files import reported_write, staged_file
 
-#: chaingen is installed from its source tree (it is not published on a package index).
-INSTALL_HINT = "in the chaingen source tree: pip install -e '.[plot]'"
+INSTALL_HINT = install_hint("plot")
 
 
 def require_matplotlib(what: str) -> None:

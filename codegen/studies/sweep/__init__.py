@@ -20,7 +20,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from ...errors import ChaingenError
+from ...errors import ChaingenError, install_hint
 from .spec import SweepError, SweepSpec, chunk_size, load_spec, parse_spec
 from .store import RUNS, TRAJECTORIES, SweepStore
 
@@ -45,7 +45,7 @@ def require_extra() -> None:
     if missing:
         raise ChaingenError(f"chaingen sweep needs {', '.join(missing)}, which "
                             f"{'is' if len(missing) == 1 else 'are'} not installed "
-                            "(pip install 'chaingen[sweep]')")
+                            f"({install_hint('sweep')})")
 
 
 def run_sweep(spec: SweepSpec, out: str | Path, *, engine: str = "local",
@@ -60,7 +60,7 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, engine: str = "local",
         raise SweepError(f"engine: must be one of {', '.join(ENGINES)}, got {engine!r}")
     if engine == "dask" and importlib.util.find_spec("distributed") is None:
         raise ChaingenError("the Dask engine needs dask[distributed], which is not installed "
-                            "(pip install 'chaingen[sweep]')")
+                            f"({install_hint('sweep')})")
     store = SweepStore(out, spec, chunk_size(len(spec.runs)))
     store.check()
     # A Dask cluster starts (and its workers import) while the solver is generated and built.
