@@ -18,43 +18,45 @@ import numpy as np
 
 from . import contract
 
-#: Values numpy would turn into a float that are no real number a user meant.
-_NOT_REAL = (bool, np.bool_, str, bytes, complex, np.complexfloating)
+#: Values numpy would turn into a float that are no real number a user meant (None is NaN).
+_NOT_REAL = (bool, np.bool_, str, bytes, complex, np.complexfloating, type(None))
+_REAL = object()     # what _not_real finds in real numbers
 
 
 def _not_real(values):
     """The first value in `values` (nested lists, tuples, object arrays) that is a bool, a
-    complex number or a string, or None."""
+    complex number, a string or None, or _REAL if there is none."""
     if isinstance(values, np.ndarray):
         if values.dtype.kind in "fiu":
-            return None
+            return _REAL
         if values.dtype.kind != "O":
             return values.flat[0] if values.size else values.dtype
         values = values.flat
     elif not isinstance(values, (list, tuple)):
-        return values if isinstance(values, _NOT_REAL) else None
+        return values if isinstance(values, _NOT_REAL) else _REAL
     for item in values:
         found = _not_real(item)
-        if found is not None:
+        if found is not _REAL:
             return found
-    return None
+    return _REAL
 
 
 def real_array(values, name: str, shape: tuple | None = None, *,
                noun: str = "real numbers") -> np.ndarray:
     """`values` as a contiguous float64 array (of `shape`, if given), `name` naming them in a
-    one-line error: real numbers only (a bool, complex number or string is a TypeError)."""
+    one-line error: real numbers only (a bool, complex number, string or None is a
+    TypeError)."""
     if not (type(values) is np.ndarray and values.dtype.kind in "fiu"):
         found = _not_real(values)
-        if found is None and not isinstance(values, (list, tuple)):
+        if found is _REAL and not isinstance(values, (list, tuple)):
             found = _not_real(np.asarray(values))    # a Series, a 0-d array, ...
-        if found is not None:
+        if found is not _REAL:
             what = found if isinstance(found, np.dtype) else f"{type(found).__name__} {found!r}"
             raise TypeError(f"{name}: must be {noun}, got {what}")
     try:
         array = np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise TypeError(f"{name}: must be {noun} ({error})") from None
+    except (TypeError, ValueError) as error:    # a ragged list is a ValueError, as it was
+        raise type(error)(f"{name}: must be {noun} ({error})") from None
     if shape is not None or not array.flags.c_contiguous:
         array = np.ascontiguousarray(array)      # with a shape: a scalar is one entry
     if shape is not None and array.shape != shape:
@@ -65,13 +67,14 @@ def real_array(values, name: str, shape: tuple | None = None, *,
 
 def real_number(value, name: str) -> float:
     """`value` as a float, `name` naming it in a one-line error: a real number only."""
-    if type(value) is float:
-        return value
+    if isinstance(value, float):     # np.float64 too; no bool, complex or str is one
+        return float(value)
     array = real_array(value, name, noun="a real number")
     if array.shape != ():
         raise TypeError(f"{name}: must be a real number, got {type(value).__name__} of shape "
                         f"{array.shape}")
     return float(array)
+
 
 _C_SCALARS = {"int": ctypes.c_int, "long": ctypes.c_long, "double": ctypes.c_double,
               "size_t": ctypes.c_size_t, "volatile int": ctypes.c_int,

@@ -209,6 +209,15 @@ def test_the_one_conversion_refuses_what_is_no_real_number(value, kind):
     np.testing.assert_array_equal(real_array([1, 2.5, np.int8(3)], "phi"), [1.0, 2.5, 3.0])
 
 
+def test_none_is_no_number():
+    """numpy takes None as NaN: a missing value would run as one."""
+    for values in (None, [0.1, None], np.array([0.1, None], dtype=object)):
+        with pytest.raises(TypeError, match="^phi: must be real numbers, got NoneType None$"):
+            real_array(values, "phi")
+    with pytest.raises(TypeError, match=r"^links\[1\]\.mass: must be a real number, got None"):
+        fake_solver().parameter_values({"links[1].mass": None})
+
+
 @pytest.mark.parametrize("value, kind", NOT_REAL)
 def test_every_entry_point_refuses_values_that_are_no_real_numbers(value, kind):
     solver = fake_solver()
