@@ -15,7 +15,6 @@ overwrite each other's workspace and state: wrong numbers, no error).
 from __future__ import annotations
 
 import ctypes
-import threading
 
 import numpy as np
 
@@ -80,8 +79,11 @@ class Stepper:
                           else np.zeros(0))
         self._workspace = ctypes.create_string_buffer(solver._workspace_size)
         self._options = solver._fixed_step_options(options, "Stepper")
-        self._lock = threading.Lock()     # held by the step or reset under way
-        self._acquire, self._release = self._lock.acquire, self._lock.release    # bound once
+        # The right to step: one token, taken by the step (reset, change of dt) under way.
+        # list.pop and list.append are atomic: a lock that costs a third of a Lock's
+        # acquire(False) and release (a step's Python cost is some microseconds).
+        tokens = [True]
+        self._take_token, self._give_token = tokens.pop, tokens.append
         self._dt = ctypes.c_double(0.0)
         self.dt = dt
         self._iterations = ctypes.c_int(0)
@@ -136,7 +138,7 @@ class Stepper:
             self._base, self._count = self.t, 0
             self._dt.value = value
         finally:
-            self._lock.release()
+            self._give_token(True)
 
     @property
     def t(self) -> float:
@@ -149,10 +151,12 @@ class Stepper:
         return self._states[self._current].copy()
 
     def _take(self) -> None:
-        """Take the Stepper's lock without waiting (the caller releases it): a RuntimeError if
-        another thread's step, reset or change of dt is under way."""
-        if not self._lock.acquire(False):
-            raise self._busy()
+        """Take the Stepper's token without waiting (the caller gives it back): a RuntimeError
+        if another thread's step, reset or change of dt holds it."""
+        try:
+            self._take_token()
+        except IndexError:
+            raise self._busy() from None
 
     def _busy(self) -> RuntimeError:
         return RuntimeError(f"{self.solver.prefix} Stepper: used by two threads at once (a "
@@ -165,7 +169,7 @@ class Stepper:
         try:
             self._reset(phi, omega, t)
         finally:
-            self._lock.release()
+            self._give_token(True)
 
     def _reset(self, phi, omega, t: float) -> None:
         solver = self.solver
@@ -189,8 +193,10 @@ class Stepper:
         """One step of dt with torques u (actuated scenes; None: keep `self.u`). Updates phi,
         omega, t and the rest in place; raises NewtonError if the step fails (the state is
         then that before the step)."""
-        if not self._acquire(False):     # another thread's step is under way
-            raise self._busy()
+        try:
+            self._take_token()
+        except IndexError:      # another thread's step is under way
+            raise self._busy() from None
         try:
             if u is not None:
                 if type(u) is np.ndarray and u.dtype is _DOUBLE and u.shape == self._inputs_shape:
@@ -217,4 +223,4 @@ class Stepper:
                 self.input_work += self._flows[0]
                 self.dissipated += self._flows[1]
         finally:
-            self._release()
+            self._give_token(True)
