@@ -414,8 +414,16 @@ def main(argv: list[str] | None = None) -> int:
     (bad input) or 1 (a run that failed); Ctrl-C exits with 130; an unexpected error is one
     line too, with the way to its traceback (--debug or CHAINGEN_DEBUG=1 shows it)."""
     args = parser().parse_args(argv)
-    from .progress import set_quiet
+    from .progress import quiet, set_quiet
+    before = quiet()
     set_quiet(args.quiet)
+    try:      # --quiet holds for this command only (main may run in a longer process)
+        return _run(args)
+    finally:
+        set_quiet(before)
+
+
+def _run(args) -> int:
     debug = args.debug or os.environ.get("CHAINGEN_DEBUG", "") not in ("", "0")
     handlers = {"generate": command_generate, "simulate": command_simulate,
                 "check": command_check, "order": command_order, "bench": command_bench,

@@ -42,6 +42,11 @@ def set_quiet(quiet: bool) -> None:
     _quiet = bool(quiet)
 
 
+def quiet() -> bool:
+    """Whether set_quiet has silenced the progress displays of this process."""
+    return _quiet
+
+
 def _falsy(value: str | None) -> bool:
     return value is None or value.strip().lower() in ("", "0", "false", "no")
 

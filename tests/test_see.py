@@ -25,7 +25,7 @@ from chaingen.symbolic.com_model import com_model, joint_space_positions
 from chaingen.views.animate import ChainDrawing, animate, frame_plan
 from chaingen.views.plots import DPI, FIGURE_SIZE, broken_at_wraps, load_run, plot_files
 
-from helpers import load, require_tools, scene_path
+from helpers import chaingen_in_process, load, require_tools, scene_path
 
 PIL = pytest.importorskip("PIL.Image")
 PNG_SIZE = (int(FIGURE_SIZE[0] * DPI), int(FIGURE_SIZE[1] * DPI))
@@ -265,6 +265,17 @@ def test_progress_draws_on_a_terminal_and_erases_itself(monkeypatch):
     text = stream.getvalue()
     assert "simulate [" in text and "10/10 steps" in text
     assert text.endswith("\r")   # erased: the terminal keeps only the work's own output
+
+
+def test_quiet_holds_for_one_command_only(tmp_path, monkeypatch):
+    """--quiet of a command run in this process (tests, a notebook) does not silence the
+    progress of what runs after it: it once did, and a later progress test in the same worker
+    saw nothing drawn."""
+    monkeypatch.delenv("CI", raising=False)
+    monkeypatch.delenv("CHAINGEN_QUIET", raising=False)
+    result = chaingen_in_process("-q", "simulate", tmp_path / "missing.toml", cwd=tmp_path)
+    assert result.returncode == 2
+    assert progress_enabled(Terminal())
 
 
 @pytest.mark.parametrize("setting", ["not a terminal", "CI", "CHAINGEN_QUIET", "--quiet"])
