@@ -45,8 +45,8 @@ def test_a_large_model_is_compiled_with_o1(monkeypatch, tmp_path):
     large = generate_package(scene, "midpoint", 3, sensitivities=False)
     assert large.manifest["source_flags"][model] == ["-O1"]
     assert f"{small.prefix}_model.o: {model}\n\t$(CC) $(CFLAGS) -O1 " in large.files["Makefile"]
-    assert (f'set_source_files_properties({model} PROPERTIES COMPILE_OPTIONS "-O1")'
-            in large.files["CMakeLists.txt"])
+    assert (f'set_source_files_properties({model} PROPERTIES COMPILE_OPTIONS\n'
+            f'    "$<${{{small.prefix}_tuned}}:-O1>")' in large.files["CMakeLists.txt"])
     solver = Solver.from_files(large.files)
     x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
     assert solver.step(x0, dt=0.01).iterations >= 1
