@@ -20,29 +20,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_sweep_trust import MONO, document, refused
 
 from chaingen.simulation import run_settings
-from chaingen.studies.sweep import SweepError, load_spec, parse_spec, run_sweep
+from chaingen.studies.sweep import load_spec, parse_spec, run_sweep
 from chaingen.studies.sweep.store import StoreError, SweepStore
 
 from helpers import ROOT, chaingen_in_process
-
-MONO = ROOT / "scenes" / "three_link_mono.toml"
-
-
-def document(**entries) -> dict:
-    found = {"scene": str(MONO), "t_end": 0.2, "axes": {"springs[0].stiffness": [5.0, 10.0]}}
-    found.update(entries)
-    return found
-
-
-def refused(**entries) -> str:
-    with pytest.raises(SweepError) as error:
-        parse_spec(document(**entries))
-    message = str(error.value)
-    assert "\n" not in message
-    return message
-
 
 # -- point 1: t_end and dt are whole steps -----------------------------------------------------
 
