@@ -3,7 +3,7 @@
 A run is a scene with some numbers replaced, and the scene reader (`with_values`) is the judge
 of whether that scene is valid, with its own messages. Calling the reader for each of 10^6 runs
 takes minutes, so the runs are first screened column by column with numpy: each number's own
-range (a mass > 0, a rest length >= 0, ...), and, when the varied numbers move a spring's
+range (contract.NUMBER_BOUNDS: a mass > 0, a rest length >= 0, ...), and, when the varied numbers move a spring's
 fastenings, its segments' lengths at the initial angles. The screen is generous (a run near a
 limit is suspect too); the reader then judges the suspects in run order and the first it
 refuses is the error. A run the screen passes is one the reader accepts: the screen's rules are
@@ -18,26 +18,13 @@ from collections.abc import Callable
 import numpy as np
 
 from ...errors import SceneError
+from ...runtime.contract import lower_bound
 from ...scene import Scene
 from ...scene.kinematics import ZERO_SEGMENT_RELATIVE_TOLERANCE
 from ...scene.parameters import with_values
 
-#: The numbers that must be > 0 and >= 0 (the reader's `positive` and `nonnegative`); the
-#: others need only be finite.
-POSITIVE = ("mass", "length", "stiffness")
-NONNEGATIVE = ("inertia", "damping", "rest_length", "gravity")
 #: Runs screened at once (bounded memory).
 BLOCK = 65_536
-
-
-def rule(path: str) -> str:
-    """"positive", "nonnegative" or "finite": what the scene format asks of the number."""
-    key = path.rsplit(".", 1)[-1].split("[", 1)[0]
-    if path.startswith("simulation.") or key in POSITIVE:
-        return "positive"
-    if key in NONNEGATIVE:
-        return "nonnegative"
-    return "finite"
 
 
 def _geometric(path: str) -> bool:
@@ -52,13 +39,10 @@ def suspects(scene: Scene, columns: dict[str, np.ndarray], first: int, count: in
     bad = np.zeros(count, dtype=bool)
     block = {path: column[first:first + count] for path, column in columns.items()}
     for path, values in block.items():
-        kind = rule(path)
-        finite = np.isfinite(values)
-        bad |= ~finite
-        if kind == "positive":
-            bad |= ~(values > 0)
-        elif kind == "nonnegative":
-            bad |= ~(values >= 0)
+        bad |= ~np.isfinite(values)
+        bound = lower_bound(path)     # the scene format's, stated once (the reader's too)
+        if bound is not None:
+            bad |= ~(values >= bound.value if bound.inclusive else values > bound.value)
     if scene.springs and any(_geometric(path) for path in block):
         bad |= _short_segments(scene, block, count)
     return np.flatnonzero(bad) + first
