@@ -5,9 +5,9 @@ of whether that scene is valid, with its own messages. Calling the reader for ea
 takes minutes, so the runs are first screened column by column with numpy: each number's own
 range (contract.NUMBER_BOUNDS: a mass > 0, a rest length >= 0, ...), and, when the varied
 numbers move a spring's fastenings, its segments' lengths at the initial angles. The screen is
-generous (a run near a limit is suspect too); the reader then judges the suspects in run order and the first it
-refuses is the error. A run the screen passes is one the reader accepts: the screen's rules are
-the reader's (tests/test_sweep_properties.py compares them on drawn values).
+generous (a run near a limit is suspect too); the reader then judges the suspects in run order
+and the first it refuses is the error. A run the screen passes is one the reader accepts: the
+screen's rules are the reader's (tests/test_sweep_properties.py compares them on drawn values).
 """
 from __future__ import annotations
 
