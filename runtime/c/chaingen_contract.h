@@ -1,5 +1,7 @@
-/* The C contract of chaingen's runtime: status codes, options, counters and callback types.
- * Rendered from chaingen/runtime/contract.py (seed). Do not edit. */
+/* The C contract of chaingen's runtime: status codes, options, counters, callback types
+ * and constants. Rendered from chaingen/runtime/contract.py by
+ * chaingen.generate.interface.contract_header(). Do not edit. */
+
 #ifndef CHAINGEN_CONTRACT_H
 #define CHAINGEN_CONTRACT_H
 
@@ -28,13 +30,17 @@
                                       * spurious root of a step too long for the motion */
 #define CHAINGEN_BAD_PARAMETER 10    /* a run-time parameter p_i is not finite or below its lower
                                       * bound, a value the scene format refuses (see p above) */
+#define CHAINGEN_UNAVAILABLE 11      /* the package was generated without this function:
+                                      * step_sensitivities without the sensitivities,
+                                      * holding_torques and simulate_controlled for a scene
+                                      * without actuated joints */
 
 /* Values of the option reuse_jacobian. */
 #define CHAINGEN_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
 #define CHAINGEN_JACOBIAN_ACROSS_STEPS 1   /* simplified Newton */
 #define CHAINGEN_JACOBIAN_PER_STEP 2       /* Newton-chord: once a step */
 
-/* Newton options (the defaults are each package's, default_options). */
+/* Newton options (each package's defaults: <prefix>_default_options). */
 typedef struct {
     int max_iterations;     /* default 20; bounds the work of one step */
     double update_rtol;     /* default 1e-10 */
@@ -61,7 +67,7 @@ typedef struct {
     double largest_dt;      /* the longest accepted step (s) */
 } chaingen_stats;
 
-/* Shared with a running simulate_observed. */
+/* Shared with a running simulate_observed or simulate_controlled. */
 typedef struct {
     volatile int stop;      /* set nonzero to stop the run after the current step (status INTERRUPTED) */
     volatile long steps;    /* steps completed so far, written after every step */
@@ -72,13 +78,25 @@ typedef int (*chaingen_observer)(long steps, void *context);
 typedef int (*chaingen_controller)(long step, double t, const double *phi, const double *omega,
                                    double *u, void *context);
 
-#define CHAINGEN_WARM_START_HISTORY 3
-#define CHAINGEN_REFRESH_RATE 0.1
-#define CHAINGEN_SIMPLIFIED_MARGIN 0.1
-#define CHAINGEN_CHORD_MARGIN 0.001
-#define CHAINGEN_MAX_SPLIT 4
-#define CHAINGEN_MIN_TOLERANCE 1e-14
-#define CHAINGEN_MIN_STEP_FRACTION 1e-12
-#define CHAINGEN_UNAVAILABLE 11 /* seed: the package was generated without this function */
+/* The sizes <prefix>_dimension(which) answers (-1 for another which). */
+#define CHAINGEN_DIMENSION_N_JOINTS 0      /* links and revolute joints */
+#define CHAINGEN_DIMENSION_NX 1            /* entries of a state x */
+#define CHAINGEN_DIMENSION_NZ 2            /* Newton unknowns z of one step */
+#define CHAINGEN_DIMENSION_NU 3            /* inputs u: torques of the actuated joints (0: none) */
+#define CHAINGEN_DIMENSION_NP 4            /* run-time parameters p (0: none) */
+#define CHAINGEN_DIMENSION_NSAMPLE 5       /* entries of one sample row of simulate */
+#define CHAINGEN_DIMENSION_NCONSTRAINT 6   /* structural constraints of a state */
+#define CHAINGEN_DIMENSION_ORDER 7         /* order of the step: 2, 4 or 6 */
+#define CHAINGEN_DIMENSION_NSTAGE 8        /* stages of a composed step (0: the scheme's step alone) */
+#define CHAINGEN_DIMENSION_SENSITIVITIES 9 /* 1 when the package has step_sensitivities */
+
+/* Constants of the runtime's algorithms. */
+#define CHAINGEN_WARM_START_HISTORY 3  /* solutions of chained steps kept for the warm start */
+#define CHAINGEN_REFRESH_RATE 0.1      /* a kept Jacobian is evaluated anew when updates shrink by less than this */
+#define CHAINGEN_SIMPLIFIED_MARGIN 0.1 /* simplified Newton stops at this fraction of the tolerance */
+#define CHAINGEN_CHORD_MARGIN 1e-3     /* Newton-chord stops at this fraction of the tolerance */
+#define CHAINGEN_MAX_SPLIT 4           /* halvings of a step Newton fails on whole */
+#define CHAINGEN_MIN_TOLERANCE 1e-14   /* adaptive steps: rtol and atol are 0 or at least this */
+#define CHAINGEN_MIN_STEP_FRACTION 1e-12 /* adaptive steps: STEP_TOO_SMALL below this fraction of dt */
 
 #endif /* CHAINGEN_CONTRACT_H */
