@@ -42,11 +42,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import contract
 from .errors import BuildError, ChaingenError
 from .files import write_text
 
-#: Flags of every build: the generated code must stay clean under all of them.
-STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
+#: Flags of every build: the generated code must stay clean under all of them (the contract's).
+STRICT_FLAGS = contract.STRICT_FLAGS
 DEFAULT_OPTIMISATION = ("-O2",)
 #: A build directory's name: BUILD_PREFIX + the package prefix + "-" + random + BUILD_SUFFIX.
 BUILD_PREFIX = "build-"

@@ -96,8 +96,7 @@ STATUSES = (
            "a spring segment came within {segment_tolerance} of the geometry's size of zero "
            "length or passed through it (turned by 90 degrees or more in one step), or one is "
            "shorter than 1e-9 of that size in the start state or posture given, where its "
-           "direction is undefined",
-           when="segments"),
+           "direction is undefined"),
     Status("INTERRUPTED", 7, "simulate_observed or simulate_controlled: the observer, the "
                              "controller or control->stop asked to stop",
            "interrupted"),
@@ -108,12 +107,15 @@ STATUSES = (
            "the converged step missed the energy balance by more than energy_tol times the "
            "kinetic energy at its ends: a spurious root of a step too long for the motion",
            "the converged step missed the energy balance by more than energy_tol times its "
-           "kinetic energy (a spurious Newton root of a step too long for the motion)",
-           when="energy_check"),
+           "kinetic energy (a spurious Newton root of a step too long for the motion)"),
     Status("BAD_PARAMETER", 10, "a run-time parameter p_i is not finite or below its lower "
                                 "bound, a value the scene format refuses (see p above)",
            "a run-time parameter is not finite or below its lower bound (a value the scene "
-           "format refuses)", when="parameters"),
+           "format refuses)"),
+    Status("UNAVAILABLE", 11, "the package was generated without this function: "
+                              "step_sensitivities without the sensitivities, holding_torques "
+                              "and simulate_controlled for a scene without actuated joints",
+           "the package was generated without this function"),
 )
 STATUS_CODES = {status.name: status.code for status in STATUSES}
 
@@ -246,6 +248,11 @@ ADAPTIVE_TOLERANCES = ("rtol", "atol")
 ADAPTIVE_TOLERANCE_RULE = f"0 (fixed steps) or from {MIN_ADAPTIVE_TOLERANCE:g} up, and finite"
 
 
+#: Adaptive steps stop with STEP_TOO_SMALL when the step the error test or Newton needs falls
+#: below this fraction of the sample interval dt.
+MIN_STEP_FRACTION = 1e-12
+
+
 def is_adaptive_tolerance(value: float) -> bool:
     """Whether `value` may be an rtol or atol (ADAPTIVE_TOLERANCE_RULE)."""
     return value == 0 or MIN_ADAPTIVE_TOLERANCE <= value < float("inf")
@@ -340,80 +347,76 @@ class Parameter:
 
     name: str
     c_type: str
-    when: str | None = None
 
 
 @dataclass(frozen=True)
 class EntryPoint:
-    """An exported function, <prefix>_<name>: its result type and parameters."""
+    """An exported function, <prefix>_<name>: its result type and parameters, the same in every
+    package. `when`: the feature it needs; a package without it returns UNAVAILABLE."""
 
     name: str
     returns: str
     parameters: tuple[Parameter, ...]
     when: str | None = None
 
-    def present(self, features: Features) -> tuple[Parameter, ...]:
-        """The parameters a package with `features` has, in order."""
-        return tuple(p for p in self.parameters if features.has(p.when))
-
 
 def _parameters(text: str) -> tuple[Parameter, ...]:
-    """Parameters from 'type name, type name [when], ...' (the tables below stay readable)."""
+    """Parameters from 'type name, type name, ...' (the tables below stay readable)."""
     parameters = []
     for item in text.split(","):
-        item = item.strip()
-        when = None
-        match = re.fullmatch(r"(.*?)\s*\[(\w+)\]", item)
-        if match:
-            item, when = match.group(1), match.group(2)
-        c_type, name = re.fullmatch(r"(.*?[\s*])(\w+)", item).groups()
-        parameters.append(Parameter(name, c_type.strip(), when))
+        c_type, name = re.fullmatch(r"(.*?[\s*])(\w+)", item.strip()).groups()
+        parameters.append(Parameter(name, c_type.strip()))
     return tuple(parameters)
 
 
 _WORKSPACE = "{prefix}_workspace *workspace"
-#: The run-time parameters of a package with the feature "parameters".
-P_ARGUMENT = "const double *p [parameters]"
+#: The inputs and the run-time parameters, with their sizes: arguments of every package (NULL and
+#: 0 when the scene has none), so that the signatures do not depend on the scene's features.
+U_ARGUMENTS = "const double *u, int nu"
+P_ARGUMENTS = "const double *p, int np"
 _OPTIONS = "const {prefix}_options *options"
 
+#: The entry points every package exports, with the same signatures whatever its features; one
+#: that needs a feature the package lacks (`when`) returns UNAVAILABLE.
 ENTRY_POINTS = (
     EntryPoint("workspace_size", "size_t", ()),
     EntryPoint("workspace_init", "void", _parameters(_WORKSPACE)),
     EntryPoint("default_options", "void", _parameters("{prefix}_options *options")),
+    EntryPoint("dimension", "long", _parameters("int which")),
     EntryPoint("initial_state", "int", _parameters(
-        f"const double *phi, const double *phidot, {P_ARGUMENT}, double *x, {_WORKSPACE}")),
+        f"const double *phi, const double *phidot, {P_ARGUMENTS}, double *x, {_WORKSPACE}")),
     EntryPoint("outputs", "int", _parameters(
-        f"const double *x, {P_ARGUMENT}, double *phi, double *omega, double *energy, "
+        f"const double *x, {P_ARGUMENTS}, double *phi, double *omega, double *energy, "
         f"double *constraint_error, {_WORKSPACE}")),
     EntryPoint("holding_torques", "int", _parameters(
-        f"const double *phi, {P_ARGUMENT}, double *tau, {_WORKSPACE}"), when="inputs"),
+        f"const double *phi, {P_ARGUMENTS}, double *tau, {_WORKSPACE}"), when="inputs"),
     EntryPoint("residual", "int", _parameters(
-        f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
+        f"const double *z, const double *x0, {U_ARGUMENTS}, {P_ARGUMENTS}, double dt, "
         f"double *residual, {_WORKSPACE}")),
     EntryPoint("residual_jacobian", "int", _parameters(
-        f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
+        f"const double *z, const double *x0, {U_ARGUMENTS}, {P_ARGUMENTS}, double dt, "
         f"double *residual, double *jacobian, {_WORKSPACE}")),
     EntryPoint("step", "int", _parameters(
-        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
-        f"double *flows [flows], {_OPTIONS}, {_WORKSPACE}, int *iterations")),
+        f"const double *x0, {U_ARGUMENTS}, {P_ARGUMENTS}, double dt, double *x1, "
+        f"double *flows, {_OPTIONS}, {_WORKSPACE}, int *iterations")),
     EntryPoint("step_sensitivities", "int", _parameters(
-        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
-        f"double *ds_ds, double *ds_du [inputs], double *ds_dp [parameters], {_OPTIONS}, "
-        f"{_WORKSPACE}, int *iterations"), when="sensitivities"),
+        f"const double *x0, {U_ARGUMENTS}, {P_ARGUMENTS}, double dt, double *x1, "
+        f"double *ds_ds, double *ds_du, double *ds_dp, {_OPTIONS}, {_WORKSPACE}, "
+        "int *iterations"), when="sensitivities"),
     EntryPoint("sample_count", "long", _parameters("long n_steps, long every")),
     EntryPoint("simulate", "int", _parameters(
         "const double *x0, double t0, double dt, long n_steps, long every, "
-        f"const double *u [inputs], {P_ARGUMENT}, {_OPTIONS}, {_WORKSPACE}, double *samples, "
+        f"{U_ARGUMENTS}, {P_ARGUMENTS}, {_OPTIONS}, {_WORKSPACE}, double *samples, "
         "double *x_final, {prefix}_stats *stats")),
     EntryPoint("simulate_observed", "int", _parameters(
         "const double *x0, double t0, double dt, long n_steps, long every, "
-        f"const double *u [inputs], {P_ARGUMENT}, {_OPTIONS}, {_WORKSPACE}, double *samples, "
+        f"{U_ARGUMENTS}, {P_ARGUMENTS}, {_OPTIONS}, {_WORKSPACE}, double *samples, "
         "double *x_final, {prefix}_stats *stats, {prefix}_observer observer, void *context, "
         "long interval, {prefix}_control *control")),
     EntryPoint("simulate_controlled", "int", _parameters(
         "const double *x0, double t0, double dt, long n_steps, long every, "
         "{prefix}_controller controller, void *context, long hold, "
-        f"{P_ARGUMENT}, {_OPTIONS}, {_WORKSPACE}, double *samples, double *torques, "
+        f"{P_ARGUMENTS}, {_OPTIONS}, {_WORKSPACE}, double *samples, double *torques, "
         "double *x_final, {prefix}_stats *stats, {prefix}_control *control"), when="inputs"),
     EntryPoint("build_hash", "const char *", ()),
 )
@@ -438,13 +441,33 @@ def resolved(c_type: str, prefix: str) -> str:
 
 
 def manifest_entry_points(prefix: str, features: Features) -> dict[str, dict]:
-    """The entry points of a package with `features`, as its manifest records them:
-    {name: {"returns": C type, "parameters": [[name, C type], ...]}}."""
+    """The entry points of a package, as its manifest records them: {name: {"returns": C type,
+    "parameters": [[name, C type], ...], "available": whether the package has it}}."""
     return {entry.name: {"returns": entry.returns,
                          "parameters": [[p.name, resolved(p.c_type, prefix)]
-                                        for p in entry.present(features)]}
-            for entry in ENTRY_POINTS if features.has(entry.when)}
+                                        for p in entry.parameters],
+                         "available": features.has(entry.when)}
+            for entry in ENTRY_POINTS}
 
+
+#: Sizes a caller queries with <prefix>_dimension(which): (name, value of which, meaning).
+DIMENSIONS = (
+    ("N_JOINTS", 0, "links and revolute joints"),
+    ("NX", 1, "entries of a state x"),
+    ("NZ", 2, "Newton unknowns z of one step"),
+    ("NU", 3, "inputs u: torques of the actuated joints (0: none)"),
+    ("NP", 4, "run-time parameters p (0: none)"),
+    ("NSAMPLE", 5, "entries of one sample row of simulate"),
+    ("NCONSTRAINT", 6, "structural constraints of a state"),
+    ("ORDER", 7, "order of the step: 2, 4 or 6"),
+    ("NSTAGE", 8, "stages of a composed step (0: the scheme's step alone)"),
+    ("SENSITIVITIES", 9, "1 when the package has step_sensitivities"),
+)
+
+
+#: The compiler flags every build of generated C uses (chaingen's own, a package's Makefile and
+#: the tests): the code must stay clean under all of them.
+STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 
 #: The package's manifest: sizes, layouts, entry points and build flags, read by the loader.
 MANIFEST = "chaingen.json"

@@ -96,8 +96,11 @@ class Solver:
                                            dtype=float)
         self._bounds = _parameter_bounds(manifest["parameters"])
         self._lib = ctypes.CDLL(str(self.library_path))
-        self._entry_points = {name: self._declare(name, entry)
-                              for name, entry in manifest["entry_points"].items()}
+        # The one set of signatures every package has (the contract's), bound where the
+        # package has the function (the others return UNAVAILABLE).
+        features = contract.Features.from_manifest(manifest)
+        self._entry_points = {entry.name: self._declare(entry)
+                              for entry in contract.ENTRY_POINTS if features.has(entry.when)}
         if build_hash is not None:
             built = self._call("build_hash").decode()
             if built != build_hash:
@@ -126,12 +129,13 @@ class Solver:
 
     # -- the C functions ----------------------------------------------------------------------
 
-    def _declare(self, name: str, entry: dict):
-        function = getattr(self._lib, f"{self.prefix}_{name}")
-        function.restype = ctypes_type(entry["returns"], self.prefix)
-        function.argtypes = [ctypes_type(c_type, self.prefix)
-                             for _, c_type in entry["parameters"]]
-        return function, tuple(parameter for parameter, _ in entry["parameters"])
+    def _declare(self, entry: contract.EntryPoint):
+        """The ctypes function of an entry point, with the signature every package has."""
+        function = getattr(self._lib, f"{self.prefix}_{entry.name}")
+        function.restype = ctypes_type(entry.returns, self.prefix)
+        function.argtypes = [ctypes_type(contract.resolved(p.c_type, self.prefix), self.prefix)
+                             for p in entry.parameters]
+        return function, tuple(p.name for p in entry.parameters)
 
     def newton_options(self, options: NewtonOptions | dict | None = None) -> NewtonOptions:
         """Newton options: given ones as they are, or the package's defaults with the fields
@@ -146,13 +150,18 @@ class Solver:
         return dataclasses.replace(self.default_options, **(options or {}))   # checks them
 
     def has_entry_point(self, name: str) -> bool:
+        """Whether the package has `name` (every package exports every entry point; one it
+        was generated without returns UNAVAILABLE)."""
         return name in self._entry_points
 
     def _call(self, name: str, **arguments):
-        """Call <prefix>_<name> with its arguments by parameter name; arguments for parameters
-        the package does not have (u of an unactuated scene, flows) are left out."""
+        """Call <prefix>_<name> with its arguments by parameter name. The sizes nu and np are
+        the package's unless given; a pointer not given is NULL (u of an unactuated scene,
+        flows)."""
         function, parameters = self._entry_points[name]
-        return function(*[arguments[parameter] for parameter in parameters])
+        sizes = {"nu": self.nu, "np": len(self.parameters)}
+        return function(*[arguments.get(parameter, sizes.get(parameter))
+                          for parameter in parameters])
 
     @property
     def _workspace(self):

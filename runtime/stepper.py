@@ -18,6 +18,7 @@ import ctypes
 
 import numpy as np
 
+from . import contract
 from .errors import NewtonError
 from .interface import real_array, real_number
 
@@ -33,19 +34,21 @@ def _address(buffer) -> ctypes.c_void_p:
 
 
 def _bound(solver, name: str, arguments: dict):
-    """<prefix>_<name> and its arguments in the manifest's order, for calls without argtypes:
+    """<prefix>_<name> and its arguments in the contract's order, for calls without argtypes:
     ctypes then converts nothing per call (a call costs a third of one with argtypes), so
     every argument must already be of its C type: c_void_p for pointers (NULL: None),
-    c_double for doubles."""
+    c_double for doubles, c_int for the sizes nu and np (the package's unless given)."""
     function = solver._lib[f"{solver.prefix}_{name}"]    # an object of its own: no argtypes
     function.restype = ctypes.c_int
+    sizes = {"nu": ctypes.c_int(solver.nu), "np": ctypes.c_int(len(solver.parameters))}
     values = []
-    for parameter, c_type in solver.manifest["entry_points"][name]["parameters"]:
-        value = arguments[parameter]
-        if c_type.endswith("*"):
+    for parameter in contract.ENTRY_POINTS_BY_NAME[name].parameters:
+        value = arguments.get(parameter.name, sizes.get(parameter.name))
+        if parameter.c_type.endswith("*"):
             value = None if value is None else _address(value)
-        elif c_type != "double":
-            raise ValueError(f"{name}: no raw argument of C type {c_type!r} ({parameter})")
+        elif parameter.c_type not in ("double", "int"):
+            raise ValueError(f"{name}: no raw argument of C type {parameter.c_type!r} "
+                             f"({parameter.name})")
         values.append(value)
     return function, tuple(values)
 

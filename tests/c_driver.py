@@ -30,9 +30,10 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from chaingen.runtime import contract
 from chaingen.runtime.contract import STATUS_CODES, lower_bound
 
-STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+STRICT = list(contract.STRICT_FLAGS)
 LONG_MAX = 2 ** 63 - 1
 SIZE_MAX = 2 ** 64 - 1
 OK = STATUS_CODES["OK"]
@@ -130,17 +131,17 @@ int main(void)
             p[i] = number();
         }
         PFX_workspace_init(&workspace);
-        status[0] = PFX_initial_state(phi, zeros, p, x, &workspace);
-        if (status[0] != PFXU_OK && PFX_initial_state(phi, zeros, defaults, x, &workspace)) {
-            PFX_initial_state(zeros, zeros, defaults, x, &workspace);
+        status[0] = PFX_initial_state(phi, zeros, p, NP, x, &workspace);
+        if (status[0] != PFXU_OK && PFX_initial_state(phi, zeros, defaults, NP, x, &workspace)) {
+            PFX_initial_state(zeros, zeros, defaults, NP, x, &workspace);
         }
         x[0] += poison;
-        status[1] = PFX_outputs(x, p, out_phi, out_omega, &energy, &error, &workspace);
-        status[2] = PFX_holding_torques(phi, p, tau, &workspace);
-        status[3] = PFX_residual(z, x, u, p, dt, residual, &workspace);
-        status[4] = PFX_residual_jacobian(z, x, u, p, dt, residual, jacobian, &workspace);
-        status[5] = PFX_step(x, u, p, dt, x1, flows, NULL, &workspace, &iterations);
-        status[6] = PFX_step_sensitivities(x, u, p, dt, x1, ds_ds, ds_du, ds_dp, NULL,
+        status[1] = PFX_outputs(x, p, NP, out_phi, out_omega, &energy, &error, &workspace);
+        status[2] = PFX_holding_torques(phi, p, NP, tau, &workspace);
+        status[3] = PFX_residual(z, x, u, NU, p, NP, dt, residual, &workspace);
+        status[4] = PFX_residual_jacobian(z, x, u, NU, p, NP, dt, residual, jacobian, &workspace);
+        status[5] = PFX_step(x, u, NU, p, NP, dt, x1, flows, NULL, &workspace, &iterations);
+        status[6] = PFX_step_sensitivities(x, u, NU, p, NP, dt, x1, ds_ds, ds_du, ds_dp, NULL,
                                           &workspace, &iterations);
         count = PFX_sample_count(n_steps, every);
         controlled_rows = n_steps > 0 && every > 0 ? (n_steps - 1) / every + 1 : 0;
@@ -150,13 +151,14 @@ int main(void)
             /* No step is taken: one row, and the inputs of none. */
             double *samples = rows(1, sizeof(double) * NSAMPLE);
             double *torques = rows(1, sizeof(double) * NU);
-            status[7] = PFX_simulate_observed(x, t0, dt, n_steps, every, u, p, NULL, &workspace,
+            status[7] = PFX_simulate_observed(x, t0, dt, n_steps, every, u, NU, p, NP, NULL,
+                                              &workspace,
                                               samples, x1, &stats, NULL, NULL, 1, &control);
-            status[8] = PFX_simulate_observed(x, t0, dt, n_steps, every, NULL, p, NULL,
+            status[8] = PFX_simulate_observed(x, t0, dt, n_steps, every, NULL, NU, p, NP, NULL,
                                               &workspace, samples, x1, &stats, NULL, NULL, 1,
                                               &control);
             status[9] = PFX_simulate_controlled(x, t0, dt, n_steps, every, controller, u, hold,
-                                                p, NULL, &workspace, samples, torques, x1,
+                                                p, NP, NULL, &workspace, samples, torques, x1,
                                                 &stats, &control);
             free(samples);
             free(torques);
@@ -172,20 +174,20 @@ int main(void)
             for (k = 0; k < n_steps; ++k) {
                 memcpy(inputs + k * NU, u, sizeof u);
             }
-            status[7] = PFX_simulate(x, t0, dt, n_steps, every, inputs, p, NULL, &workspace,
+            status[7] = PFX_simulate(x, t0, dt, n_steps, every, inputs, NU, p, NP, NULL, &workspace,
                                      samples, x1, &stats);
             memset(&stats, 0, sizeof stats);
-            status[8] = PFX_simulate(x, t0, dt, n_steps, every, NULL, p, NULL, &workspace,
+            status[8] = PFX_simulate(x, t0, dt, n_steps, every, NULL, NU, p, NP, NULL, &workspace,
                                      null_samples, x1, &stats);
             done = stats.steps;
             memset(&stats, 0, sizeof stats);
-            same = PFX_simulate(x, t0, dt, n_steps, every, no_inputs, p, NULL, &workspace,
+            same = PFX_simulate(x, t0, dt, n_steps, every, no_inputs, NU, p, NP, NULL, &workspace,
                                 zero_samples, x1, &stats) == status[8] && stats.steps == done
                    && (count <= 0 || !memcmp(null_samples, zero_samples, sizeof(double)
                                              * NSAMPLE * (size_t)(done / every + 1)));
             memset(&stats, 0, sizeof stats);
             status[9] = PFX_simulate_controlled(x, t0, dt, n_steps, every, controller, u, hold,
-                                                p, NULL, &workspace, samples, torques, x1,
+                                                p, NP, NULL, &workspace, samples, torques, x1,
                                                 &stats, NULL);
             for (j = 0; status[9] != PFXU_BAD_ARGUMENT && j * every < stats.steps; ++j) {
                 long s = j * every;

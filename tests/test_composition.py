@@ -88,10 +88,10 @@ def test_composed_es_chains_its_sensitivities_in_the_whole_state():
     scene = load("four_link_actuated")
     es = generate_package(scene, "es", 3, order=4, sensitivities=True)
     vi = generate_package(scene, "vi", 3, order=4, sensitivities=True)
-    assert "_model_joint_maps" in es.files[f"{es.prefix}.c"]
-    assert "#define NCHAIN NX" in es.files[f"{es.prefix}.c"]
-    assert "_model_joint_maps" not in vi.files[f"{vi.prefix}.c"]
-    assert "NCHAIN" not in vi.files[f"{vi.prefix}.c"]
+    assert "_model_joint_maps," in es.files[f"{es.prefix}.c"]
+    assert ".chain_state = 1," in es.files[f"{es.prefix}.c"]
+    assert ".joint_maps = NULL," in vi.files[f"{vi.prefix}.c"]
+    assert ".chain_state = 0," in vi.files[f"{vi.prefix}.c"]
 
 
 def test_order_2_generates_no_composition_and_4_does():
@@ -99,7 +99,8 @@ def test_order_2_generates_no_composition_and_4_does():
     plain = generate_package(scene, "midpoint", 3, sensitivities=False)
     composed = generate_package(scene, "midpoint", 3, order=4, sensitivities=False)
     assert "STAGES" not in plain.files[f"{plain.prefix}.c"]
-    assert "#define NSTAGE 5" in composed.files[f"{composed.prefix}.c"]
+    assert ".nstage = 0," in plain.files[f"{plain.prefix}.c"]
+    assert ".nstage = 5," in composed.files[f"{composed.prefix}.c"]
     assert composed.manifest["order"] == 4
     assert composed.manifest["input_hash"] != plain.manifest["input_hash"]
 

@@ -142,14 +142,18 @@ def test_holding_torques_hold_the_chain_still(method):
 def test_an_unactuated_scene_generates_no_input_path():
     package = generate_package(load("three_link_mono"), "es", 3)
     header = package.files["three_link_mono_es.h"]
-    assert "_NU " not in header and "const double *u" not in header
-    assert "holding_torques" not in header and "flows" not in header
+    # The signatures are every package's (u with its size, NULL and 0 here); the model has no
+    # input path and no holding torques (that entry point returns UNAVAILABLE).
+    assert "#define THREE_LINK_MONO_ES_NU 0 " in header
     assert "three_link_mono_es_model_holding_torques" not in package.files[
         "three_link_mono_es_model.c"]
+    assert ".holding_torques = NULL," in package.files["three_link_mono_es.c"]
+    assert ".nu = 0," in package.files["three_link_mono_es.c"]
     actuated = generate_package(load(UNDERACTUATED), "es", 3)
     header = actuated.files["four_link_underactuated_es.h"]
     assert "#define FOUR_LINK_UNDERACTUATED_ES_NU 3" in header
-    assert "const double *u, double dt" in header and "double *flows" in header
+    assert "const double *u, int nu" in header and "double *flows" in header
+    assert ".nu = 3," in actuated.files["four_link_underactuated_es.c"]
 
 
 def test_inputs_are_refused_where_there_are_none_and_checked_where_there_are():
@@ -241,7 +245,8 @@ def test_sensitivities_linearise_the_step_map():
 def test_a_package_without_sensitivities_has_no_sensitivity_path():
     """generate --no-sensitivities: neither the function nor its generated code exist."""
     package = generate_package(load("three_link_mono"), "vi", 3, sensitivities=False)
-    assert "step_sensitivities" not in package.files["three_link_mono_vi.h"]
+    assert ".sensitivities = 0," in package.files["three_link_mono_vi.c"]
+    assert not package.manifest["entry_points"]["step_sensitivities"]["available"]
     assert "sensitivity" not in package.files["three_link_mono_vi_model.c"]
     solver = solver_for("three_link_mono", "vi", 3)
     assert not solver.has_sensitivities

@@ -7,12 +7,13 @@ import subprocess
 
 import pytest
 
+from chaingen.runtime import contract
 from chaingen.studies.reference_packages import REFERENCE_PACKAGES, differences, reference_package
 
 from helpers import ROOT, require_tools
 
 GENERATED = ROOT / "generated"
-STRICT = "-std=c99 -Wall -Wextra -Werror -pedantic"
+STRICT = " ".join(contract.STRICT_FLAGS)
 
 
 @pytest.mark.parametrize("scene,method,quadrature", [
@@ -80,9 +81,10 @@ int main(void)
     double phi[3] = {0.7853981633974483, 0.3, 0.3}, phidot[3] = {0.0, 0.0, 0.0};
     double x[THREE_LINK_GRAVITY_ES_NX];
     three_link_gravity_es_stats stats;
-    int status = three_link_gravity_es_initial_state(phi, phidot, x, &workspace);
+    int status = three_link_gravity_es_initial_state(phi, phidot, NULL, 0, x, &workspace);
     if (status == THREE_LINK_GRAVITY_ES_OK)
-        status = three_link_gravity_es_simulate(x, 0.0, 0.01, 100, 1, NULL, &workspace,
+        status = three_link_gravity_es_simulate(x, 0.0, 0.01, 100, 1, NULL, 0, NULL, 0, NULL,
+                                                &workspace,
                                                 samples, NULL, &stats);
     printf("%d %ld %.17g %.17g\n", status, stats.steps,
            samples[100 * THREE_LINK_GRAVITY_ES_NSAMPLE + 7] - samples[7],

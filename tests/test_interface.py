@@ -52,42 +52,53 @@ def prototypes(header: str, prefix: str) -> dict[str, tuple[str, list[list[str]]
 
 
 def header_differences(header: str, prefix: str, features: Features, facts) -> list[str]:
-    """Where the rendered `header` disagrees with the interface facts `facts` (a contract)."""
+    """Where the rendered `header` (a package's header after the runtime's contract header,
+    which declares the structs) disagrees with the interface facts `facts` (a contract)."""
     PREFIX = prefix.upper()
     problems = []
     macros = dict(re.findall(r"^#define " + PREFIX + r"_(\w+) (-?\d+)\b", header, re.M))
     for status in facts.STATUSES:
-        expected = str(status.code) if features.has(status.when) else None
+        expected = str(status.code)
         if macros.get(status.name) != expected:
             problems.append(f"status {status.name}: {macros.get(status.name)} != {expected}")
     for mode in facts.JACOBIAN_MODES:
         if macros.get(mode.name) != str(mode.value):
             problems.append(f"mode {mode.name}: {macros.get(mode.name)} != {mode.value}")
-    options = struct_fields(header, f"{prefix}_options")
+    options = struct_fields(header, "chaingen_options")
     if [(c_type, name) for c_type, name, _ in options] != [
             (field.c_type, field.name) for field in facts.NEWTON_OPTIONS]:
         problems.append(f"options struct {options} != {facts.NEWTON_OPTIONS}")
-    stats = struct_fields(header, f"{prefix}_stats")
+    stats = struct_fields(header, "chaingen_stats")
     if [(c_type, name) for c_type, name, _ in stats] != [
             (field.c_type, field.name) for field in facts.STATS_FIELDS]:
         problems.append(f"stats struct {stats} != {facts.STATS_FIELDS}")
     declared = prototypes(header, prefix)
     expected = {name: (entry["returns"], entry["parameters"])
                 for name, entry in facts.manifest_entry_points(prefix, features).items()}
+    for name in ("options", "stats", "control", "observer", "controller"):
+        if f"typedef chaingen_{name} {prefix}_{name};" not in header:
+            problems.append(f"{prefix}_{name} is not chaingen_{name}")
     if declared != expected:
         problems.append(f"prototypes {sorted(set(declared) ^ set(expected)) or declared} != "
                         f"{expected}")
     return problems
 
 
+def package_header(package) -> str:
+    """The package's header after the runtime's contract header it includes."""
+    return (package.files["chaingen_contract.h"] + "\n"
+            + package.files[f"{package.prefix}.h"])
+
+
 def test_the_header_equals_the_contract(package):
     prefix = package.prefix
     features = Features.from_manifest(package.manifest)
-    header = package.files[f"{prefix}.h"]
+    header = package_header(package)
     assert header_differences(header, prefix, features, contract) == []
     # The defaults the header documents are the package's (the contract's, the scheme's reuse).
-    defaults = {name: comment.split(";")[0].removeprefix("default ")
-                for _, name, comment in struct_fields(header, f"{prefix}_options")}
+    text = " ".join(re.search(r"The defaults of this package:\s*(.*?)\. \*/", header,
+                              re.S).group(1).replace("*", " ").split())
+    defaults = dict(item.split() for item in text.split(", "))
     assert {name: float(value) for name, value in defaults.items()} == {
         name: float(value) for name, value in package.manifest["newton_defaults"].items()}
     assert package.manifest["entry_points"] == contract.manifest_entry_points(prefix, features)
@@ -106,8 +117,7 @@ def test_a_contract_that_differs_from_the_header_is_noticed(package, change):
         facts.NEWTON_OPTIONS = (*contract.NEWTON_OPTIONS[:-1],
                                 dataclasses.replace(contract.NEWTON_OPTIONS[-1], c_type="long"))
     elif change == "renumber a status":
-        # The last status every package has (a later one may depend on a feature).
-        last = max(i for i, status in enumerate(contract.STATUSES) if status.when is None)
+        last = len(contract.STATUSES) - 1
         facts.STATUSES = tuple(dataclasses.replace(status, code=status.code + 100)
                                if i == last else status
                                for i, status in enumerate(contract.STATUSES))
@@ -122,11 +132,11 @@ def test_a_contract_that_differs_from_the_header_is_noticed(package, change):
     def manifest_entry_points(prefix, features):
         return {entry.name: {"returns": entry.returns,
                              "parameters": [[p.name, contract.resolved(p.c_type, prefix)]
-                                            for p in entry.present(features)]}
-                for entry in entries if features.has(entry.when)}
+                                            for p in entry.parameters]}
+                for entry in entries}
 
     facts.manifest_entry_points = manifest_entry_points
-    header = package.files[f"{package.prefix}.h"]
+    header = package_header(package)
     features = Features.from_manifest(package.manifest)
     assert header_differences(header, package.prefix, features, facts)
 

@@ -66,7 +66,9 @@ def test_newton_defaults_per_scheme(method, reuse):
     defaults = package.manifest["newton_defaults"]
     assert defaults["warm_start"] == 1 and defaults["reuse_jacobian"] == reuse
     header = package.files[f"{package.prefix}.h"]
-    assert re.search(rf"int reuse_jacobian; +/\* default {reuse}; one of ", header)
+    defaults_text = " ".join(re.search(r"defaults of this package:(.*?)\*/", header,
+                                       re.S).group(1).replace("*", " ").split())
+    assert f"reuse_jacobian {reuse}," in defaults_text
     assert f"#define {package.prefix.upper()}_JACOBIAN_PER_STEP {JACOBIAN_PER_STEP} " in header
     solver = Solver.from_files(package.files)
     assert solver.default_options.reuse_jacobian == reuse

@@ -17,13 +17,15 @@ from pathlib import Path
 
 import pytest
 
+from chaingen.runtime import contract
+
 from helpers import ROOT, require_tools
 
 pytestmark = pytest.mark.tools
 
 PACKAGE = ROOT / "generated" / "four_link_actuated_es"
 PREFIX = "four_link_actuated_es"
-STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+STRICT = list(contract.STRICT_FLAGS)
 SANITIZE = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer",
             "-fno-sanitize-recover=all", "-g"]
 COMPILERS = ("gcc", "clang")
@@ -172,7 +174,7 @@ int main(void)
     double x[{PREFIX.upper()}_NX];
     int status;
     {PREFIX}_default_options(&options);
-    status = {PREFIX}_initial_state(phi, phidot, x, &workspace);
+    status = {PREFIX}_initial_state(phi, phidot, NULL, 0, x, &workspace);
     if (status != {PREFIX.upper()}_OK || options.max_iterations < 1) {{
         printf("FAILED status %d max_iterations %d\\n", status, options.max_iterations);
         return 1;
@@ -267,10 +269,10 @@ int main(void)
     double ds_ds[64], ds_du[8 * {prefix.upper()}_NU];
     int iterations, status;
     {prefix}_workspace_init(&ws);
-    status = {prefix}_initial_state(phi, phidot, x, &ws);
+    status = {prefix}_initial_state(phi, phidot, NULL, 0, x, &ws);
     if (status == 0) {{
-        status = {prefix}_step_sensitivities(x, u, 0.01, x1, ds_ds, ds_du, NULL, &ws,
-                                              &iterations);
+        status = {prefix}_step_sensitivities(x, u, {prefix.upper()}_NU, NULL, 0, 0.01, x1, ds_ds,
+                                              ds_du, NULL, NULL, &ws, &iterations);
     }}
     return status;
 }}
@@ -327,9 +329,10 @@ static const double torque[2][NU] = {{ {{ 1.5, -0.5, 0.2, 0.05 }}, {{ -2.0, 0.7,
 static int alone(int i, double *x, {PREFIX}_workspace *workspace)
 {{
     double next[NX];
-    int k, status = {PREFIX}_initial_state(phi0[i], phidot0[i], x, workspace);
+    int k, status = {PREFIX}_initial_state(phi0[i], phidot0[i], NULL, 0, x, workspace);
     for (k = 0; k < STEPS && status == {PREFIX.upper()}_OK; ++k) {{
-        status = {PREFIX}_step(x, torque[i], dt, next, NULL, NULL, workspace, NULL);
+        status = {PREFIX}_step(x, torque[i], {PREFIX.upper()}_NU, NULL, 0, dt, next, NULL, NULL,
+                               workspace, NULL);
         memcpy(x, next, sizeof next);
     }}
     return status;
@@ -347,11 +350,12 @@ int main(void)
     {PREFIX}_workspace_init(&together[1]);
     memset(single, 0, sizeof single);
     for (i = 0; i < 2 && status == {PREFIX.upper()}_OK; ++i) {{
-        status = {PREFIX}_initial_state(phi0[i], phidot0[i], x[i], &together[i]);
+        status = {PREFIX}_initial_state(phi0[i], phidot0[i], NULL, 0, x[i], &together[i]);
     }}
     for (k = 0; k < STEPS && status == {PREFIX.upper()}_OK; ++k) {{
         for (i = 0; i < 2 && status == {PREFIX.upper()}_OK; ++i) {{
-            status = {PREFIX}_step(x[i], torque[i], dt, next[i], flows[i], NULL, &together[i],
+            status = {PREFIX}_step(x[i], torque[i], {PREFIX.upper()}_NU, NULL, 0, dt, next[i],
+                                   flows[i], NULL, &together[i],
                                    &iterations[i]);
             memcpy(x[i], next[i], sizeof next[i]);
         }}
@@ -455,16 +459,16 @@ int main(void)
     options.rtol = 1e-8;
     options.atol = 1e-8;
     {prefix}_workspace_init(&ws);
-    status = {prefix}_initial_state(phi, phidot, x, &ws);
+    status = {prefix}_initial_state(phi, phidot, NULL, 0, x, &ws);
     if (status == {P}_OK) {{
-        status = {prefix}_simulate(x, 0.0, 0.1, STEPS, 1, u, &options, &ws, samples, NULL,
-                                   &stats);
+        status = {prefix}_simulate(x, 0.0, 0.1, STEPS, 1, u, {P}_NU, NULL, 0, &options, &ws,
+                                   samples, NULL, &stats);
     }}
     printf("%d %ld %ld %ld %g %g\\n", status, stats.steps, stats.accepted_steps,
            stats.rejected_steps, stats.smallest_dt, stats.largest_dt);
     options.rtol = 1e-20;   /* below the floor: refused */
-    if (status == {P}_OK && {prefix}_simulate(x, 0.0, 0.1, STEPS, 1, u, &options, &ws, samples,
-                                              NULL, &stats) != {P}_BAD_ARGUMENT) {{
+    if (status == {P}_OK && {prefix}_simulate(x, 0.0, 0.1, STEPS, 1, u, {P}_NU, NULL, 0, &options,
+                                              &ws, samples, NULL, &stats) != {P}_BAD_ARGUMENT) {{
         return 98;
     }}
     return status;

@@ -1,14 +1,14 @@
-"""The C text of the interface contract: macros, structs, prototypes and calls.
+"""The C text of the interface contract: macros, structs, prototypes and the package's wrappers.
 
-chaingen.runtime.contract states each fact of the C interface once; this module writes it as C
-for the templates. The exported entry points come from the contract; the solver's internal
-functions are described here the same way, so that every C signature that changes with the
-scene's features (an input u, energy flows) is written from one parameter list:
+chaingen.runtime.contract states each fact of the C interface once; this module writes it as C:
+the runtime's contract header (runtime/c/chaingen_contract.h, `contract_header`) and, for one
+package, its status macros, prototypes and the definitions of its exported functions, each a
+call of the runtime library (runtime/c/chaingen_runtime.h) with the package's model table:
 
-    prototype("step")              -> the declaration, prefixed, with the parameters it has
-    call("step", x1="next")        -> prefix_step(x0, dt, next, options, workspace, iterations)
+    prototype("step")   -> int prefix_step(const double *x0, const double *u, int nu, ...);
+    wrapper("step")     -> its definition: return chaingen_step(&MODEL, x0, u, nu, ..., &view, ...)
 
-An argument defaults to the parameter's own name; a call is one line.
+Every package has the same entry points with the same signatures (the contract's table).
 """
 from __future__ import annotations
 
@@ -17,73 +17,19 @@ import textwrap
 from dataclasses import dataclass
 
 from ..runtime import contract
-from ..runtime.contract import P_ARGUMENT, EntryPoint, Features, Parameter, _parameters
 
 #: Width of the generated C text.
 WIDTH = 100
 #: A comment beside a long name (a long scene name makes long macros) is wrapped at this width at
 #: least, overrunning WIDTH rather than leaving no room.
 MIN_COMMENT_WIDTH = 40
-
-#: The solver's static functions whose parameters follow the scene's features.
-INTERNAL_FUNCTIONS = {entry.name: entry for entry in (
-    EntryPoint("step_arguments", "static void", _parameters(
-        f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, "
-        "const double *dt, {prefix}_workspace *workspace")),
-    EntryPoint("newton_factors", "static int", _parameters(
-        f"const double *z, const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
-        "double *residual, double *jacobian, {prefix}_workspace *workspace")),
-    EntryPoint("first_guess", "static int", _parameters(
-        f"const double *x0, {P_ARGUMENT}, double dt, int warm, {{prefix}}_workspace *workspace")),
-    EntryPoint("predict", "static int", _parameters(
-        f"const double *x0, {P_ARGUMENT}, double dt, double *guess, "
-        "{prefix}_workspace *workspace")),
-    EntryPoint("choose_warm_start", "static int", _parameters(
-        f"const double *x0, {P_ARGUMENT}, double dt, const {{prefix}}_options *options, "
-        "{prefix}_workspace *workspace")),
-    EntryPoint("newton", "static int", _parameters(
-        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
-        "const {prefix}_options *options, int warm, {prefix}_workspace *workspace, "
-        "int *iterations")),
-    EntryPoint("solve_step", "static int", _parameters(
-        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, "
-        "const {prefix}_options *options, {prefix}_workspace *workspace, int *iterations")),
-    EntryPoint("finish_step", "static int", _parameters(
-        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
-        "double *flows [flows], const {prefix}_options *options [energy_check], "
-        "{prefix}_workspace *workspace")),
-    EntryPoint("advance", "static int", _parameters(
-        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
-        "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
-        "int *iterations, int depth")),
-    EntryPoint("compose", "static int", _parameters(
-        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
-        "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
-        "int *iterations, int depth")),
-    EntryPoint("joint_state", "static int", _parameters(
-        f"const double *x, {P_ARGUMENT}, double *s, {{prefix}}_workspace *workspace")),
-    EntryPoint("adaptive_interval", "static int", _parameters(
-        f"const double *x0, const double *u [inputs], {P_ARGUMENT}, double dt, double *x1, "
-        "double *flows [flows], const {prefix}_options *options, {prefix}_workspace *workspace, "
-        "int *iterations, {prefix}_stats *counters")),
-    EntryPoint("evaluate_residual", "static int",
-               contract.ENTRY_POINTS_BY_NAME["residual"].parameters),
-    EntryPoint("evaluate_residual_jacobian", "static int",
-               contract.ENTRY_POINTS_BY_NAME["residual_jacobian"].parameters),
-    EntryPoint("stage_sensitivities", "static int",
-               contract.ENTRY_POINTS_BY_NAME["step_sensitivities"].parameters,
-               when="sensitivities"),
-    EntryPoint("run", "static int", _parameters(
-        "const double *x0, double t0, double dt, long n_steps, long every, "
-        f"const double *u [inputs], {P_ARGUMENT}, const {{prefix}}_options *options, "
-        "{prefix}_workspace *workspace, double *samples, double *x_final, "
-        "{prefix}_stats *stats, {prefix}_observer observer, void *context, long interval, "
-        "{prefix}_control *control, {prefix}_controller controller [inputs], "
-        "void *controller_context [inputs], long hold [inputs], double *torques [inputs]")),
-    EntryPoint("write_sample", "static int", _parameters(
-        f"const double *x, {P_ARGUMENT}, double t, const compensated_sum *totals [flows], "
-        "double *row, {prefix}_workspace *workspace")),
-)}
+#: The runtime's contract header, rendered by contract_header() (runtime/c/).
+CONTRACT_HEADER = "chaingen_contract.h"
+#: The model table's name in a package's source.
+MODEL = "MODEL"
+#: Exported functions that call a runtime function of another name, with the arguments the
+#: runtime's has beyond the wrapper's.
+RUNTIME_CALLS = {"simulate": ("simulate_observed", ("NULL", "NULL", "1", "NULL"))}
 
 
 def c_literal(value: int | float) -> str:
@@ -117,65 +63,50 @@ def comment_lines(text: str, indent: int, width: int = WIDTH) -> list[str]:
 
 @dataclass(frozen=True)
 class CInterface:
-    """The contract's C text for one package: its prefix and its features."""
+    """The contract's C text for one package (prefix), or for the runtime (prefix chaingen)."""
 
     prefix: str
-    features: Features
 
     @property
     def PREFIX(self) -> str:
         return self.prefix.upper()
 
-    def _entry(self, name: str) -> tuple[EntryPoint, str]:
-        if name in contract.ENTRY_POINTS_BY_NAME:
-            return contract.ENTRY_POINTS_BY_NAME[name], f"{self.prefix}_{name}"
-        return INTERNAL_FUNCTIONS[name], name
-
-    def _parameters(self, name: str) -> tuple[Parameter, ...]:
-        entry, _ = self._entry(name)
-        if not self.features.has(entry.when):
-            raise ValueError(f"{self.prefix}_{name} does not exist in this package")
-        return entry.present(self.features)
-
     def signature(self, name: str) -> str:
-        """'returns name(type name, ...)', wrapped at WIDTH with the parameters aligned."""
-        entry, c_name = self._entry(name)
+        """'returns prefix_name(type name, ...)', wrapped at WIDTH with the parameters
+        aligned."""
+        entry = contract.ENTRY_POINTS_BY_NAME[name]
         parameters = [_declaration(contract.resolved(p.c_type, self.prefix), p.name)
-                      for p in self._parameters(name)]
-        head = f"{_declaration(entry.returns, c_name)}("
+                      for p in entry.parameters]
+        head = f"{_declaration(entry.returns, f'{self.prefix}_{name}')}("
         return _wrap(head, parameters or ["void"], ")")
 
     def prototype(self, name: str) -> str:
         return self.signature(name) + ";"
 
-    def call(self, name: str, **arguments: str) -> str:
-        """A call of `name` with the package's parameters; each argument is the parameter's
-        name unless given."""
-        _, c_name = self._entry(name)
-        parameters = self._parameters(name)
-        unknown = set(arguments) - {p.name for p in self._entry(name)[0].parameters}
-        if unknown:
-            raise ValueError(f"{name}: no parameters {', '.join(sorted(unknown))}")
-        return f"{c_name}({', '.join(arguments.get(p.name, p.name) for p in parameters)})"
-
-    def null_check(self, name: str, *optional: str) -> str:
-        """'!a || !b ...' over the pointer parameters of `name` the package has, except the
-        `optional` ones (which may be NULL)."""
-        pointers = [p.name for p in self._parameters(name)
-                    if p.c_type.endswith("*") and p.name not in optional]
-        return " || ".join(f"!{pointer}" for pointer in pointers)
-
-    def has(self, name: str) -> bool:
-        """Whether the package exports (or its solver defines) `name`."""
-        entry, _ = self._entry(name)
-        return self.features.has(entry.when)
+    def wrapper(self, name: str) -> str:
+        """The definition of the exported function `name`: the runtime's function of that name
+        called with the package's model table and a view of its workspace."""
+        entry = contract.ENTRY_POINTS_BY_NAME[name]
+        if name == "workspace_size":
+            body = [f"return sizeof({self.prefix}_workspace);"]
+        elif name == "build_hash":
+            body = [f"return {self.PREFIX}_BUILD_HASH;"]
+        else:
+            runtime, extra = RUNTIME_CALLS.get(name, (name, ()))
+            arguments = [f"&{MODEL}"] + ["&view" if p.name == "workspace" else p.name
+                                         for p in entry.parameters] + list(extra)
+            call = _wrap(f"chaingen_{runtime}(", arguments, ");")
+            result = "" if entry.returns == "void" else "return "
+            body = (["const chaingen_workspace view = workspace_view(workspace);"]
+                    if any(p.name == "workspace" for p in entry.parameters) else [])
+            body.append(result + call.replace("\n", "\n" + " " * len(result)))
+        lines = "\n".join("    " + line.replace("\n", "\n    ") for line in body)
+        return f"{self.signature(name)}\n{{\n{lines}\n}}"
 
     def status_macros(self, segment_tolerance: str) -> str:
         """#define <PREFIX>_<status> code /* comment */ for every status of the package."""
         lines = []
         for status in contract.STATUSES:
-            if not self.features.has(status.when):
-                continue
             head = f"#define {self.PREFIX}_{status.name} {status.code}"
             head = head.ljust(len(self.PREFIX) + 28)
             comment = status.comment.format(segment_tolerance=segment_tolerance)
@@ -235,3 +166,63 @@ def _wrap(head: str, items: list[str], tail: str) -> str:
         line += piece
     lines.append(line)
     return "\n".join(lines)
+
+
+def constant_macros(prefix: str) -> str:
+    """The runtime's constants as #defines (the contract's values)."""
+    P = prefix.upper()
+    constants = (
+        ("WARM_START_HISTORY", contract.WARM_START_HISTORY,
+         "solutions of chained steps kept for the warm start"),
+        ("REFRESH_RATE", contract.REFRESH_RATE,
+         "a kept Jacobian is evaluated anew when updates shrink by less than this"),
+        ("SIMPLIFIED_MARGIN", contract.SIMPLIFIED_MARGIN,
+         "simplified Newton stops at this fraction of the tolerance"),
+        ("CHORD_MARGIN", contract.CHORD_MARGIN,
+         "Newton-chord stops at this fraction of the tolerance"),
+        ("MAX_SPLIT", contract.MAX_SPLIT_DEPTH, "halvings of a step Newton fails on whole"),
+        ("MIN_TOLERANCE", contract.MIN_ADAPTIVE_TOLERANCE,
+         "adaptive steps: rtol and atol are 0 or at least this"),
+        ("MIN_STEP_FRACTION", contract.MIN_STEP_FRACTION,
+         "adaptive steps: STEP_TOO_SMALL below this fraction of dt"),
+    )
+    lines = []
+    for name, value, comment in constants:
+        head = f"#define {P}_{name} {c_literal(value)}"
+        lines.append(f"{head.ljust(len(P) + 30)} /* {comment} */")
+    return "\n".join(lines)
+
+
+def dimension_macros(prefix: str) -> str:
+    """#define <PREFIX>_DIMENSION_<name> which: the sizes <prefix>_dimension answers."""
+    P = prefix.upper()
+    return "\n".join(f"{f'#define {P}_DIMENSION_{name} {which}'.ljust(len(P) + 34)} "
+                     f"/* {comment} */" for name, which, comment in contract.DIMENSIONS)
+
+
+def contract_header() -> str:
+    """runtime/c/chaingen_contract.h: the contract's C text with the runtime's prefix, included
+    by the runtime and by every package's header."""
+    interface = CInterface("chaingen")
+    defaults = contract.NEWTON_OPTION_DEFAULTS
+    sections = [
+        "/* The C contract of chaingen's runtime: status codes, options, counters, callback types\n"
+        " * and constants. Rendered from chaingen/runtime/contract.py by\n"
+        " * chaingen.generate.interface.contract_header(). Do not edit. */",
+        "#ifndef CHAINGEN_CONTRACT_H\n#define CHAINGEN_CONTRACT_H",
+        "/* Status codes. */\n" + interface.status_macros("its tolerance"),
+        "/* Values of the option reuse_jacobian. */\n" + interface.jacobian_mode_macros(),
+        "/* Newton options (each package's defaults: <prefix>_default_options). */\n"
+        + interface.struct(contract.NEWTON_OPTIONS, "options", defaults),
+        "/* Counters of one simulate call. */\n"
+        + interface.struct(contract.STATS_FIELDS, "stats"),
+        "/* Shared with a running simulate_observed or simulate_controlled. */\n"
+        + interface.struct(contract.CONTROL_FIELDS, "control"),
+        interface.observer_typedef(),
+        interface.controller_typedef(),
+        "/* The sizes <prefix>_dimension(which) answers (-1 for another which). */\n"
+        + dimension_macros("chaingen"),
+        "/* Constants of the runtime's algorithms. */\n" + constant_macros("chaingen"),
+        "#endif /* CHAINGEN_CONTRACT_H */",
+    ]
+    return "\n\n".join(sections) + "\n"

@@ -30,7 +30,7 @@ from ..version import VERSION
 from .casadi_functions import chains_state, scheme_functions
 from .casadi_source import casadi_c_source, work_sizes
 from .example import example_context
-from .interface import CInterface, c_literal
+from .interface import CInterface, c_literal, dimension_macros
 from .key import input_hash
 
 #: template -> file it renders ({prefix} is replaced by the package prefix)
@@ -42,9 +42,23 @@ TEMPLATES = {
     "example.c.j2": "example.c",
     "README.md.j2": "README.md",
 }
-LU_HEADER = "chaingen_lu.h"
-#: es's Newton solve by the Jacobian's factors (packages whose scheme has an arm_space).
-ARM_SOLVE_HEADER = "chaingen_arm_solve.h"
+#: The runtime library (runtime/c/), copied into every package: its source, compiled into the
+#: package's own (<prefix>.c includes it), and its headers.
+RUNTIME_FILES = ("chaingen_runtime.c", "chaingen_runtime.h", "chaingen_contract.h",
+                 "chaingen_workspace.h", "chaingen_lu.h", "chaingen_arm_solve.h")
+#: The runtime headers a package's public header includes, installed beside it.
+PUBLIC_RUNTIME_HEADERS = ("chaingen_contract.h", "chaingen_workspace.h")
+#: Fields of the model table (chaingen_runtime.h) that point at a generated function, and the
+#: function (SchemeFunctions' field) each is.
+MODEL_FUNCTIONS = (
+    ("parameters", "parameters"), ("initial_state", "initial_state"), ("outputs", "outputs"),
+    ("holding_torques", "holding_torques"), ("residual", "residual"),
+    ("residual_jacobian", "residual_jacobian"), ("newton_factors", "newton_factors"),
+    ("predictor", "predictor"), ("next_state", "next_state"),
+    ("segment_margins", "segment_margins"), ("energy_terms", "energy_check"),
+    ("sensitivity_rhs", "sensitivity_rhs"), ("sensitivity_map", "sensitivity_map"),
+    ("joint_maps", "joint_maps"),
+)
 
 #: A generated model source larger than this is compiled with LARGE_MODEL_FLAGS in place of the
 #: optimisation level: on a single function of some 10^5 lines gcc's -O2 takes minutes (n = 20:
@@ -100,19 +114,12 @@ def parameter_bounds(paths) -> list[tuple[str, str, str]]:
     return bounds
 
 
-def template_environment(interface: CInterface | None = None) -> jinja2.Environment:
-    """The Jinja2 environment of the templates (package data chaingen.templates); with an
-    interface, its functions are the templates' globals: prototype, call, signature, has and
-    null_check."""
+def template_environment() -> jinja2.Environment:
+    """The Jinja2 environment of the templates (package data chaingen.templates)."""
     loader = jinja2.FunctionLoader(
         lambda name: importlib.resources.files("chaingen.templates").joinpath(name).read_text())
-    environment = jinja2.Environment(loader=loader, undefined=jinja2.StrictUndefined,
-                                     keep_trailing_newline=True, autoescape=False)
-    if interface is not None:
-        environment.globals.update(prototype=interface.prototype, call=interface.call,
-                                   signature=interface.signature, has=interface.has,
-                                   null_check=interface.null_check)
-    return environment
+    return jinja2.Environment(loader=loader, undefined=jinja2.StrictUndefined,
+                              keep_trailing_newline=True, autoescape=False)
 
 
 def scheme_label(scheme: DiscreteScheme) -> str:
@@ -140,13 +147,118 @@ def newton_defaults(scheme: DiscreteScheme) -> dict:
             **dict(scheme.newton_overrides)}
 
 
+def comment_text(text: str) -> str:
+    """Text for the inside of a C block comment: wrapped at the generated width, each line after
+    the first starting " * "."""
+    return "\n * ".join(textwrap.wrap(text, width=96))
+
+
+def _c_array(c_type: str, name: str, values) -> str:
+    """A static const C array, its initialiser wrapped within the generated width."""
+    return f"static const {c_type} {name}[{len(values)}] = {{\n    {c_list(values)}\n}};\n"
+
+
+def model_table(scheme: DiscreteScheme, functions, sizes: dict, defaults: dict,
+                features: Features) -> tuple[str, str]:
+    """The package's model table (chaingen_runtime.h's chaingen_model) as C: the static arrays
+    it points at, and its field initialisers."""
+    tables = []
+    stages = [c_literal(f) for f in scheme.composition] if len(scheme.composition) > 1 else []
+    if stages:
+        tables.append("/* The stages of the composed step: fractions of dt that sum to 1. */\n"
+                      + _c_array("double", "STAGES", stages))
+    bounds = parameter_bounds(scheme.parameter_paths)
+    if bounds:
+        tables.append("/* The lower bound of each parameter, the scene format's (chaingen's "
+                      "contract,\n * NUMBER_BOUNDS), and whether p_i may equal it; -DBL_MAX, "
+                      "inclusive: any finite value. */\n"
+                      + _c_array("double", "P_LOWER", [b[0] for b in bounds])
+                      + _c_array("int", "P_INCLUSIVE", [b[1] for b in bounds]))
+    if functions.arm_pattern:
+        tables.append("/* The structural nonzeros of H = dh/dw (chaingen_arm_solve.h), on the "
+                      "arms: row, column. */\n"
+                      + _c_array("int", "ARM_H_ROW", functions.arm_pattern[0])
+                      + _c_array("int", "ARM_H_COL", functions.arm_pattern[1]))
+    options = ", ".join(c_literal(defaults[field.name]) for field in contract.NEWTON_OPTIONS)
+    fields = dict(sizes)
+    fields.update({
+        "stages": "STAGES" if stages else "NULL",
+        # A start state's segments are measured against the scene reader's tolerance: in
+        # margins (length / RUN_SEGMENT_RELATIVE_TOLERANCE G), at least this.
+        "start_margin": f"{ZERO_SEGMENT_RELATIVE_TOLERANCE!r} / "
+                        f"{RUN_SEGMENT_RELATIVE_TOLERANCE!r}",
+        "p_lower": "P_LOWER" if bounds else "NULL",
+        "p_inclusive": "P_INCLUSIVE" if bounds else "NULL",
+        "arm_h_row": "ARM_H_ROW" if functions.arm_pattern else "NULL",
+        "arm_h_col": "ARM_H_COL" if functions.arm_pattern else "NULL",
+        "defaults": f"{{{options}}}",
+    })
+    dense = functions.newton_factors is None
+    for field, attribute in MODEL_FUNCTIONS:
+        function = getattr(functions, attribute)
+        if attribute == "residual_jacobian" and not dense:
+            function = None   # formed from the factors (chaingen_arm_solve.h)
+        fields[field] = "NULL" if function is None else function.name()
+    lines = [f"    .{name} = {value}," for name, value in fields.items()]
+    return "\n".join(tables), "\n".join(lines)
+
+
+def layout_comments(scheme: DiscreteScheme, prefix: str, columns, parameters) -> str:
+    """The header's comments on the layouts of x, u, p, z, a sample row and the energy flows."""
+    P = prefix.upper()
+    scene = scheme.scene
+
+    def listing(title: str, entries) -> str:
+        return "\n".join([f"/* {title}"] + [f" *   {entry}" for entry in entries]) + " */\n"
+
+    parts = [listing(f"State x ({P}_NX entries): {scheme.state_layout.description}.",
+                     [f"x[{i}] {name}" for i, name in enumerate(scheme.state_layout.entries)])]
+    if scene.actuated_joints:
+        parts.append(listing(
+            f"Inputs u ({P}_NU entries): the torque (N m) of each actuated joint, held constant "
+            "over a\n * step. It acts between link i-1 and link i, positive in the direction of "
+            "phi_i (power tau phidot).",
+            [f"u[{i}] tau of joint {joint}" for i, joint in enumerate(scene.actuated_joints)]))
+    else:
+        parts.append("/* The scene has no [actuation] table: the chain is unactuated, NU is 0 "
+                     "and u is NULL. */\n")
+    if parameters:
+        parts.append(listing(
+            f"Parameters p ({P}_NP entries): numbers of the scene the solver takes at run time, "
+            "by their\n * key path in the scene file (unit; the scene's own value; the values "
+            "the scene format allows).\n * Every other number of the scene is a constant of the "
+            "code.",
+            [f"p[{i}] {path} ({unit}; {value}; {rule})"
+             for i, (path, unit, value, rule) in enumerate(parameters)]))
+    else:
+        parts.append("/* The package takes no run-time parameters: NP is 0 and p is NULL. */\n")
+    parts.append(listing(
+        f"Newton unknowns z ({P}_NZ entries): {scheme.unknowns_layout.description}.",
+        [f"z[{i}] {name}" for i, name in enumerate(scheme.unknowns_layout.entries)])[:-4]
+        + f"\n * Residual F (same length): {scheme.residual_description}. */\n")
+    parts.append(listing(f"One sample row of simulate ({P}_NSAMPLE entries), the columns of the "
+                         "trajectory file:",
+                         [f"[{i}] {name}: {meaning}" for i, (name, meaning)
+                          in enumerate(columns)]))
+    flows = scheme.flow_description
+    if flows:
+        parts.append(f"/* Energy flows of one step (flows[2]): flows[0] the work of the joint "
+                     f"torques {flows.input_work},\n * flows[1] the energy dissipated by joint "
+                     f"damping {flows.dissipated}, >= 0 (J).\n * {flows.balance} */\n")
+    else:
+        parts.append("/* Energy flows of one step (flows[2]): the scene has neither actuated nor "
+                     "damped joints, and\n * they are zero: the energy is conserved. */\n")
+    return "\n".join(parts)
+
+
 def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
                    progress=None) -> GeneratedPackage:
     """The C package of `scheme`: CasADi code for its functions and the templates around it.
 
-    sensitivities=False leaves out step_sensitivities and its generated functions (a package
-    only run forward, as `chaingen simulate` does, builds faster without them). progress: a
-    chaingen.progress.Progress told of each stage.
+    sensitivities=False leaves out the generated functions of step_sensitivities (a package
+    only run forward, as `chaingen simulate` does, builds faster without them; its
+    step_sensitivities returns UNAVAILABLE). progress: a chaingen.progress.Progress told of each
+    stage.
     """
     scene = scheme.scene
     prefix = package_prefix(scene, scheme.method)
@@ -158,14 +270,15 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     if progress is not None:
         progress.update(2, "C code of the model")
     model_source, model_header = casadi_c_source(functions.all(), prefix)
-    sizes = work_sizes(functions.all())
+    work = {key: max(1, value) for key, value in dataclasses.asdict(
+        work_sizes(functions.all())).items()}
     model_flags = LARGE_MODEL_FLAGS if len(model_source) > LARGE_MODEL_BYTES else ()
     source_flags = {f"{prefix}.c": list(SOLVER_FLAGS)}
     if model_flags:
         source_flags[f"{prefix}_model.c"] = list(model_flags)
     defaults = newton_defaults(scheme)
     features = package_features(scheme, sensitivities)
-    interface = CInterface(prefix, features)
+    interface = CInterface(prefix)
     segment_tolerance = f"{scheme.segment_relative_tolerance:g}"
 
     banner_text = (f"Generated by chaingen {VERSION} (SymPy {sympy.__version__}, CasADi "
@@ -177,81 +290,92 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     n_p = len(scheme.parameter_paths)
     columns = contract.sample_columns(n, features.flows)
     flows = scheme.flow_description
+    chain_state = chains_state(scheme)
+    nstage = len(scheme.composition) if len(scheme.composition) > 1 else 0
+    sizes = {
+        "n_joints": n, "nx": len(scheme.state_layout), "nz": len(scheme.unknowns_layout),
+        "nu": nu, "np": n_p,
+        "nq": functions.parameters.size1_out(0) if functions.parameters is not None else 0,
+        "nsample": len(columns), "nconstraint": scheme.constraint_residuals.shape[0],
+        "nsegment": len(scheme.segment_tolerances), "order": scheme.order, "nstage": nstage,
+        # The adaptive steps' error test: es's nodal rates at order 2 are off C(q) v = 0 by
+        # O(dt^2) in every step without accumulating (es.tangent_velocity_solve), which step
+        # doubling would take for the local error; there the test takes the angles alone.
+        "error_entries": n if scheme.method == "es" and scheme.order == 2 else 2 * n,
+        "flows": int(features.flows), "energy_check": int(features.energy_check),
+        "sensitivities": int(sensitivities), "chain_state": int(chain_state),
+        "arm_nh": len(functions.arm_pattern[0]) if functions.arm_pattern else 0,
+    }
+    tables, model_fields = model_table(scheme, functions, sizes, defaults, features)
+    parameters_listed = list(zip(scheme.parameter_paths, scheme.parameter_units,
+                                 map(c_literal, scheme.parameter_values),
+                                 [rule for _, _, rule in parameter_bounds(scheme.parameter_paths)]))
     context = {
-        "nu": nu, "actuated_joints": scene.actuated_joints, "flows": features.flows,
-        "sensitivities": sensitivities, "segments": len(scheme.segment_tolerances),
-        # A start state's segments are measured against the scene reader's tolerance.
-        "zero_segment_relative_tolerance": repr(ZERO_SEGMENT_RELATIVE_TOLERANCE),
-        "run_segment_relative_tolerance": repr(RUN_SEGMENT_RELATIVE_TOLERANCE),
-        "energy_check": features.energy_check,
-        "nsens": 2 * n + nu + n_p,
-        # The state the stages of a composed step chain their Jacobians in: x (es) or s.
-        "chain_state": chains_state(scheme),
-        "nchain": len(scheme.state_layout) if chains_state(scheme) else 2 * n,
-        "flows_work": flows.input_work if flows else "",
-        "flows_dissipated": flows.dissipated if flows else "",
-        "flows_balance": flows.balance if flows else "",
-        **example_context(scene),
         "banner": c_banner, "make_banner": f"# {banner_text}", "banner_text": banner_text,
         "prefix": prefix, "PREFIX": prefix.upper(),
         "scene_name": scene.name, "method": scheme.method,
         "scheme_label": scheme_label(scheme), "method_summary": scheme.summary,
-        "n": n, "nx": len(scheme.state_layout), "nz": len(scheme.unknowns_layout),
-        "nsample": len(columns), "nconstraint": scheme.constraint_residuals.shape[0],
+        **{key: sizes[key] for key in ("nu", "np", "nq", "order", "nstage", "arm_nh")},
+        # The rest of chaingen_workspace.h's formula: NQ, NSTAGE, ARM_NH, SENSITIVITIES,
+        # CHAIN_STATE, NSEGMENT, NCONSTRAINT.
+        "workspace_sizes": ", ".join(str(sizes[key]) for key in (
+            "nq", "nstage", "arm_nh", "sensitivities", "chain_state", "nsegment",
+            "nconstraint")),
+        "n": n, "nx": sizes["nx"], "nz": sizes["nz"], "nsample": sizes["nsample"],
+        "sensitivities": int(sensitivities), "chain_state": int(chain_state),
+        "flows": int(features.flows),
+        "p_arguments": f"parameters, {prefix.upper()}_NP" if n_p else "NULL, 0",
+        "actuated_joints": scene.actuated_joints,
+        "flows_work": flows.input_work if flows else "",
+        "flows_dissipated": flows.dissipated if flows else "",
+        "flows_balance": flows.balance if flows else "",
+        **example_context(scene),
         "state_entries": scheme.state_layout.entries,
         "state_description": scheme.state_layout.description,
         "unknowns_entries": scheme.unknowns_layout.entries,
         "unknowns_description": scheme.unknowns_layout.description,
         "residual_description": scheme.residual_description,
         "sample_columns": columns,
-        "step_inputs": ["z", "x0"] + (["u"] if nu else []) + (["p"] if n_p else []) + ["dt"],
-        "np": n_p,
-        "order": scheme.order,
-        # The adaptive steps' error test: es's nodal rates at order 2 are off C(q) v = 0 by
-        # O(dt^2) in every step without accumulating (es.tangent_velocity_solve), which step
-        # doubling would take for the local error; there the test takes the angles alone.
-        "error_entries": n if scheme.method == "es" and scheme.order == 2 else 2 * n,
-        "stages": [c_literal(fraction) for fraction in scheme.composition]
-        if len(scheme.composition) > 1 else [],
-        "nq": functions.parameters.size1_out(0) if functions.parameters is not None else 0,
-        "parameters": list(zip(scheme.parameter_paths, scheme.parameter_units,
-                               map(c_literal, scheme.parameter_values),
-                               [rule for _, _, rule in parameter_bounds(scheme.parameter_paths)])),
-        "parameter_bounds": parameter_bounds(scheme.parameter_paths),
-        "sensitivity_outputs": (["ds_du"] if nu else []) + (["ds_dp"] if n_p else []),
-        "sensitivity_checks": ([("ds_du", "NU")] if nu else []) + ([("ds_dp", "NP")]
-                                                                     if n_p else []),
-        "work": {key: max(1, value) for key, value in dataclasses.asdict(sizes).items()},
+        "stages": [c_literal(fraction) for fraction in scheme.composition] if nstage else [],
+        "parameters": parameters_listed,
+        "work": work,
         "defaults": {name: c_literal(value) for name, value in defaults.items()},
         "status_macros": interface.status_macros(segment_tolerance),
         "jacobian_mode_macros": interface.jacobian_mode_macros(),
-        "options_struct": interface.struct(contract.NEWTON_OPTIONS, "options", defaults),
-        "stats_struct": interface.struct(contract.STATS_FIELDS, "stats"),
-        "control_struct": interface.struct(contract.CONTROL_FIELDS, "control"),
+        "dimension_macros": dimension_macros(prefix),
+        "prototypes": {entry.name: interface.prototype(entry.name)
+                       for entry in contract.ENTRY_POINTS},
+        "wrappers": [interface.wrapper(entry.name) for entry in contract.ENTRY_POINTS],
+        "tables": tables, "model_fields": model_fields,
+        "layouts": layout_comments(scheme, prefix, columns, parameters_listed),
+        "defaults_text": comment_text(", ".join(f"{name} {c_literal(value)}"
+                                                for name, value in defaults.items())),
+        "step_text": comment_text(
+            f"The step is of order {scheme.order}: a symmetric composition of {nstage} steps "
+            "of the scheme, of dt times " + ", ".join(map(c_literal, scheme.composition))
+            + " (one negative: a step back in time); each stage keeps the scheme's structure."
+            if nstage else "The scheme's step, of order 2."),
+        "sensitivities_text": comment_text(
+            "This package has them." if sensitivities else
+            "This package was generated without them (chaingen generate --no-sensitivities): "
+            f"{prefix.upper()}_UNAVAILABLE."),
         "max_split": contract.MAX_SPLIT_DEPTH,
-        "min_tolerance": c_literal(contract.MIN_ADAPTIVE_TOLERANCE),
-        "observer_typedef": interface.observer_typedef(),
-        "controller_typedef": interface.controller_typedef(),
-        "history": contract.WARM_START_HISTORY,
         "refresh_rate": c_literal(contract.REFRESH_RATE),
         "simplified_margin": c_literal(contract.SIMPLIFIED_MARGIN),
         "chord_margin": c_literal(contract.CHORD_MARGIN),
         "source_flags": {name: " ".join(flags) for name, flags in source_flags.items()},
         "model_flags": " ".join(model_flags), "large_model_bytes": LARGE_MODEL_BYTES,
         "sources": [f"{prefix}.c", f"{prefix}_model.c"],
-        "arm_solve": functions.arm_pattern is not None,
-        "arm_nh": len(functions.arm_pattern[0]) if functions.arm_pattern else 0,
-        "arm_rows": c_list(functions.arm_pattern[0]) if functions.arm_pattern else "",
-        "arm_cols": c_list(functions.arm_pattern[1]) if functions.arm_pattern else "",
+        "strict_flags": " ".join(contract.STRICT_FLAGS),
+        "public_headers": [f"{prefix}.h", *PUBLIC_RUNTIME_HEADERS],
     }
-    environment = template_environment(interface)
+    environment = template_environment()
     files = {output.format(prefix=prefix): environment.get_template(template).render(context)
              for template, output in TEMPLATES.items()}
     files[f"{prefix}_model.c"] = f"{c_banner}\n{model_source}"
     files[f"{prefix}_model.h"] = f"{c_banner}\n{model_header}"
-    for header in (LU_HEADER, ARM_SOLVE_HEADER) if functions.arm_pattern else (LU_HEADER,):
-        files[header] = importlib.resources.files("chaingen.runtime").joinpath(
-            "c", header).read_text()
+    for name in RUNTIME_FILES:
+        files[name] = importlib.resources.files("chaingen.runtime").joinpath("c", name).read_text()
     manifest = {
         "chaingen_version": VERSION, "input_hash": digest, "prefix": prefix,
         "scene": scene.name, "method": scheme.method, "quadrature": scheme.quadrature,

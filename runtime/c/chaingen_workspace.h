@@ -8,7 +8,8 @@
  *         const double *arg[ARG]; double *res[RES]; long long int iw[IW]; double w[W];
  *         int ints[CHAINGEN_WORKSPACE_INTS(NZ, NSTAGE)];
  *         double doubles[CHAINGEN_WORKSPACE_DOUBLES(N, NX, NZ, NU, NP, NQ, NSTAGE, ARM_NH,
- *                                                   SENSITIVITIES, CHAIN_STATE)];
+ *                                                   SENSITIVITIES, CHAIN_STATE, NSEGMENT,
+ *                                                   NCONSTRAINT)];
  *     } prefix_workspace;
  *
  * and hands the runtime a chaingen_workspace, pointers into it. The runtime carves `doubles` and
@@ -75,9 +76,14 @@ typedef struct {
  *  - with NSTAGE > 0: stage_state (2 x NX), composed_x1 (NX), stage_z (NSTAGE x HISTORY x NZ),
  *    and with SENSITIVITIES the stage's and the accumulated sensitivities (NCHAIN x NCHAIN_SENS
  *    each), and with CHAIN_STATE the maps to joint space: x0_s0 (NX x 2N), s1_x1 (2N x NX), a
- *    column (NX), x0_p (NX x NP), s1_p (2N x NP). */
+ *    column (NX), x0_p (NX x NP), s1_p (2N x NP);
+ *  - the runtime's scratch arrays (what were local arrays of the rendered solver): the segment
+ *    margins of a step (2 NSEGMENT), the constraint output (NCONSTRAINT + 1), a posture's state
+ *    (NX) and its zero rates (N), the adaptive step's joint states start, whole and ends (3 x 2N),
+ *    the controller's phi, omega (N each) and held inputs (NU), and with NSTAGE > 0 and
+ *    SENSITIVITIES a column of the composed sensitivities (NCHAIN). */
 #define CHAINGEN_WORKSPACE_DOUBLES(N, NX, NZ, NU, NP, NQ, NSTAGE, ARM_NH, SENSITIVITIES,           \
-                                   CHAIN_STATE)                                                    \
+                                   CHAIN_STATE, NSEGMENT, NCONSTRAINT)                             \
     (4 * (NZ)                                                                                      \
      + ((ARM_NH) > 0 ? (ARM_NH) + 9 * (N) + 15 * (N) + (N) * (N) + 6 * (N) : (NZ) * (NZ))          \
      + 5 * (NX) + CHAINGEN_WARM_START_HISTORY * (NZ)                                               \
@@ -90,6 +96,8 @@ typedef struct {
             ? 2 * CHAINGEN_NCHAIN(N, NX, CHAIN_STATE)                                              \
                   * CHAINGEN_NCHAIN_SENS(N, NX, NU, NP, CHAIN_STATE) : 0)                          \
      + ((NSTAGE) > 0 && (SENSITIVITIES) && (CHAIN_STATE)                                           \
-            ? 4 * (N) * (NX) + (NX) + (NX) * (NP) + 2 * (N) * (NP) : 0))
+            ? 4 * (N) * (NX) + (NX) + (NX) * (NP) + 2 * (N) * (NP) : 0)                         \
+     + 2 * (NSEGMENT) + (NCONSTRAINT) + 1 + (NX) + (N) + 6 * (N) + 2 * (N) + (NU)                  \
+     + ((NSTAGE) > 0 && (SENSITIVITIES) ? CHAINGEN_NCHAIN(N, NX, CHAIN_STATE) : 0))
 
 #endif /* CHAINGEN_WORKSPACE_H */

@@ -18,11 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...generate.interface import CInterface, c_literal
+from ...generate.interface import c_literal
 from ...generate.package import GeneratedPackage, template_environment
 from ...runtime import contract
 from ...runtime.build import STRICT_FLAGS, compiler
-from ...runtime.contract import Features
 
 
 class HarnessError(RuntimeError):
@@ -57,6 +56,14 @@ class LoopTimings:
         return self.step_ns / self.residual_jacobian_ns
 
 
+def call_arguments(prefix: str, manifest: dict) -> dict:
+    """The u and p arguments of a step call in a timing program: the arrays u and p with their
+    sizes, or NULL, 0 where the package has none."""
+    P = prefix.upper()
+    return {"u_arguments": f"u, {P}_NU" if manifest["nu"] else "NULL, 0",
+            "p_arguments": f"p, {P}_NP" if manifest["parameters"] else "NULL, 0"}
+
+
 class Harness:
     """A compiled timing program for one package; call `time` as often as needed."""
 
@@ -68,9 +75,9 @@ class Harness:
         for name, text in package.files.items():
             (self.workdir / name).write_text(text)
         manifest = package.manifest
-        environment = template_environment(
-            CInterface(package.prefix, Features.from_manifest(manifest)))
+        environment = template_environment()
         source = environment.get_template("bench_harness.c.j2").render(
+            **call_arguments(package.prefix, manifest),
             prefix=package.prefix, PREFIX=package.prefix.upper(), nu=manifest["nu"],
             flows=manifest["energy_flows"],
             parameters=[c_literal(entry["value"]) for entry in manifest["parameters"]],
@@ -151,13 +158,12 @@ def time_pair(first: GeneratedPackage, second: GeneratedPackage, x0, dt: float, 
     blocks = []
     for package in (first, second):
         manifest = package.manifest
-        environment = template_environment(
-            CInterface(package.prefix, Features.from_manifest(manifest)))
+        environment = template_environment()
         blocks.append(environment.get_template("bench_pair_block.c.j2").render(
-            prefix=package.prefix, PREFIX=package.prefix.upper(), nu=manifest["nu"],
+            **call_arguments(package.prefix, manifest), prefix=package.prefix,
+            PREFIX=package.prefix.upper(), nu=manifest["nu"],
             parameters=[c_literal(entry["value"]) for entry in manifest["parameters"]]))
-    source = template_environment(CInterface(first.prefix, Features.from_manifest(
-        first.manifest))).get_template("bench_pair.c.j2").render(
+    source = template_environment().get_template("bench_pair.c.j2").render(
         a=first.prefix, A=first.prefix.upper(), b=second.prefix, blocks="\n".join(blocks))
     with tempfile.TemporaryDirectory(prefix="bench-pair-") as directory:
         workdir = Path(directory)
