@@ -56,7 +56,8 @@ static double angle_difference(double a, double b)
 /* The control law: sets e->u and the tracking error over the actuated joints. */
 static int control(example *e, const double *phi, const double *omega, double *error)
 {
-    int j, status = four_link_actuated_es_holding_torques(phi, e->holding, &e->control_workspace);
+    int j, status = four_link_actuated_es_holding_torques(phi, NULL, 0, e->holding,
+                                                  &e->control_workspace);
     *error = 0.0;
     for (j = 0; j < NU; ++j) {
         int i = actuated[j];
@@ -122,7 +123,8 @@ int main(int argc, char **argv)
     four_link_actuated_es_default_options(&e.options);
     four_link_actuated_es_workspace_init(&e.workspace);   /* before the first step: no Newton history */
     four_link_actuated_es_workspace_init(&e.control_workspace);
-    status = four_link_actuated_es_initial_state(initial_angles, initial_velocities, e.x, &e.workspace);
+    status = four_link_actuated_es_initial_state(initial_angles, initial_velocities, NULL, 0, e.x,
+                                    &e.workspace);
     printf("# PD control of %s to phi* = (", "four-link-actuated");
     for (i = 0; i < N_JOINTS; ++i) {
         printf(i ? ", %.4g" : "%.4g", e.target[i]);
@@ -131,7 +133,7 @@ int main(int argc, char **argv)
            e.options.max_iterations);
     printf("# %10s %18s %12s\n", "t (s)", "tracking error", "Newton its");
     for (k = 0; k < n_steps && status == FOUR_LINK_ACTUATED_ES_OK; ++k) {
-        status = four_link_actuated_es_outputs(e.x, phi, omega, NULL, NULL, &e.workspace);
+        status = four_link_actuated_es_outputs(e.x, NULL, 0, phi, omega, NULL, NULL, &e.workspace);
         if (status == FOUR_LINK_ACTUATED_ES_OK) {
             status = control(&e, phi, omega, &error);
         }
@@ -141,7 +143,8 @@ int main(int argc, char **argv)
         if (k % 500 == 0) {
             printf("%12.4f %18.6e %12d\n", (double)k * dt, error, iterations);
         }
-        status = four_link_actuated_es_step(e.x, e.u, dt, e.next, NULL, &e.options, &e.workspace, &iterations);
+        status = four_link_actuated_es_step(e.x, e.u, NU, NULL, 0, dt, e.next, NULL, &e.options,
+                               &e.workspace, &iterations);
         if (status == FOUR_LINK_ACTUATED_ES_OK) {
             for (i = 0; i < NX; ++i) {
                 e.x[i] = e.next[i];
@@ -152,7 +155,7 @@ int main(int argc, char **argv)
         }
     }
     if (status == FOUR_LINK_ACTUATED_ES_OK) {
-        status = four_link_actuated_es_outputs(e.x, phi, omega, NULL, NULL, &e.workspace);
+        status = four_link_actuated_es_outputs(e.x, NULL, 0, phi, omega, NULL, NULL, &e.workspace);
     }
     if (status == FOUR_LINK_ACTUATED_ES_OK) {
         status = control(&e, phi, omega, &error);
@@ -171,9 +174,12 @@ int main(int argc, char **argv)
     printf("final tracking error %.3e rad\n", error);
     /* The same controller closed inside the solver's run: called before every step, it must
      * reach the loop's final posture. */
-    status = four_link_actuated_es_initial_state(initial_angles, initial_velocities, e.next, &e.workspace);
+    status = four_link_actuated_es_initial_state(initial_angles, initial_velocities, NULL, 0, e.next,
+                                    &e.workspace);
     if (status == FOUR_LINK_ACTUATED_ES_OK) {
-        status = four_link_actuated_es_simulate_controlled(e.next, 0.0, dt, n_steps, n_steps > 0 ? n_steps : 1, controller, &e, 1, &e.options, &e.workspace, samples, NULL, NULL, NULL, NULL);
+        status = four_link_actuated_es_simulate_controlled(e.next, 0.0, dt, n_steps, n_steps > 0 ? n_steps : 1,
+                                            controller, &e, 1, NULL, 0, &e.options,
+                                            &e.workspace, samples, NULL, NULL, NULL, NULL);
     }
     if (status != FOUR_LINK_ACTUATED_ES_OK) {
         fprintf(stderr, "%s: simulate_controlled failed with status %d\n", argv[0], status);

@@ -50,13 +50,16 @@ int main(int argc, char **argv)
     n_steps = (long)(t_end / dt + 0.5);
     three_link_gravity_midpoint_default_options(&e.options);
     three_link_gravity_midpoint_workspace_init(&e.workspace);   /* before the first step: no Newton history */
-    status = three_link_gravity_midpoint_initial_state(initial_angles, initial_velocities, e.x, &e.workspace);
-    status = status ? status : three_link_gravity_midpoint_outputs(e.x, NULL, NULL, &initial_energy, NULL, &e.workspace);
+    status = three_link_gravity_midpoint_initial_state(initial_angles, initial_velocities, NULL, 0, e.x,
+                                    &e.workspace);
+    status = status ? status : three_link_gravity_midpoint_outputs(e.x, NULL, 0, NULL, NULL, &initial_energy, NULL,
+                                             &e.workspace);
     printf("# free motion of %s, dt = %g s, %ld steps, at most %d Newton iterations a step\n",
            "three-link-gravity", dt, n_steps, e.options.max_iterations);
     printf("# %10s %18s %18s %12s\n", "t (s)", "H - H0", "constraint error", "Newton its");
     for (k = 0; k <= n_steps && status == THREE_LINK_GRAVITY_MIDPOINT_OK; ++k) {
-        status = three_link_gravity_midpoint_outputs(e.x, NULL, NULL, &energy, &constraint, &e.workspace);
+        status = three_link_gravity_midpoint_outputs(e.x, NULL, 0, NULL, NULL, &energy, &constraint,
+                                 &e.workspace);
         if (status != THREE_LINK_GRAVITY_MIDPOINT_OK) {
             break;
         }
@@ -73,7 +76,8 @@ int main(int argc, char **argv)
         if (k == n_steps) {
             break;
         }
-        status = three_link_gravity_midpoint_step(e.x, dt, e.next, &e.options, &e.workspace, &iterations);
+        status = three_link_gravity_midpoint_step(e.x, NULL, 0, NULL, 0, dt, e.next, NULL,
+                               &e.options, &e.workspace, &iterations);
         if (status == THREE_LINK_GRAVITY_MIDPOINT_OK) {
             for (i = 0; i < NX; ++i) {
                 e.x[i] = e.next[i];

@@ -4,6 +4,9 @@
 
 #include <stddef.h>
 
+#include "chaingen_contract.h"
+#include "chaingen_workspace.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -24,10 +27,12 @@ extern "C" {
  * allocates memory or keeps global state, so solvers can run side by side, each with its own
  * workspace. Matrices are dense and column-major: m[i + j*rows] is row i, column j. */
 
-/* Sizes. */
+/* Sizes (also queried at run time: three_link_multi_vi_dimension). */
 #define THREE_LINK_MULTI_VI_N_JOINTS 3      /* links and revolute joints */
 #define THREE_LINK_MULTI_VI_NX 9            /* entries of a state x */
 #define THREE_LINK_MULTI_VI_NZ 3            /* Newton unknowns z of one step */
+#define THREE_LINK_MULTI_VI_NU 0            /* inputs u of one step: torques of the actuated joints */
+#define THREE_LINK_MULTI_VI_NP 0            /* run-time parameters p: numbers of the scene */
 #define THREE_LINK_MULTI_VI_NSAMPLE 9       /* entries of one sample row of simulate */
 
 /* State x (THREE_LINK_MULTI_VI_NX entries): unit attitude vectors q_i = (c_i, s_i) = (cos phi_i, sin phi_i), then the conjugate momenta p (N m s).
@@ -39,10 +44,11 @@ extern "C" {
  *   x[5] s_3
  *   x[6] p_1
  *   x[7] p_2
- *   x[8] p_3
- */
+ *   x[8] p_3 */
 
-/* The scene has no [actuation] table: the chain is unactuated and the API takes no inputs. */
+/* The scene has no [actuation] table: the chain is unactuated, NU is 0 and u is NULL. */
+
+/* The package takes no run-time parameters: NP is 0 and p is NULL. */
 
 /* Newton unknowns z (THREE_LINK_MULTI_VI_NZ entries): rotation increments theta of the step (rad).
  *   z[0] theta_1
@@ -59,10 +65,13 @@ extern "C" {
  *   [5] omega2: relative angular velocity of joint 2 (rad/s)
  *   [6] omega3: relative angular velocity of joint 3 (rad/s)
  *   [7] energy: H = T + V (J)
- *   [8] constraint_error: largest structural error of the state's coordinates
- */
+ *   [8] constraint_error: largest structural error of the state's coordinates */
 
-/* Status codes returned by the functions below. */
+/* Energy flows of one step (flows[2]): the scene has neither actuated nor damped joints, and
+ * they are zero: the energy is conserved. */
+
+/* Status codes returned by the functions below: chaingen_contract.h's, with this prefix. A
+ * function the package was generated without returns THREE_LINK_MULTI_VI_UNAVAILABLE. */
 #define THREE_LINK_MULTI_VI_OK 0                /* success */
 #define THREE_LINK_MULTI_VI_NOT_CONVERGED 1     /* Newton: max_iterations reached without
                                                  * convergence */
@@ -92,11 +101,31 @@ extern "C" {
                                                  * by more than energy_tol times the kinetic
                                                  * energy at its ends: a spurious root of a step
                                                  * too long for the motion */
+#define THREE_LINK_MULTI_VI_BAD_PARAMETER 10    /* a run-time parameter p_i is not finite or
+                                                 * below its lower bound, a value the scene
+                                                 * format refuses (see p above) */
+#define THREE_LINK_MULTI_VI_UNAVAILABLE 11      /* the package was generated without this
+                                                 * function: step_sensitivities without the
+                                                 * sensitivities, holding_torques and
+                                                 * simulate_controlled for a scene without
+                                                 * actuated joints */
 
 /* Values of the option reuse_jacobian. */
 #define THREE_LINK_MULTI_VI_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
 #define THREE_LINK_MULTI_VI_JACOBIAN_ACROSS_STEPS 1   /* simplified Newton */
 #define THREE_LINK_MULTI_VI_JACOBIAN_PER_STEP 2       /* Newton-chord: once a step */
+
+/* The sizes three_link_multi_vi_dimension(which) answers. */
+#define THREE_LINK_MULTI_VI_DIMENSION_N_JOINTS 0      /* links and revolute joints */
+#define THREE_LINK_MULTI_VI_DIMENSION_NX 1            /* entries of a state x */
+#define THREE_LINK_MULTI_VI_DIMENSION_NZ 2            /* Newton unknowns z of one step */
+#define THREE_LINK_MULTI_VI_DIMENSION_NU 3            /* inputs u: torques of the actuated joints (0: none) */
+#define THREE_LINK_MULTI_VI_DIMENSION_NP 4            /* run-time parameters p (0: none) */
+#define THREE_LINK_MULTI_VI_DIMENSION_NSAMPLE 5       /* entries of one sample row of simulate */
+#define THREE_LINK_MULTI_VI_DIMENSION_NCONSTRAINT 6   /* structural constraints of a state */
+#define THREE_LINK_MULTI_VI_DIMENSION_ORDER 7         /* order of the step: 2, 4 or 6 */
+#define THREE_LINK_MULTI_VI_DIMENSION_NSTAGE 8        /* stages of a composed step (0: the scheme's step alone) */
+#define THREE_LINK_MULTI_VI_DIMENSION_SENSITIVITIES 9 /* 1 when the package has step_sensitivities */
 
 /* Newton options. A step solves F(z; x0, dt) = 0 for z by Newton's method with dense LU.
  *
@@ -135,87 +164,38 @@ extern "C" {
  * simplified) is replaced by full Newton; and then step() and simulate() take the step as two
  * halves, each climbing the same ladder, at most 4 halvings deep (16 substeps). "es" conserves
  * energy on any sequence of steps, so a split step keeps its energy balance. The counters of
- * simulate report how often the last two rungs were needed. The step sensitivities never
- * split (their Jacobians are those of one step).
+ * simulate report how often the last two rungs were needed. The step sensitivities never split
+ * (their Jacobians are those of one step).
  *
- * Energy check (energy_tol > 0): the scheme keeps the energy balance H_1 - H_0 = W - D only up
- * to its error, small against the kinetic energy T at the step's ends. A converged step that
- * misses it by more than energy_tol (T_0 + T_1), beyond the round-off of H, is a spurious root of
- * a step too long for the motion: it fails with THREE_LINK_MULTI_VI_ENERGY_JUMP, and step() and
- * simulate() split it like a step Newton failed. */
-typedef struct {
-    int max_iterations;     /* default 20; bounds the work of one step */
-    double update_rtol;     /* default 1e-10 */
-    double update_atol;     /* default 1e-13 */
-    double residual_tol;    /* default 1e-8; units of F */
-    int warm_start;         /* default 1; continue from the previous solutions */
-    int reuse_jacobian;     /* default 1; one of the JACOBIAN_* modes */
-    double energy_tol;      /* default 0.01; vi, midpoint: a step with |H_1 - H_0 - W + D| > energy_tol (T_0 + T_1) is refused and split; 0: no check */
-    double rtol;            /* default 0.0; adaptive steps: relative local error, 0 or >= 1e-14; 0 with atol 0: fixed steps of dt */
-    double atol;            /* default 0.0; adaptive steps: absolute local error (rad, rad/s), 0 or >= 1e-14 */
-} three_link_multi_vi_options;
+ * Energy check (vi and midpoint; energy_tol > 0): the scheme keeps the energy balance
+ * H_1 - H_0 = W - D only up to its error, small against the kinetic energy T at the step's ends.
+ * A converged step that misses it by more than energy_tol (T_0 + T_1), beyond the round-off of
+ * H, is a spurious root of a step too long for the motion: it fails with
+ * THREE_LINK_MULTI_VI_ENERGY_JUMP, and step() and simulate() split it like a step Newton failed.
+ * The defaults of this package:
+ * max_iterations 20, update_rtol 1e-10, update_atol 1e-13, residual_tol 1e-8, warm_start 1,
+ * reuse_jacobian 1, energy_tol 0.01, rtol 0.0, atol 0.0. */
+typedef chaingen_options three_link_multi_vi_options;
 
-/* Counters of one simulate call. */
-typedef struct {
-    long steps;             /* steps completed (the failing one excluded) */
-    long newton_iterations; /* Newton iterations (linear solves) over all completed steps */
-    int max_newton_iterations; /* the most a single completed step took */
-    int failed_iterations;  /* iterations spent in the failing step, 0 if none failed */
-    long full_newton_fallbacks; /* steps whose kept Jacobian failed and that full Newton solved */
-    long split_steps;       /* steps that Newton failed on whole and that were taken as two halves (recursively) */
-    long accepted_steps;    /* steps of the scheme taken: steps with fixed steps; adaptive: the accepted ones */
-    long rejected_steps;    /* adaptive: steps refused by the error test or Newton */
-    double smallest_dt;     /* the shortest accepted step (s) */
-    double largest_dt;      /* the longest accepted step (s) */
-} three_link_multi_vi_stats;
+/* Counters of one simulate call (chaingen_contract.h). */
+typedef chaingen_stats three_link_multi_vi_stats;
 
 /* Shared with a running simulate_observed (control may be NULL): another thread or a signal
  * handler sets stop to end the run after the current step, and reads steps for progress. */
-typedef struct {
-    volatile int stop;      /* set nonzero to stop the run after the current step (status INTERRUPTED) */
-    volatile long steps;    /* steps completed so far, written after every step */
-} three_link_multi_vi_control;
+typedef chaingen_control three_link_multi_vi_control;
 
 /* Scratch memory of one solver instance: declare one (static, on the stack, or inside your own
- * struct) per concurrent user. Its contents are not part of the API. */
+ * struct) per concurrent user. Its contents are not part of the API; it holds no pointer into
+ * itself. Its size is chaingen_workspace.h's formula at this package's sizes. */
 typedef struct {
+    chaingen_workspace_scalars scalars;
     const double *arg[3];
     double *res[4];
     long long int iw[1];
     double w[177];
-    double z[THREE_LINK_MULTI_VI_NZ];
-    double dz[THREE_LINK_MULTI_VI_NZ];
-    double residual[THREE_LINK_MULTI_VI_NZ];
-    double jacobian[THREE_LINK_MULTI_VI_NZ * THREE_LINK_MULTI_VI_NZ];
-    int pivot[THREE_LINK_MULTI_VI_NZ];
-    double state[2][THREE_LINK_MULTI_VI_NX];
-    double candidate[THREE_LINK_MULTI_VI_NX];
-    /* Newton state carried from step to step (warm start, simplified Newton). */
-    double previous_z[3][THREE_LINK_MULTI_VI_NZ]; /* solutions of the last 3 chained steps */
-    double previous_x1[THREE_LINK_MULTI_VI_NX];   /* the state the last step produced */
-    double previous_dt;
-    /* The energy check: (H, T) at energy_x, the state the last checked step ended in. */
-    double energy_x[THREE_LINK_MULTI_VI_NX];
-    double energy_ends[2];
-    int energy_valid;
-    double factors_dt;                 /* dt of the factorised Jacobian in jacobian/pivot */
-    int history;                       /* solutions in previous_z: 0 to 3 */
-    int warm_choice;                   /* first guess of a chained step: 0 extrapolate from all of
-                                          previous_z, 1 the scheme's predictor, d + 1 from the
-                                          last d; the best for the last step */
-    int chained;                       /* this step continues the previous one */
-    int factors_valid;                 /* jacobian/pivot hold a usable factorisation */
-    double residual_scale[THREE_LINK_MULTI_VI_NZ];  /* 1 + S_i of the residual test */
-    double split_state[4][THREE_LINK_MULTI_VI_NX];  /* mid-points of split steps */
-    long step_fallbacks;               /* full-Newton fallbacks of the last step() */
-    long step_splits;                  /* halvings of the last step() */
-    /* Adaptive steps: the states of one attempt (start, one step, the two halves' middle and
-     * end), the controller's next step and the previous error estimate. */
-    double adaptive_state[4][THREE_LINK_MULTI_VI_NX];
-    double proposed_dt;
-    double previous_error;
-    double sensitivity_rhs[THREE_LINK_MULTI_VI_NZ * 6];
-    double s1_z[6 * THREE_LINK_MULTI_VI_NZ];
+    int ints[CHAINGEN_WORKSPACE_INTS(THREE_LINK_MULTI_VI_NZ, 0)];
+    double doubles[CHAINGEN_WORKSPACE_DOUBLES(THREE_LINK_MULTI_VI_N_JOINTS, THREE_LINK_MULTI_VI_NX, THREE_LINK_MULTI_VI_NZ,
+                                              THREE_LINK_MULTI_VI_NU, THREE_LINK_MULTI_VI_NP, 0, 0, 0, 1, 0, 3, 3)];
 } three_link_multi_vi_workspace;
 
 /* sizeof(three_link_multi_vi_workspace), for callers that allocate it from another language. */
@@ -235,49 +215,80 @@ void three_link_multi_vi_workspace_init(three_link_multi_vi_workspace *workspace
 THREE_LINK_MULTI_VI_API
 void three_link_multi_vi_default_options(three_link_multi_vi_options *options);
 
+/* The size `which` names (THREE_LINK_MULTI_VI_DIMENSION_*), -1 for an unknown which. */
+THREE_LINK_MULTI_VI_API
+long three_link_multi_vi_dimension(int which);
+
+/* Every function below that takes inputs u and parameters p takes their sizes too: nu must be
+ * THREE_LINK_MULTI_VI_NU and np THREE_LINK_MULTI_VI_NP (THREE_LINK_MULTI_VI_BAD_ARGUMENT otherwise), and u or p may be
+ * NULL only when its size is 0 (simulate: u NULL is zero torques). When a p_i is not finite or
+ * out of its range a function does nothing and returns THREE_LINK_MULTI_VI_BAD_PARAMETER. */
+
 /* State x from relative joint angles phi[N_JOINTS] (rad) and rates phidot[N_JOINTS] (rad/s), all
  * finite (THREE_LINK_MULTI_VI_BAD_ARGUMENT otherwise). A posture with a spring segment of zero length,
  * under the scene reader's limit (1e-9 of the geometry's size, at the scene's own numbers), where
  * the segment's direction is undefined: THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED, x untouched. */
 THREE_LINK_MULTI_VI_API
-int three_link_multi_vi_initial_state(const double *phi, const double *phidot, double *x,
-                                      three_link_multi_vi_workspace *workspace);
+int three_link_multi_vi_initial_state(const double *phi, const double *phidot, const double *p,
+                                      int np, double *x, three_link_multi_vi_workspace *workspace);
 
 /* Joint space and diagnostics of a state: phi[N_JOINTS] wrapped to (-pi, pi], omega[N_JOINTS],
  * energy H = T + V, and the largest structural error of the state's coordinates. Any output
  * pointer may be NULL. A state x with a NaN or Inf: THREE_LINK_MULTI_VI_BAD_ARGUMENT. Its spring
  * segments are not checked: these need their lengths only, defined at zero length too. */
 THREE_LINK_MULTI_VI_API
-int three_link_multi_vi_outputs(const double *x, double *phi, double *omega, double *energy,
-                                double *constraint_error, three_link_multi_vi_workspace *workspace);
+int three_link_multi_vi_outputs(const double *x, const double *p, int np, double *phi,
+                                double *omega, double *energy, double *constraint_error,
+                                three_link_multi_vi_workspace *workspace);
 
-/* Residual F(z; x0, dt)[NZ] of one step, and with it the Jacobian dF/dz[NZ*NZ]
+/* The joint torques tau[N_JOINTS] (N m) that hold the chain still at posture phi[N_JOINTS]
+ * (finite, THREE_LINK_MULTI_VI_BAD_ARGUMENT otherwise): dV/dphi, gravity and springs. A controller's
+ * feed-forward (the example uses it). A posture initial_state refuses (a spring segment of zero
+ * length, where dV/dphi is undefined): THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED. A scene without actuated
+ * joints: THREE_LINK_MULTI_VI_UNAVAILABLE. */
+THREE_LINK_MULTI_VI_API
+int three_link_multi_vi_holding_torques(const double *phi, const double *p, int np, double *tau,
+                                        three_link_multi_vi_workspace *workspace);
+
+/* Residual F(z; x0, u, dt)[NZ] of one step, and with it the Jacobian dF/dz[NZ*NZ]
  * (jacobian[i + j*NZ] = dF_i/dz_j). For verification; step() calls them itself. dt must be finite
  * and > 0 (THREE_LINK_MULTI_VI_BAD_ARGUMENT otherwise). */
 THREE_LINK_MULTI_VI_API
-int three_link_multi_vi_residual(const double *z, const double *x0, double dt, double *residual,
+int three_link_multi_vi_residual(const double *z, const double *x0, const double *u, int nu,
+                                 const double *p, int np, double dt, double *residual,
                                  three_link_multi_vi_workspace *workspace);
 THREE_LINK_MULTI_VI_API
-int three_link_multi_vi_residual_jacobian(const double *z, const double *x0, double dt,
+int three_link_multi_vi_residual_jacobian(const double *z, const double *x0, const double *u,
+                                          int nu, const double *p, int np, double dt,
                                           double *residual, double *jacobian,
                                           three_link_multi_vi_workspace *workspace);
 
-/* One step of length dt > 0 from x0 to x1 (x1 may not alias x0). options may be NULL
- * (defaults). iterations (may be NULL) receives the Newton iterations spent. On failure x1 is untouched.
- * An x0 with a spring segment initial_state refuses: THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED. */
+/* One step of length dt > 0 from x0 to x1 (x1 may not alias x0), with the inputs u[NU] held over
+ * the step.
+ * The scheme's step, of order 2.
+ * options may be NULL (defaults). iterations (may be NULL) receives the Newton iterations spent. flows (may be NULL) receives the step's energy flows (layout above;
+ * zeros for a scene without them). On failure x1 is untouched. An x0 with a spring segment
+ * initial_state refuses: THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED. */
 THREE_LINK_MULTI_VI_API
-int three_link_multi_vi_step(const double *x0, double dt, double *x1,
+int three_link_multi_vi_step(const double *x0, const double *u, int nu, const double *p, int np,
+                             double dt, double *x1, double *flows,
                              const three_link_multi_vi_options *options,
                              three_link_multi_vi_workspace *workspace, int *iterations);
 
-/* A step as step() does it, and the step map's Jacobians in the joint-space state
- * s = (phi[N_JOINTS], omega[N_JOINTS]) a controller sees (6 entries):
- *   ds_ds[6 * 6]  ds_ds[i + j*6] = d s1_i / d s0_j
+/* A step as step() does it (a composed step's stages by the chain rule), and the step map's
+ * Jacobians in the joint-space state s = (phi[N_JOINTS], omega[N_JOINTS]) a controller sees
+ * (NS = 2 N_JOINTS entries):
+ *   ds_ds[NS * NS]  ds_ds[i + j*NS] = d s1_i / d s0_j
+ *   ds_du[NS * NU]  ds_du[i + j*NS] = d s1_i / d u_j (NULL when NU is 0)
+ *   ds_dp[NS * NP]  ds_dp[i + j*NS] = d s1_i / d p_j, the state s0 held (NULL when NP is 0)
  * by the implicit function theorem: one LU factorisation of dF/dz at the converged z, solved
- * for 6 right-hand sides. x0 is taken as the state of s0 = outputs(x0). x0 is
- * checked as step() checks it (THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED). */
+ * for NS + NU + NP right-hand sides. x0 is taken as the state of s0 = outputs(x0), and checked
+ * as step() checks it (THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED).
+ * This package has them. */
 THREE_LINK_MULTI_VI_API
-int three_link_multi_vi_step_sensitivities(const double *x0, double dt, double *x1, double *ds_ds,
+int three_link_multi_vi_step_sensitivities(const double *x0, const double *u, int nu,
+                                           const double *p, int np, double dt, double *x1,
+                                           double *ds_ds, double *ds_du, double *ds_dp,
                                            const three_link_multi_vi_options *options,
                                            three_link_multi_vi_workspace *workspace,
                                            int *iterations);
@@ -289,12 +300,14 @@ int three_link_multi_vi_step_sensitivities(const double *x0, double dt, double *
 THREE_LINK_MULTI_VI_API
 long three_link_multi_vi_sample_count(long n_steps, long every);
 
-/* Run n_steps steps from x0 at time t0. Writes a sample row (layout above) at step 0 and at every
- * `every`-th step into samples[sample_count(n_steps, every) * NSAMPLE], the final state into
- * x_final[NX] (may be NULL) and counters into stats (may be NULL). On a failed step it stops and
- * returns the step's status; stats->steps tells how many steps (and so which rows) are valid.
- * x0 is checked as step() checks it, once (every later state is a step's checked x1): a spring
- * segment of zero length there returns THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED after row 0, with no step.
+/* Run n_steps steps from x0 at time t0, step k (from t0 + k dt, k = 0..n_steps-1) with the inputs
+ * u[k*NU .. k*NU + NU-1] (u NULL: zero torques at every step). Writes a sample row (layout above)
+ * at step 0 and at every `every`-th step into samples[sample_count(n_steps, every) * NSAMPLE], the
+ * final state into x_final[NX] (may be NULL) and counters into stats (may be NULL). On a failed
+ * step it stops and returns the step's status; stats->steps tells how many steps (and so which
+ * rows) are valid. x0 is checked as step() checks it, once (every later state is a step's
+ * checked x1): a spring segment of zero length there returns THREE_LINK_MULTI_VI_SEGMENT_COLLAPSED after
+ * row 0, with no step.
  *
  * With options->rtol > 0 or options->atol > 0 the steps adapt: each interval of length dt (a
  * "step" above: the inputs' and the samples' grid) is covered by steps whose lengths an error
@@ -306,13 +319,14 @@ long three_link_multi_vi_sample_count(long n_steps, long every);
  * "midpoint" are symplectic for a fixed step only. step() always takes one step of dt. */
 THREE_LINK_MULTI_VI_API
 int three_link_multi_vi_simulate(const double *x0, double t0, double dt, long n_steps, long every,
+                                 const double *u, int nu, const double *p, int np,
                                  const three_link_multi_vi_options *options,
                                  three_link_multi_vi_workspace *workspace, double *samples,
                                  double *x_final, three_link_multi_vi_stats *stats);
 
 /* An observer of a long simulate: called with the steps completed so far and the caller's
  * context; a nonzero return stops the run (status THREE_LINK_MULTI_VI_INTERRUPTED) after that step. */
-typedef int (*three_link_multi_vi_observer)(long steps, void *context);
+typedef chaingen_observer three_link_multi_vi_observer;
 
 /* simulate, calling observer(steps, context) after every `interval` completed steps (interval
  * >= 1; observer NULL: never), for a progress display or to cancel a long run, and with a
@@ -321,11 +335,36 @@ typedef int (*three_link_multi_vi_observer)(long steps, void *context);
  * read its progress. The samples are those of simulate: observing does not change the run. */
 THREE_LINK_MULTI_VI_API
 int three_link_multi_vi_simulate_observed(const double *x0, double t0, double dt, long n_steps,
-                                          long every, const three_link_multi_vi_options *options,
+                                          long every, const double *u, int nu, const double *p,
+                                          int np, const three_link_multi_vi_options *options,
                                           three_link_multi_vi_workspace *workspace, double *samples,
                                           double *x_final, three_link_multi_vi_stats *stats,
                                           three_link_multi_vi_observer observer, void *context,
                                           long interval, three_link_multi_vi_control *control);
+
+/* A controller of simulate_controlled: called before step k (k = 0, hold, 2 hold, ...; from time
+ * t = t0 + k dt) with the joint state there, phi[N_JOINTS] and omega[N_JOINTS] (as in a sample
+ * row), and the caller's context. It writes the NU torques of the next `hold` steps into u[NU]
+ * (u holds its previous values, zeros before the first call). A nonzero return stops the run
+ * (status THREE_LINK_MULTI_VI_INTERRUPTED) before step k. */
+typedef chaingen_controller three_link_multi_vi_controller;
+
+/* simulate_observed in closed loop: the inputs come from controller(..., context) every `hold`
+ * steps (hold >= 1) instead of from an array. They are recorded as the samples are, every `every`
+ * steps, into torques[ceil(n_steps / every) * NU] (may be NULL): row j is the input held over
+ * step j*every, the step that starts at sample row j. The controller runs in the caller's
+ * thread, inside the loop: a C controller costs a function call a step. Samples, x_final, stats
+ * and control as in simulate_observed. A scene without actuated joints:
+ * THREE_LINK_MULTI_VI_UNAVAILABLE. */
+THREE_LINK_MULTI_VI_API
+int three_link_multi_vi_simulate_controlled(const double *x0, double t0, double dt, long n_steps,
+                                            long every, three_link_multi_vi_controller controller,
+                                            void *context, long hold, const double *p, int np,
+                                            const three_link_multi_vi_options *options,
+                                            three_link_multi_vi_workspace *workspace,
+                                            double *samples, double *torques, double *x_final,
+                                            three_link_multi_vi_stats *stats,
+                                            three_link_multi_vi_control *control);
 
 /* The hash chaingen's build gave this library (-DTHREE_LINK_MULTI_VI_BUILD_HASH), so a loader can check
  * that a cached library is the one it asked for; "" when built otherwise (make, CMake). */

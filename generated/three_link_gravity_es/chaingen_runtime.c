@@ -1,0 +1,1940 @@
+/* chaingen's C runtime: the solver algorithms of every generated package, written once.
+ *
+ * A port of the solver the templates used to render per scene (templates/solver.c.j2): the same
+ * floating-point operations in the same order, so a package's results are bitwise those of the
+ * rendered solver. Where the rendered solver branched on the scene's features at generation
+ * time (inputs, parameters, spring segments, energy flows, the energy check, a composed step, the
+ * arm solve, sensitivities), this file branches at run time on the fields of the model
+ * (chaingen_runtime.h).
+ *
+ * The model is reached through `const chaingen_model *` (sizes and generated functions) and the
+ * workspace through `const chaingen_workspace *` (a view: the scalars, the generated functions'
+ * argument and work arrays, and two flat arrays of ints and doubles). Each entry point carves the
+ * flat arrays into its named arrays once (carve(), in the order of the formula of
+ * chaingen_workspace.h), into a local struct: the workspace itself holds no pointers.
+ *
+ * A package compiles this file into its own source (a unity build, see chaingen_runtime.h), and
+ * should fix its model at compile time, its table a static const chaingen_model:
+ *     #define CHAINGEN_LINKAGE static
+ *     #include "chaingen_runtime.h"
+ *     static const chaingen_model MODEL = { ... };
+ *     #define CHAINGEN_FIXED_MODEL (&MODEL)
+ *     #include "chaingen_runtime.c"
+ * Every function then reads the model there rather than through its argument (which is not
+ * checked), so the compiler sees the model's sizes and features as the constants they are: it
+ * specialises the loops (the LU factorisation and solve, the arm solve) to the sizes and drops
+ * the code of the features the model lacks, as it did in a package's own rendered solver.
+ * Without it a step runs the same operations on the same numbers (the results are bitwise the
+ * same) with some 5 to 15% more instructions around them.
+ *
+ * Plain C99: no allocation, no global mutable state, no variable-length arrays. Matrices are
+ * dense and column-major. Units SI. */
+#include <float.h>
+#include <limits.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "chaingen_runtime.h"
+#include "chaingen_lu.h"
+#include "chaingen_arm_solve.h"
+
+/* The model a function works with: its argument, or the package's fixed model (see above). */
+#ifdef CHAINGEN_FIXED_MODEL
+#define CG_MODEL(table) ((void)(table), CHAINGEN_FIXED_MODEL)
+#else
+#define CG_MODEL(table) (table)
+#endif
+
+/* Solutions of chained steps kept for the warm start: extrapolation of degree CG_HISTORY - 1. */
+#define CG_HISTORY CHAINGEN_WARM_START_HISTORY
+/* Newton with a Jacobian evaluated within the step is at the round-off floor when its updates
+ * shrink by less than CG_FLOOR_RATE from one iterate to the next while the residual, relative to
+ * its scale, is within CG_ROUNDOFF_RESIDUAL: the update is then round-off of an ill-conditioned
+ * dF/dz (a cond of 1e8 turns a residual of 1e-14 into updates of 1e-12), and no further iterate
+ * is better. The scale counts the Jacobian's terms only, and a residual entry sums many terms:
+ * hence a thousand machine epsilons. (CHAINGEN_REFRESH_RATE: a kept Jacobian, simplified Newton or
+ * Newton-chord, is evaluated anew when successive updates shrink by less than this.
+ * CHAINGEN_SIMPLIFIED_MARGIN: a kept Jacobian stops with an estimated error this fraction of the
+ * tolerance: it converges linearly, so without the margin its error would sit at the tolerance,
+ * where full Newton's (quadratic) is far below it. CHAINGEN_CHORD_MARGIN: Newton-chord's margin;
+ * it replaces full Newton, whose error at the stop is far below the tolerance, so it must stop
+ * there too. CHAINGEN_MAX_SPLIT: halvings of a step that Newton fails on whole, at most
+ * 2^MAX_SPLIT substeps.) */
+#define CG_FLOOR_RATE 0.5
+#define CG_ROUNDOFF_RESIDUAL (1024.0 * DBL_EPSILON)
+/* The adaptive steps' controller (see adaptive_interval). */
+#define CG_SAFETY 0.9
+#define CG_MIN_FACTOR 0.2
+#define CG_MAX_FACTOR 5.0
+#define CG_NEWTON_FACTOR 0.25
+#define CG_TWO_PI 6.283185307179586
+
+/* One entry point's view of the model and the workspace: the workspace's flat arrays carved into
+ * the solver's named arrays (carve()). Arrays a model does not use are NULL. */
+typedef struct {
+    chaingen_workspace_scalars *s;
+    const double **arg;
+    double **res;
+    long long int *iw;
+    double *w;
+    /* Newton: the iterate, its update, the residual and its scale 1 + S_i. */
+    double *z, *dz, *residual, *residual_scale;
+    /* The Newton matrix: dense dF/dz (NZ x NZ) and its LU factors in jacobian; or es's factors
+     * (chaingen_arm_solve.h): H's nonzeros, G_mu, G_c, the masses and maps A_k; what factorise()
+     * derives from them; the reduced n x n matrix (in jacobian) and its factors; the scratch. */
+    double *arm_factors, *arm_derived, *jacobian, *arm_scratch;
+    int *pivot;
+    /* The simulate loop's two states, a step's candidate x1, and the Newton state carried from
+     * step to step (warm start): the state the last step produced and its solutions z. */
+    double *state[2], *candidate, *previous_x1, *energy_x, *previous_z;
+    /* The derived parameters q = Q(p), and the p they belong to. */
+    double *q, *q_of;
+    /* Mid-points of split steps (MAX_SPLIT x NX); the adaptive steps' states of one attempt
+     * (start, one step, the two halves' middle and end). */
+    double *split_state, *adaptive_state;
+    /* The sensitivity solve's right-hand sides (NZ x NCHAIN_SENS) and ds1/dz (NCHAIN x NZ). */
+    double *sensitivity_rhs, *s1_z;
+    /* The composed step: the states between its stages, the stages' warm starts (stage_z:
+     * NSTAGE x HISTORY x NZ; stage_history, stage_choice), the end of the last composed step. */
+    double *stage_state, *composed_x1, *stage_z;
+    int *stage_history, *stage_choice;
+    /* The stage's and the accumulated sensitivities [ds_ds ds_du ds_dp] (NCHAIN x NCHAIN_SENS),
+     * and with chain_state the maps to joint space and a column of them. */
+    double *stage_sensitivities, *composed_sensitivities;
+    double *x0_s0, *s1_x1, *chain_column, *x0_p, *s1_p;
+    /* Scratch: a step's segment margins (2 NSEGMENT), the constraint output (NCONSTRAINT + 1),
+     * a posture's state (NX) and zero rates (N), the adaptive step's joint states (2N each), the
+     * controller's phi, omega (N each) and held inputs (NU), a composed sensitivities' column. */
+    double *margins, *constraint, *posture, *rest;
+    double *joint_start, *joint_whole, *joint_ends;
+    double *phi, *omega, *held, *column;
+} cg_solver;
+
+/* The workspace's arrays, carved from workspace->doubles and workspace->ints in the order and
+ * sizes of CHAINGEN_WORKSPACE_DOUBLES and CHAINGEN_WORKSPACE_INTS (chaingen_workspace.h). */
+static void cg_carve(const chaingen_model *table, const chaingen_workspace *workspace, cg_solver *c)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    const int n = model->n_joints, nx = model->nx, nz = model->nz;
+    const int nchain = CHAINGEN_NCHAIN(n, nx, model->chain_state);
+    const int nsens = CHAINGEN_NCHAIN_SENS(n, nx, model->nu, model->np, model->chain_state);
+    const int staged = model->nstage > 0;
+    double *d = workspace->doubles;
+    int *k = workspace->ints;
+    memset(c, 0, sizeof *c);
+    c->s = workspace->scalars;
+    c->arg = workspace->arg;
+    c->res = workspace->res;
+    c->iw = workspace->iw;
+    c->w = workspace->w;
+    c->z = d;
+    d += nz;
+    c->dz = d;
+    d += nz;
+    c->residual = d;
+    d += nz;
+    c->residual_scale = d;
+    d += nz;
+    if (model->arm_nh > 0) {
+        c->arm_factors = d;
+        d += model->arm_nh + 9 * n;
+        c->arm_derived = d;
+        d += 15 * n;
+        c->jacobian = d;
+        d += n * n;
+        c->arm_scratch = d;
+        d += 6 * n;
+    } else {
+        c->jacobian = d;
+        d += nz * nz;
+    }
+    c->state[0] = d;
+    d += nx;
+    c->state[1] = d;
+    d += nx;
+    c->candidate = d;
+    d += nx;
+    c->previous_x1 = d;
+    d += nx;
+    c->energy_x = d;
+    d += nx;
+    c->previous_z = d;
+    d += CG_HISTORY * nz;
+    c->q = d;
+    d += model->nq > 0 ? model->nq : 1;
+    c->q_of = d;
+    d += model->np;
+    c->split_state = d;
+    d += CHAINGEN_MAX_SPLIT * nx;
+    c->adaptive_state = d;
+    d += 4 * nx;
+    if (model->sensitivities) {
+        c->sensitivity_rhs = d;
+        d += nz * nsens;
+        c->s1_z = d;
+        d += nchain * nz;
+    }
+    if (staged) {
+        c->stage_state = d;
+        d += 2 * nx;
+        c->composed_x1 = d;
+        d += nx;
+        c->stage_z = d;
+        d += model->nstage * CG_HISTORY * nz;
+    }
+    if (staged && model->sensitivities) {
+        c->stage_sensitivities = d;
+        d += nchain * nsens;
+        c->composed_sensitivities = d;
+        d += nchain * nsens;
+    }
+    if (staged && model->sensitivities && model->chain_state) {
+        c->x0_s0 = d;
+        d += nx * 2 * n;
+        c->s1_x1 = d;
+        d += 2 * n * nx;
+        c->chain_column = d;
+        d += nx;
+        c->x0_p = d;
+        d += nx * model->np;
+        c->s1_p = d;
+        d += 2 * n * model->np;
+    }
+    c->margins = d;
+    d += 2 * model->nsegment;
+    c->constraint = d;
+    d += model->nconstraint + 1;
+    c->posture = d;
+    d += nx;
+    c->rest = d;
+    d += n;
+    c->joint_start = d;
+    d += 2 * n;
+    c->joint_whole = d;
+    d += 2 * n;
+    c->joint_ends = d;
+    d += 2 * n;
+    c->phi = d;
+    d += n;
+    c->omega = d;
+    d += n;
+    c->held = d;
+    d += model->nu;
+    if (staged && model->sensitivities) {
+        c->column = d;
+    }
+    c->pivot = k;
+    k += nz;
+    c->stage_history = k;
+    k += model->nstage;
+    c->stage_choice = k;
+}
+
+/* Whether the model and the workspace view can be used at all. */
+static int cg_bad_view(const chaingen_model *table, const chaingen_workspace *workspace)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    return !model || !workspace || !workspace->scalars || !workspace->arg || !workspace->res
+           || !workspace->ints || !workspace->doubles;
+}
+
+/* The fixed ABI's sizes: nu and np must be the model's; u may be NULL only when nu is 0 (unless
+ * u_optional: simulate_observed's zero torques), p only when np is 0. */
+static int cg_bad_sizes(const chaingen_model *table, const double *u, int nu, int u_optional,
+                        const double *p, int np)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    return nu != model->nu || np != model->np || (!u && model->nu > 0 && !u_optional)
+           || (!p && model->np > 0);
+}
+
+CHAINGEN_LINKAGE long chaingen_dimension(const chaingen_model *table, int which)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    if (!model) {
+        return -1;
+    }
+    switch (which) {
+    case CHAINGEN_DIMENSION_N_JOINTS:
+        return model->n_joints;
+    case CHAINGEN_DIMENSION_NX:
+        return model->nx;
+    case CHAINGEN_DIMENSION_NZ:
+        return model->nz;
+    case CHAINGEN_DIMENSION_NU:
+        return model->nu;
+    case CHAINGEN_DIMENSION_NP:
+        return model->np;
+    case CHAINGEN_DIMENSION_NSAMPLE:
+        return model->nsample;
+    case CHAINGEN_DIMENSION_NCONSTRAINT:
+        return model->nconstraint;
+    case CHAINGEN_DIMENSION_ORDER:
+        return model->order;
+    case CHAINGEN_DIMENSION_NSTAGE:
+        return model->nstage;
+    case CHAINGEN_DIMENSION_SENSITIVITIES:
+        return model->sensitivities ? 1 : 0;
+    default:
+        return -1;
+    }
+}
+
+CHAINGEN_LINKAGE long chaingen_workspace_doubles(const chaingen_model *table)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    if (!model) {
+        return 0;
+    }
+    return CHAINGEN_WORKSPACE_DOUBLES((long)model->n_joints, (long)model->nx, (long)model->nz,
+                                      (long)model->nu, (long)model->np, (long)model->nq,
+                                      (long)model->nstage, (long)model->arm_nh,
+                                      model->sensitivities, model->chain_state,
+                                      (long)model->nsegment, (long)model->nconstraint);
+}
+
+CHAINGEN_LINKAGE long chaingen_workspace_ints(const chaingen_model *table)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    if (!model) {
+        return 0;
+    }
+    return CHAINGEN_WORKSPACE_INTS((long)model->nz, (long)model->nstage);
+}
+
+CHAINGEN_LINKAGE void chaingen_workspace_init(const chaingen_model *table,
+                                              const chaingen_workspace *workspace)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    if (!workspace) {
+        return;
+    }
+    if (workspace->scalars) {
+        memset(workspace->scalars, 0, sizeof *workspace->scalars);
+    }
+    if (model && workspace->ints) {
+        memset(workspace->ints, 0, sizeof(int) * (size_t)chaingen_workspace_ints(model));
+    }
+    if (model && workspace->doubles) {
+        memset(workspace->doubles, 0, sizeof(double) * (size_t)chaingen_workspace_doubles(model));
+    }
+}
+
+CHAINGEN_LINKAGE void chaingen_default_options(const chaingen_model *table,
+                                               chaingen_options *options)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    if (!model || !options) {
+        return;
+    }
+    *options = model->defaults;
+}
+
+/* Whether the n entries of v are all finite: the inputs a caller gives are checked with it. */
+static int cg_all_finite(const double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        if (!isfinite(v[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Evaluate a generated function: inputs and outputs by position (workspace arg and res), NULL
+ * outputs skipped. A function the model lacks fails as an evaluation. */
+static int cg_evaluate(chaingen_function function, const cg_solver *c)
+{
+    if (!function) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
+    return function(c->arg, c->res, c->iw, c->w, 0) ? CHAINGEN_EVALUATION_FAILED : CHAINGEN_OK;
+}
+
+/* The derived parameters q = Q(p) in the workspace: the parts of the model that depend on the
+ * parameters alone, evaluated here when p changes instead of in every evaluation of every step.
+ * A new p also ends the Newton state carried from step to step (warm start, kept Jacobian): it
+ * belongs to the old one. A p_i that is not finite or below its bound (model->p_lower,
+ * p_inclusive: whether p_i may equal it; -DBL_MAX, inclusive: any finite value): nothing
+ * changes, BAD_PARAMETER. */
+static int cg_derive_parameters(const chaingen_model *table, const cg_solver *c, const double *p)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    const int np = model->np;
+    const double *arg[1];
+    double *res[1];
+    int i;
+    if (c->s->q_valid && !memcmp(p, c->q_of, sizeof(double) * (size_t)np)) {
+        return CHAINGEN_OK;
+    }
+    for (i = 0; i < np; ++i) {
+        if (!isfinite(p[i])
+            || (model->p_lower
+                && !(model->p_inclusive && model->p_inclusive[i] ? p[i] >= model->p_lower[i]
+                                                                  : p[i] > model->p_lower[i]))) {
+            return CHAINGEN_BAD_PARAMETER;
+        }
+    }
+    arg[0] = p;
+    res[0] = c->q;
+    c->s->history = 0;
+    if (model->energy_check) {
+        c->s->energy_valid = 0;
+    }
+    if (model->nstage > 0) {
+        c->s->composed_valid = 0;
+    }
+    c->s->factors_valid = 0;
+    c->s->q_valid = 0;
+    if (!model->parameters || model->parameters(arg, res, c->iw, c->w, 0)) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
+    memcpy(c->q_of, p, sizeof(double) * (size_t)np);
+    c->s->q_valid = 1;
+    return CHAINGEN_OK;
+}
+
+/* q = Q(p) derived as above; a model without parameters (np = 0) has nothing to derive. */
+static int cg_derive(const chaingen_model *table, const cg_solver *c, const double *p)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    return model->np > 0 ? cg_derive_parameters(model, c, p) : CHAINGEN_OK;
+}
+
+/* Whether every spring segment of the state x (finite) is long enough to start from: OK, or
+ * SEGMENT_COLLAPSED where one is of (numerically) zero length and its direction undefined. A
+ * start state's segments are measured as the scene reader measures the initial angles: each at
+ * least ZERO_SEGMENT_RELATIVE_TOLERANCE of the geometry's size G long (G at the scene's own
+ * numbers, as in the run's check); in margins (length / RUN_SEGMENT_RELATIVE_TOLERANCE G) that
+ * is model->start_margin. A step checks its new state itself; this is for the states a caller
+ * hands in (q derived). The length alone: a segment has no turn within one state (and a huge
+ * finite one, whose squared length overflows, is long, not collapsed). */
+static int cg_start_segments(const chaingen_model *table, const cg_solver *c, const double *x)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    double *margins = c->margins;
+    int i;
+    c->arg[0] = x;
+    c->arg[1] = x;
+    if (model->np > 0) {
+        c->arg[2] = c->q;
+    }
+    c->res[0] = margins;
+    if (cg_evaluate(model->segment_margins, c)) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
+    for (i = 0; i < model->nsegment; ++i) {
+        if (!(margins[i] >= model->start_margin)) {
+            return CHAINGEN_SEGMENT_COLLAPSED;
+        }
+    }
+    return CHAINGEN_OK;
+}
+
+/* The state of posture phi at rest into x[NX], its segments checked (start_segments). */
+static int cg_posture_state(const chaingen_model *table, const cg_solver *c, const double *phi,
+                            double *x)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    double *rest = c->rest;
+    int i;
+    for (i = 0; i < model->n_joints; ++i) {
+        rest[i] = 0.0;
+    }
+    c->arg[0] = phi;
+    c->arg[1] = rest;
+    if (model->np > 0) {
+        c->arg[2] = c->q;
+    }
+    c->res[0] = x;
+    if (cg_evaluate(model->initial_state, c)) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
+    return cg_all_finite(x, model->nx) ? cg_start_segments(model, c, x) : CHAINGEN_NONFINITE;
+}
+
+CHAINGEN_LINKAGE int chaingen_initial_state(const chaingen_model *table, const double *phi,
+                                            const double *phidot, const double *p, int np,
+                                            double *x, const chaingen_workspace *workspace)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver, *c = &solver;
+    int status;
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, NULL, model->nu, 1, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!phi || !phidot || !x || !cg_all_finite(phi, model->n_joints)
+        || !cg_all_finite(phidot, model->n_joints)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, c);
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    c->arg[0] = phi;
+    c->arg[1] = phidot;
+    if (model->np > 0) {
+        c->arg[2] = c->q;
+    }
+    if (model->nsegment > 0) {
+        /* Into the workspace first: a posture with a collapsed segment leaves x untouched. */
+        double *state = c->posture;
+        c->res[0] = state;
+        status = cg_evaluate(model->initial_state, c);
+        if (status == CHAINGEN_OK) {
+            status = cg_all_finite(state, model->nx) ? cg_start_segments(model, c, state)
+                                                     : CHAINGEN_NONFINITE;
+        }
+        if (status == CHAINGEN_OK) {
+            memcpy(x, state, sizeof(double) * (size_t)model->nx);
+        }
+        return status;
+    }
+    c->res[0] = x;
+    return cg_evaluate(model->initial_state, c);
+}
+
+/* Joint space and diagnostics of a state (the entry point outputs, on a carved workspace). */
+static int cg_outputs(const chaingen_model *table, const cg_solver *c, const double *x,
+                      const double *p, double *phi, double *omega, double *energy,
+                      double *constraint_error)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    double *constraint = c->constraint;
+    double largest = 0.0;
+    int i, status;
+    if (!x || (!p && model->np > 0) || !cg_all_finite(x, model->nx)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    c->arg[0] = x;
+    if (model->np > 0) {
+        c->arg[1] = c->q;
+    }
+    c->res[0] = phi;
+    c->res[1] = omega;
+    c->res[2] = energy;
+    c->res[3] = constraint;
+    status = cg_evaluate(model->outputs, c);
+    for (i = 0; i < model->nconstraint; ++i) {
+        if (!(fabs(constraint[i]) <= largest)) {
+            largest = fabs(constraint[i]);
+        }
+    }
+    if (constraint_error) {
+        *constraint_error = largest;
+    }
+    return status;
+}
+
+CHAINGEN_LINKAGE int chaingen_outputs(const chaingen_model *table, const double *x, const double *p,
+                                      int np, double *phi, double *omega, double *energy,
+                                      double *constraint_error, const chaingen_workspace *workspace)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver;
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, NULL, model->nu, 1, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, &solver);
+    return cg_outputs(model, &solver, x, p, phi, omega, energy, constraint_error);
+}
+
+CHAINGEN_LINKAGE int chaingen_holding_torques(const chaingen_model *table, const double *phi,
+                                              const double *p, int np, double *tau,
+                                              const chaingen_workspace *workspace)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver, *c = &solver;
+    int status;
+    if (model && !model->holding_torques) {
+        return CHAINGEN_UNAVAILABLE;
+    }
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, NULL, model->nu, 1, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!phi || !tau || !cg_all_finite(phi, model->n_joints)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, c);
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    if (model->nsegment > 0) {
+        /* A posture initial_state refuses (a segment of zero length, where dV/dphi is
+         * undefined): SEGMENT_COLLAPSED. */
+        status = cg_posture_state(model, c, phi, c->posture);
+        if (status != CHAINGEN_OK) {
+            return status;
+        }
+    }
+    c->arg[0] = phi;
+    if (model->np > 0) {
+        c->arg[1] = c->q;
+    }
+    c->res[0] = tau;
+    return cg_evaluate(model->holding_torques, c);
+}
+
+/* Point the generated step functions' inputs at (z, x0, [u], [q], dt): u when the model has
+ * inputs, q = Q(p) (derived by the caller) when it has parameters. */
+static void cg_step_arguments(const chaingen_model *table, const cg_solver *c, const double *z,
+                              const double *x0, const double *u, const double *dt)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    int k = 2;
+    c->arg[0] = z;
+    c->arg[1] = x0;
+    if (model->nu > 0) {
+        c->arg[k++] = u;
+    }
+    if (model->np > 0) {
+        c->arg[k++] = c->q;
+    }
+    c->arg[k] = dt;
+}
+
+/* The Newton matrix's factors in the workspace, as chaingen_arm_solve.h reads them (es's arm
+ * solve: model->arm_nh > 0). */
+static chaingen_arm_system cg_arm_system(const chaingen_model *table, const cg_solver *c)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    chaingen_arm_system system;
+    system.n = model->n_joints;
+    system.nh = model->arm_nh;
+    system.h_row = model->arm_h_row;
+    system.h_col = model->arm_h_col;
+    system.h = c->arm_factors;
+    system.derived = c->arm_derived;
+    system.reduced = c->jacobian;
+    system.pivot = c->pivot;
+    system.scratch = c->arm_scratch;
+    return system;
+}
+
+/* F and the factors of dF/dz at z (arm solve): the factors go to the workspace. */
+static int cg_newton_factors(const chaingen_model *table, const cg_solver *c, const double *z,
+                             const double *x0, const double *u, double dt, double *residual)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_step_arguments(model, c, z, x0, u, &dt);
+    c->res[0] = residual;
+    c->res[1] = c->arm_factors;
+    return cg_evaluate(model->newton_factors, c);
+}
+
+/* Factorise the Newton matrix: with the arm solve, the reduced n x n system of
+ * chaingen_arm_solve.h from the factors newton_factors left in the workspace; otherwise dF/dz in
+ * the workspace's jacobian in place, dense LU with partial pivoting. Nonzero: singular. */
+static int cg_factorise(const chaingen_model *table, const cg_solver *c)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    if (model->arm_nh > 0) {
+        const chaingen_arm_system system = cg_arm_system(model, c);
+        return chaingen_arm_factor(&system);
+    }
+    return chaingen_lu_factor(model->nz, c->jacobian, c->pivot);
+}
+
+/* Solve dF/dz x = b in place of b, with the factors of factorise(). */
+static void cg_solve_newton(const chaingen_model *table, const cg_solver *c, double *b)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    if (model->arm_nh > 0) {
+        const chaingen_arm_system system = cg_arm_system(model, c);
+        chaingen_arm_solve(&system, b);
+    } else {
+        chaingen_lu_solve(model->nz, c->jacobian, c->pivot, b);
+    }
+}
+
+/* The residual for Newton, whose steps may be negative (a stage of a composed step). */
+static int cg_evaluate_residual(const chaingen_model *table, const cg_solver *c, const double *z,
+                                const double *x0, const double *u, const double *p, double dt,
+                                double *residual)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    int status;
+    if (!z || !x0 || (!u && model->nu > 0) || (!p && model->np > 0) || !residual) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    cg_step_arguments(model, c, z, x0, u, &dt);
+    c->res[0] = residual;
+    return cg_evaluate(model->residual, c);
+}
+
+/* F and dF/dz at z (jacobian[i + j*NZ] = dF_i/dz_j). With the arm solve, dF/dz is formed from
+ * its factors, which replace the workspace's: its kept factorisation is no more. */
+static int cg_evaluate_residual_jacobian(const chaingen_model *table, const cg_solver *c,
+                                         const double *z, const double *x0, const double *u,
+                                         const double *p, double dt, double *residual,
+                                         double *jacobian)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    int status;
+    if (!z || !x0 || (!u && model->nu > 0) || (!p && model->np > 0) || !residual || !jacobian) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    if (model->arm_nh > 0) {
+        c->s->factors_valid = 0;
+        if (cg_newton_factors(model, c, z, x0, u, dt, residual)) {
+            return CHAINGEN_EVALUATION_FAILED;
+        }
+        {
+            const chaingen_arm_system system = cg_arm_system(model, c);
+            chaingen_arm_jacobian(&system, jacobian);
+        }
+        return CHAINGEN_OK;
+    }
+    cg_step_arguments(model, c, z, x0, u, &dt);
+    c->res[0] = residual;
+    c->res[1] = jacobian;
+    return cg_evaluate(model->residual_jacobian, c);
+}
+
+CHAINGEN_LINKAGE int chaingen_residual(const chaingen_model *table, const double *z,
+                                       const double *x0, const double *u, int nu, const double *p,
+                                       int np, double dt, double *residual,
+                                       const chaingen_workspace *workspace)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver;
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!(dt > 0.0) || !isfinite(dt)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, &solver);
+    return cg_evaluate_residual(model, &solver, z, x0, u, p, dt, residual);
+}
+
+CHAINGEN_LINKAGE int chaingen_residual_jacobian(const chaingen_model *table, const double *z,
+                                                const double *x0, const double *u, int nu,
+                                                const double *p, int np, double dt,
+                                                double *residual, double *jacobian,
+                                                const chaingen_workspace *workspace)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver;
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!(dt > 0.0) || !isfinite(dt)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, &solver);
+    return cg_evaluate_residual_jacobian(model, &solver, z, x0, u, p, dt, residual, jacobian);
+}
+
+/* The scheme's predictor from x0 into guess (it takes the derived q). */
+static int cg_predict(const chaingen_model *table, const cg_solver *c, const double *x0, double dt,
+                      double *guess)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    c->arg[0] = x0;
+    if (model->np > 0) {
+        c->arg[1] = c->q;
+        c->arg[2] = &dt;
+    } else {
+        c->arg[1] = &dt;
+    }
+    c->res[0] = guess;
+    return cg_evaluate(model->predictor, c);
+}
+
+/* Entry i of the extrapolation of the last `points` solutions in previous_z (polynomial of
+ * degree points - 1 through them, at the next step). */
+static double cg_extrapolate(const chaingen_model *table, const cg_solver *c, int points, int i)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    const double *previous = c->previous_z;
+    const int nz = model->nz;
+    switch (points) {
+    case 1:
+        return previous[i];
+    case 2:
+        return 2.0 * previous[i] - previous[nz + i];
+    default:
+        return 3.0 * (previous[i] - previous[nz + i]) + previous[2 * nz + i];
+    }
+}
+
+/* The first Newton guess: the scheme's predictor from x0, or with `warm`, when this step
+ * continues the workspace's previous one, the guess that would have been best for that step
+ * (warm_choice, set by choose_warm_start): the predictor, or the extrapolation of the previous
+ * solutions, from all of them (quadratic) or from fewer. */
+static int cg_first_guess(const chaingen_model *table, const cg_solver *c, const double *x0,
+                          double dt, int warm)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    chaingen_workspace_scalars *s = c->s;
+    int i;
+    s->chained = warm && s->history > 0 && dt == s->previous_dt
+                 && !memcmp(x0, c->previous_x1, sizeof(double) * (size_t)model->nx);
+    if (s->chained && s->warm_choice != 1) {
+        const int fewer = s->warm_choice - 1;   /* > 0: extrapolate from these */
+        const int points = fewer > 0 && fewer < s->history ? fewer : s->history;
+        for (i = 0; i < model->nz; ++i) {
+            c->z[i] = cg_extrapolate(model, c, points, i);
+        }
+        return CHAINGEN_OK;
+    }
+    return cg_predict(model, c, x0, dt, c->z);
+}
+
+/* After a chained step converged to z: which first guess would have been closest, in the
+ * weighted norm of Newton's update test? The scheme's predictor, or the extrapolation from the
+ * last 1, 2 or 3 solutions. The next step starts from it. Quadratic extrapolation is best while a
+ * step resolves the motion; where it does not (a long chain's fast tail at dt = 0.01 s),
+ * extrapolation magnifies the step-to-step changes and a lower degree, or the predictor, is
+ * closer. Costs one predictor evaluation. */
+static int cg_choose_warm_start(const chaingen_model *table, const cg_solver *c, const double *x0,
+                                double dt, const chaingen_options *options)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    chaingen_workspace_scalars *s = c->s;
+    double error[CG_HISTORY + 1] = {0.0};
+    double *guess = c->dz;   /* free once Newton has converged */
+    int d, i, best = 0;
+    if (!s->chained || s->history < 1) {
+        return CHAINGEN_OK;
+    }
+    if (cg_predict(model, c, x0, dt, guess)) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
+    for (i = 0; i < model->nz; ++i) {
+        const double weight = 1.0 / (options->update_atol
+                                     + options->update_rtol * fabs(c->z[i]));
+        for (d = 0; d <= s->history; ++d) {
+            const double value = d == 0 ? guess[i] : cg_extrapolate(model, c, d, i);
+            const double distance = fabs(value - c->z[i]) * weight;
+            if (!(distance <= error[d])) {
+                error[d] = distance;
+            }
+        }
+    }
+    for (d = 1; d <= s->history; ++d) {
+        if (error[d] < error[best]) {
+            best = d;
+        }
+    }
+    s->warm_choice = best + 1;
+    return CHAINGEN_OK;
+}
+
+/* Newton's method on F(z, x0, [u], [q], dt) = 0 from the first guess, full, simplified or chord
+ * (see the options in the package header), with the linear solves of factorise() and
+ * solve_newton(), at most options->max_iterations of them. Leaves z in the workspace. */
+static int cg_newton(const chaingen_model *table, const cg_solver *c, const double *x0,
+                     const double *u, const double *p, double dt, const chaingen_options *options,
+                     int warm, int *iterations)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    chaingen_workspace_scalars *s = c->s;
+    const int nz = model->nz;
+    double *z, *dz, *residual, *jacobian;
+    double previous_update = -1.0;   /* update norm of the previous iteration, < 0: none */
+    int i, iteration = 0, status, fresh = 0;   /* fresh: dF/dz evaluated within this call */
+    z = c->z;
+    dz = c->dz;
+    residual = c->residual;
+    jacobian = c->jacobian;
+    if (options->reuse_jacobian != CHAINGEN_JACOBIAN_ACROSS_STEPS || s->factors_dt != dt) {
+        s->factors_valid = 0;
+    }
+    status = cg_first_guess(model, c, x0, dt, warm);
+    if (status == CHAINGEN_OK) {
+        status = CHAINGEN_NOT_CONVERGED;
+    }
+    while (status == CHAINGEN_NOT_CONVERGED && iteration < options->max_iterations) {
+        double residual_norm = 0.0, update_norm = 0.0;
+        int evaluated, j;
+        ++iteration;
+        if (!s->factors_valid) {
+            if (model->arm_nh > 0) {
+                chaingen_arm_system system = cg_arm_system(model, c);
+                evaluated = cg_newton_factors(model, c, z, x0, u, dt, residual);
+                /* The residual's scale at this Jacobian, 1 + sum_j |dF_i/dz_j| |z_j|, bounded by
+                 * its factors. */
+                if (!evaluated) {
+                    chaingen_arm_scale(&system, z, c->residual_scale);
+                }
+            } else {
+                evaluated = cg_evaluate_residual_jacobian(model, c, z, x0, u, p, dt, residual,
+                                                          jacobian);
+                /* The residual's scale at this Jacobian: 1 + sum_j |dF_i/dz_j| |z_j|. */
+                for (i = 0; i < nz; ++i) {
+                    c->residual_scale[i] = 1.0;
+                }
+                for (j = 0; j < nz; ++j) {
+                    for (i = 0; i < nz; ++i) {
+                        c->residual_scale[i] += fabs(jacobian[i + j * nz]) * fabs(z[j]);
+                    }
+                }
+            }
+        } else {
+            evaluated = cg_evaluate_residual(model, c, z, x0, u, p, dt, residual);
+        }
+        if (evaluated) {
+            status = CHAINGEN_EVALUATION_FAILED;
+            break;
+        }
+        for (i = 0; i < nz; ++i) {
+            double scaled = fabs(residual[i]) / c->residual_scale[i];
+            if (!isfinite(residual[i])) {
+                status = CHAINGEN_NONFINITE;
+            }
+            if (scaled > residual_norm) {
+                residual_norm = scaled;
+            }
+            dz[i] = -residual[i];
+        }
+        if (status != CHAINGEN_NOT_CONVERGED) {
+            break;
+        }
+        if (!s->factors_valid) {
+            if (cg_factorise(model, c)) {
+                status = CHAINGEN_SINGULAR_JACOBIAN;
+                break;
+            }
+            s->factors_valid = 1;
+            s->factors_dt = dt;
+            fresh = 1;
+            previous_update = -1.0;   /* a new Jacobian: contraction is measured afresh */
+        }
+        cg_solve_newton(model, c, dz);
+        for (i = 0; i < nz; ++i) {
+            double ratio = fabs(dz[i]) / (options->update_atol + options->update_rtol * fabs(z[i]));
+            if (!(ratio <= update_norm)) {
+                update_norm = ratio;
+            }
+            z[i] += dz[i];
+        }
+        if (!isfinite(update_norm)) {
+            status = CHAINGEN_NONFINITE;
+        } else if (options->reuse_jacobian == CHAINGEN_JACOBIAN_EVERY_ITERATE) {
+            /* Converged; or at the round-off floor: the residual is round-off of its own scale
+             * and the update stopped shrinking (quadratic convergence would have shrunk it by
+             * orders), so the update is round-off of an ill-conditioned dF/dz, and no further
+             * iterate is better. */
+            int floor = previous_update > 0.0 && update_norm >= CG_FLOOR_RATE * previous_update
+                        && residual_norm <= CG_ROUNDOFF_RESIDUAL;
+            s->factors_valid = 0;
+            if (residual_norm <= options->residual_tol && (update_norm <= 1.0 || floor)) {
+                status = CHAINGEN_OK;
+            }
+            previous_update = update_norm;
+        } else {
+            /* With contraction rate theta the new iterate's error is at most theta / (1 - theta)
+             * times the update. The rate is measured within this step only (a rate carried
+             * over from earlier steps would go stale with the Jacobian, unnoticed); before
+             * it is known, the update itself must be within tolerance, as for full Newton
+             * (the error is then below it while theta <= 1/2). */
+            int measured = previous_update > 0.0;
+            double rate = measured ? update_norm / previous_update : 1.0;
+            double margin = options->reuse_jacobian == CHAINGEN_JACOBIAN_PER_STEP
+                                ? CHAINGEN_CHORD_MARGIN : CHAINGEN_SIMPLIFIED_MARGIN;
+            int contracted = measured ? rate < 1.0 && rate / (1.0 - rate) * update_norm <= margin
+                                      : update_norm <= margin;
+            /* A Jacobian evaluated within this step that no longer contracts an update already
+             * within tolerance: the iterate is at the round-off floor, where the margin cannot
+             * be met. */
+            int floor = measured && fresh
+                        && ((rate > CHAINGEN_REFRESH_RATE && update_norm <= 1.0)
+                            || (rate >= CG_FLOOR_RATE && residual_norm <= CG_ROUNDOFF_RESIDUAL));
+            if (residual_norm <= options->residual_tol && (contracted || floor)) {
+                status = CHAINGEN_OK;
+            } else if (measured && rate > CHAINGEN_REFRESH_RATE) {
+                s->factors_valid = 0;
+            }
+            previous_update = update_norm;
+        }
+    }
+    if (status == CHAINGEN_OK) {
+        status = cg_choose_warm_start(model, c, x0, dt, options);
+    }
+    *iterations = iteration;
+    return status;
+}
+
+/* Newton from the first guess; a warm start that fails is retried once from the scheme's
+ * predictor with a fresh Jacobian (an extrapolated guess can be poor where the motion changes
+ * abruptly), and a kept Jacobian that fails is replaced by full Newton from the predictor: a
+ * step does at most 3 max_iterations linear solves. options NULL: the model's defaults. */
+static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const double *x0,
+                         const double *u, const double *p, double dt,
+                         const chaingen_options *options, int *iterations)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    chaingen_options defaults;
+    int status, spent = 0, retried = 0;
+    if (!x0 || (!u && model->nu > 0) || (!p && model->np > 0) || !(dt != 0.0) || !isfinite(dt)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!options) {
+        defaults = model->defaults;
+        options = &defaults;
+    }
+    if (options->reuse_jacobian < CHAINGEN_JACOBIAN_EVERY_ITERATE
+        || options->reuse_jacobian > CHAINGEN_JACOBIAN_PER_STEP || !(options->energy_tol >= 0.0)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    status = cg_newton(model, c, x0, u, p, dt, options, options->warm_start, &spent);
+    if (status != CHAINGEN_OK && c->s->chained) {
+        c->s->factors_valid = 0;
+        status = cg_newton(model, c, x0, u, p, dt, options, 0, &retried);
+        spent += retried;
+    }
+    if (status != CHAINGEN_OK && status != CHAINGEN_EVALUATION_FAILED
+        && options->reuse_jacobian != CHAINGEN_JACOBIAN_EVERY_ITERATE) {
+        chaingen_options full = *options;
+        full.reuse_jacobian = CHAINGEN_JACOBIAN_EVERY_ITERATE;
+        c->s->factors_valid = 0;
+        status = cg_newton(model, c, x0, u, p, dt, &full, 0, &retried);
+        spent += retried;
+        if (status == CHAINGEN_OK) {
+            ++c->s->step_fallbacks;
+        }
+    }
+    if (iterations) {
+        *iterations = spent;
+    }
+    return status;
+}
+
+/* (H, T) of a state, for the energy check of finish_step. */
+static int cg_state_energies(const chaingen_model *table, const cg_solver *c, const double *x,
+                             double *energies)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    c->arg[0] = x;
+    if (model->np > 0) {
+        c->arg[1] = c->q;
+    }
+    c->res[0] = energies;
+    return cg_evaluate(model->energy_terms, c);
+}
+
+/* x1 (and the energy flows, when the model reports them) from the converged z in the workspace.
+ * The candidate is checked (finite; with spring segments, no segment collapsed; with the energy
+ * check, the energy balance kept within energy_tol) before it is copied out: a failed step
+ * leaves x1 untouched. */
+static int cg_finish_step(const chaingen_model *table, const cg_solver *c, const double *x0,
+                          const double *u, double dt, double *x1, double *flows,
+                          const chaingen_options *options)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    chaingen_workspace_scalars *s = c->s;
+    const int nx = model->nx, nz = model->nz;
+    double *candidate = c->candidate;
+    double step_flows[2];
+    int i, status;
+    cg_step_arguments(model, c, c->z, x0, u, &dt);
+    c->res[0] = candidate;
+    if (model->flows) {
+        c->res[1] = step_flows;
+    }
+    status = cg_evaluate(model->next_state, c);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    for (i = 0; i < nx; ++i) {
+        if (!isfinite(candidate[i])) {
+            return CHAINGEN_NONFINITE;
+        }
+    }
+    if (model->nsegment > 0) {
+        /* Every spring segment must keep a length above its tolerance, and must not pass
+         * through zero length within the step: its direction turns by less than 90 degrees. */
+        double *margins = c->margins;
+        c->arg[0] = x0;
+        c->arg[1] = candidate;
+        if (model->np > 0) {
+            c->arg[2] = c->q;
+        }
+        c->res[0] = margins;
+        if (cg_evaluate(model->segment_margins, c)) {
+            return CHAINGEN_EVALUATION_FAILED;
+        }
+        for (i = 0; i < model->nsegment; ++i) {
+            if (!(margins[i] >= 1.0) || !(margins[model->nsegment + i] > 0.0)) {
+                return CHAINGEN_SEGMENT_COLLAPSED;
+            }
+        }
+    }
+    if (model->energy_check) {
+        /* The scheme keeps the energy balance H_1 - H_0 = W - D only up to its error, small
+         * against the kinetic energy at the step's ends; a root that misses it by energy_tol
+         * (T_0 + T_1) or more is spurious: Newton converged to another solution of a step too
+         * long for the motion (docs/model.md, section 13). Within round-off of H it passes (a
+         * chain held still has T = 0). The energies at x0 are the last accepted step's when it
+         * ended there. options NULL: the model's default. */
+        const double tolerance = options ? options->energy_tol : model->defaults.energy_tol;
+        double start[2], end[2], balance;
+        if (tolerance > 0.0) {
+            if (s->energy_valid && !memcmp(x0, c->energy_x, sizeof(double) * (size_t)nx)) {
+                start[0] = s->energy_ends[0];
+                start[1] = s->energy_ends[1];
+            } else if (cg_state_energies(model, c, x0, start)) {
+                return CHAINGEN_EVALUATION_FAILED;
+            }
+            if (cg_state_energies(model, c, candidate, end)) {
+                return CHAINGEN_EVALUATION_FAILED;
+            }
+            if (model->flows) {
+                balance = end[0] - start[0] - (step_flows[0] - step_flows[1]);
+            } else {
+                balance = end[0] - start[0];
+            }
+            if (!(fabs(balance) <= tolerance * (start[1] + end[1])
+                                   + CG_ROUNDOFF_RESIDUAL * (fabs(start[0]) + fabs(end[0])))) {
+                return CHAINGEN_ENERGY_JUMP;
+            }
+            memcpy(c->energy_x, candidate, sizeof(double) * (size_t)nx);
+            s->energy_ends[0] = end[0];
+            s->energy_ends[1] = end[1];
+            s->energy_valid = 1;
+        }
+    }
+    memcpy(x1, candidate, sizeof(double) * (size_t)nx);
+    /* Remember the solution for a warm start of the next step. */
+    if (s->chained && s->history > 0) {
+        memmove(c->previous_z + nz, c->previous_z, sizeof(double) * (size_t)nz * (CG_HISTORY - 1));
+        if (s->history < CG_HISTORY) {
+            ++s->history;
+        }
+    } else {
+        s->history = 1;
+    }
+    memcpy(c->previous_z, c->z, sizeof(double) * (size_t)nz);
+    memcpy(c->previous_x1, x1, sizeof(double) * (size_t)nx);
+    s->previous_dt = dt;
+    if (model->flows && flows) {
+        flows[0] = step_flows[0];
+        flows[1] = step_flows[1];
+    }
+    return CHAINGEN_OK;
+}
+
+/* Whether a step that failed with `status` may pass when shorter: Newton failed on it, or its
+ * solution was not finite, turned a spring segment through 90 degrees, or jumped in energy. (A
+ * bad argument or a failed evaluation fails at any length.) */
+static int cg_shorter_may_pass(const chaingen_model *table, int status)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    return status == CHAINGEN_NOT_CONVERGED || status == CHAINGEN_SINGULAR_JACOBIAN
+           || status == CHAINGEN_NONFINITE
+           || (model->nsegment > 0 && status == CHAINGEN_SEGMENT_COLLAPSED)
+           || (model->energy_check && status == CHAINGEN_ENERGY_JUMP);
+}
+
+/* One step, climbing the ladder of solve_step; when Newton fails on the whole step, or its
+ * solution fails the segment test (a spurious root of a step too long for the motion turns a
+ * segment through 90 degrees; a segment that really collapses fails every half too), or the
+ * energy check (a spurious root that jumps in energy), two half steps, each climbing the same
+ * ladder, at most MAX_SPLIT halvings deep. "es" conserves energy on any sequence of steps: the
+ * halves keep its energy balance. The energy flows are the halves' sum; iterations counts every
+ * linear solve. */
+static int cg_advance(const chaingen_model *table, const cg_solver *c, const double *x0,
+                      const double *u, const double *p, double dt, double *x1, double *flows,
+                      const chaingen_options *options, int *iterations, int depth)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    int status, spent = 0;
+    status = cg_solve_step(model, c, x0, u, p, dt, options, &spent);
+    if (status == CHAINGEN_OK) {
+        status = cg_finish_step(model, c, x0, u, dt, x1, flows, options);
+    }
+    *iterations += spent;
+    if (cg_shorter_may_pass(model, status) && depth < CHAINGEN_MAX_SPLIT) {
+        double *middle = c->split_state + depth * model->nx;
+        double halves[2][2] = {{0.0, 0.0}, {0.0, 0.0}};
+        ++c->s->step_splits;
+        status = cg_advance(model, c, x0, u, p, 0.5 * dt, middle, halves[0], options, iterations,
+                            depth + 1);
+        if (status == CHAINGEN_OK) {
+            status = cg_advance(model, c, middle, u, p, 0.5 * dt, x1, halves[1], options,
+                                iterations, depth + 1);
+        }
+        if (model->flows && status == CHAINGEN_OK && flows) {
+            flows[0] = halves[0][0] + halves[1][0];
+            flows[1] = halves[0][1] + halves[1][1];
+        }
+    }
+    return status;
+}
+
+/* One step of the model's order, composed (model->nstage > 0): the scheme's step (with its
+ * ladder, advance, splitting from `depth`) at dt * stages[s] for each stage in turn, fractions of
+ * dt that sum to 1 (one negative: a step back in time). x1 is written by the last stage only: on
+ * failure it is untouched. The energy flows are the stages' sum.
+ *
+ * The warm start works stage by stage: when this step continues the previous composed step (x0
+ * bitwise its x1, the same dt), stage s starts from the extrapolation of stage s's own solutions
+ * in the previous steps, which lie one step apart as a plain step's do. (A stage's neighbours
+ * have other lengths, and extrapolating across them costs Newton iterations.) Otherwise a
+ * stage continues the previous stage where the two have equal length. */
+static int cg_compose(const chaingen_model *table, const cg_solver *c, const double *x0,
+                      const double *u, const double *p, double dt, double *x1, double *flows,
+                      const chaingen_options *options, int *iterations, int depth)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    chaingen_workspace_scalars *ws = c->s;
+    const int nx = model->nx;
+    const size_t record = sizeof(double) * CG_HISTORY * (size_t)model->nz;
+    const double *from = x0;
+    double stage_flows[2] = {0.0, 0.0}, total[2] = {0.0, 0.0};
+    const int continues = ws->composed_valid && dt == ws->composed_dt
+                          && !memcmp(x0, c->composed_x1, sizeof(double) * (size_t)nx);
+    int s, status = CHAINGEN_OK;
+    ws->composed_valid = 0;
+    for (s = 0; s < model->nstage && status == CHAINGEN_OK; ++s) {
+        double *to = s == model->nstage - 1 ? x1 : c->stage_state + (s % 2) * nx;
+        double *stage_z = c->stage_z + (size_t)s * CG_HISTORY * model->nz;
+        const double stage_dt = model->stages[s] * dt;
+        const int own = continues && c->stage_history[s] > 0;
+        if (own) {
+            memcpy(c->previous_z, stage_z, record);
+            ws->history = c->stage_history[s];
+            ws->warm_choice = c->stage_choice[s];
+            memcpy(c->previous_x1, from, sizeof(double) * (size_t)nx);
+            ws->previous_dt = stage_dt;
+        }
+        status = cg_advance(model, c, from, u, p, stage_dt, to, stage_flows, options, iterations,
+                            depth);
+        /* Keep the stage's record unless the stage was split (its last solve was shorter); a
+         * record that did not start from the stage's own holds only this solution. */
+        c->stage_history[s] = 0;
+        if (status == CHAINGEN_OK && ws->previous_dt == stage_dt) {
+            memcpy(stage_z, c->previous_z, record);
+            c->stage_history[s] = own ? ws->history : 1;
+            c->stage_choice[s] = ws->warm_choice;
+        }
+        if (model->flows && status == CHAINGEN_OK) {
+            total[0] += stage_flows[0];
+            total[1] += stage_flows[1];
+        }
+        from = to;
+    }
+    if (status == CHAINGEN_OK) {
+        memcpy(c->composed_x1, x1, sizeof(double) * (size_t)nx);
+        ws->composed_dt = dt;
+        ws->composed_valid = 1;
+    }
+    if (model->flows && status == CHAINGEN_OK && flows) {
+        flows[0] = total[0];
+        flows[1] = total[1];
+    }
+    return status;
+}
+
+/* One step of the model's order: the composed step, or the scheme's step alone. */
+static int cg_take_step(const chaingen_model *table, const cg_solver *c, const double *x0,
+                        const double *u, const double *p, double dt, double *x1, double *flows,
+                        const chaingen_options *options, int *iterations, int depth)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    if (model->nstage > 0) {
+        return cg_compose(model, c, x0, u, p, dt, x1, flows, options, iterations, depth);
+    }
+    return cg_advance(model, c, x0, u, p, dt, x1, flows, options, iterations, depth);
+}
+
+CHAINGEN_LINKAGE int chaingen_step(const chaingen_model *table, const double *x0, const double *u,
+                                   int nu, const double *p, int np, double dt, double *x1,
+                                   double *flows, const chaingen_options *options,
+                                   const chaingen_workspace *workspace, int *iterations)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver, *c = &solver;
+    int spent = 0, status;
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!x1 || !(dt > 0.0) || !isfinite(dt)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, c);
+    c->s->step_fallbacks = 0;
+    c->s->step_splits = 0;
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    /* The start state's segments (a run checks its start once: each later step starts where the
+     * one before ended, checked as its x1). */
+    if (model->nsegment > 0 && x0 && cg_all_finite(x0, model->nx)) {
+        status = cg_start_segments(model, c, x0);
+        if (status != CHAINGEN_OK) {
+            return status;
+        }
+    }
+    status = cg_take_step(model, c, x0, u, p, dt, x1, flows, options, &spent, 0);
+    if (iterations) {
+        *iterations = spent;
+    }
+    return status;
+}
+
+/* A step as advance's first rung takes it (no split: the Jacobians are those of one step), and
+ * the step map's Jacobians by the implicit function theorem: one factorisation of dF/dz at the
+ * converged z, solved for the NCHAIN_SENS right-hand sides. Rows: the joint-space state s
+ * (2N), or with chain_state (a composed es step's stages) the whole state x. `whole`: the step
+ * is the entry point's own (dt > 0 and x0's segments checked here); otherwise a stage of a
+ * composed step, whose dt may be negative and whose start the composition checked. */
+static int cg_stage_sensitivities(const chaingen_model *table, const cg_solver *c, const double *x0,
+                                  const double *u, const double *p, double dt, double *x1,
+                                  double *ds_ds, double *ds_du, double *ds_dp,
+                                  const chaingen_options *options, int *iterations, int whole)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    const int nz = model->nz, nu = model->nu, np = model->np;
+    const int R = CHAINGEN_NCHAIN(model->n_joints, model->nx, model->chain_state);
+    const int C = CHAINGEN_NCHAIN_SENS(model->n_joints, model->nx, nu, np, model->chain_state);
+    double *rhs;
+    int i, j, k, status;
+    if ((!p && np > 0) || !x1 || !ds_ds || (!ds_du && nu > 0) || (!ds_dp && np > 0)
+        || (whole && (!(dt > 0.0) || !isfinite(dt)))) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    if (whole && model->nsegment > 0) {
+        status = x0 && cg_all_finite(x0, model->nx) ? cg_start_segments(model, c, x0) : CHAINGEN_OK;
+        if (status != CHAINGEN_OK) {
+            return status;
+        }
+    }
+    status = cg_solve_step(model, c, x0, u, p, dt, options, iterations);
+    if (status == CHAINGEN_OK) {
+        status = cg_finish_step(model, c, x0, u, dt, x1, NULL, options);
+    }
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    /* dF/dz at the converged z, factorised once. */
+    if (model->arm_nh > 0 ? cg_newton_factors(model, c, c->z, x0, u, dt, c->residual)
+                          : cg_evaluate_residual_jacobian(model, c, c->z, x0, u, p, dt, c->residual,
+                                                          c->jacobian)) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
+    if (cg_factorise(model, c)) {
+        c->s->factors_valid = 0;
+        return CHAINGEN_SINGULAR_JACOBIAN;
+    }
+    c->s->factors_valid = 1;   /* dF/dz at this step's solution: reusable */
+    c->s->factors_dt = dt;
+    /* Z = -J^-1 [F_x0 X_s, F_u, F_p]: one solve per column, in place. */
+    rhs = c->sensitivity_rhs;
+    cg_step_arguments(model, c, c->z, x0, u, &dt);
+    c->res[0] = rhs;
+    if (cg_evaluate(model->sensitivity_rhs, c)) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
+    for (j = 0; j < C; ++j) {
+        cg_solve_newton(model, c, rhs + j * nz);
+    }
+    /* ds1 = S_z Z + [S_s0, S_u, S_p]. */
+    cg_step_arguments(model, c, c->z, x0, u, &dt);
+    c->res[0] = c->s1_z;
+    c->res[1] = ds_ds;
+    k = 2;
+    if (nu > 0) {
+        c->res[k++] = ds_du;
+    }
+    if (np > 0) {
+        c->res[k++] = ds_dp;
+    }
+    if (cg_evaluate(model->sensitivity_map, c)) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
+    for (j = 0; j < C; ++j) {
+        double *column = ds_ds + j * R;
+        if (nu > 0 && j >= R && j < R + nu) {
+            column = ds_du + (j - R) * R;
+        }
+        if (np > 0 && j >= R + nu) {
+            column = ds_dp + (j - R - nu) * R;
+        }
+        for (i = 0; i < R; ++i) {
+            double sum = 0.0;
+            for (k = 0; k < nz; ++k) {
+                sum += c->s1_z[i + k * R] * rhs[k + j * nz];
+            }
+            column[i] -= sum;
+        }
+    }
+    if (!cg_all_finite(ds_ds, R * R)) {
+        return CHAINGEN_NONFINITE;
+    }
+    if (nu > 0 && !cg_all_finite(ds_du, R * nu)) {
+        return CHAINGEN_NONFINITE;
+    }
+    if (np > 0 && !cg_all_finite(ds_dp, R * np)) {
+        return CHAINGEN_NONFINITE;
+    }
+    return CHAINGEN_OK;
+}
+
+/* The composed step's sensitivities by the chain rule through its stages: with the stage's
+ * [S B] = [ds_ds ds_du ds_dp], the accumulated [D E] becomes [S D, S E + B]. Each stage is a step
+ * as stage_sensitivities does it (no split steps). With chain_state the stages chain in x, mapped
+ * to joint space at the ends (joint_maps). */
+static int cg_composed_sensitivities(const chaingen_model *table, const cg_solver *c,
+                                     const double *x0, const double *u, const double *p, double dt,
+                                     double *x1, double *ds_ds, double *ds_du, double *ds_dp,
+                                     const chaingen_options *options, int *iterations)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    const int nx = model->nx, nu = model->nu, np = model->np, NS = 2 * model->n_joints;
+    const int R = CHAINGEN_NCHAIN(model->n_joints, nx, model->chain_state);
+    const int C = CHAINGEN_NCHAIN_SENS(model->n_joints, nx, nu, np, model->chain_state);
+    double *stage = c->stage_sensitivities;
+    double *composed = c->composed_sensitivities;
+    const double *from = x0;
+    int s, i, j, k, spent = 0, status = CHAINGEN_OK;
+    if (!x0 || (!p && np > 0) || !x1 || !ds_ds || (!ds_du && nu > 0) || (!ds_dp && np > 0)
+        || !(dt > 0.0) || !isfinite(dt)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (model->nsegment > 0) {
+        /* The start state's segments (the stages' later states are checked as their x1). */
+        status = cg_derive(model, c, p);
+        if (status == CHAINGEN_OK && cg_all_finite(x0, nx)) {
+            status = cg_start_segments(model, c, x0);
+        }
+        if (status != CHAINGEN_OK) {
+            return status;
+        }
+    }
+    for (s = 0; s < model->nstage && status == CHAINGEN_OK; ++s) {
+        int stage_iterations = 0;
+        double *to = s == model->nstage - 1 ? x1 : c->stage_state + (s % 2) * nx;
+        status = cg_stage_sensitivities(model, c, from, u, p, model->stages[s] * dt, to, stage,
+                                        stage + R * R, stage + R * (R + nu), options,
+                                        &stage_iterations, 0);
+        spent += stage_iterations;
+        if (status != CHAINGEN_OK) {
+            break;
+        }
+        if (s == 0) {
+            memcpy(composed, stage, sizeof(double) * (size_t)R * (size_t)C);
+        } else {
+            double *column = c->column;
+            for (j = 0; j < C; ++j) {
+                for (i = 0; i < R; ++i) {
+                    double sum = j < R ? 0.0 : stage[i + j * R];
+                    for (k = 0; k < R; ++k) {
+                        sum += stage[i + k * R] * composed[k + j * R];
+                    }
+                    column[i] = sum;
+                }
+                memcpy(composed + j * R, column, sizeof(double) * (size_t)R);
+            }
+        }
+        from = to;
+    }
+    if (iterations) {
+        *iterations = spent;
+    }
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    if (model->chain_state) {
+        /* To joint space, with X_s = dx0/ds0 at s0 = outputs(x0) and S = ds1/dx1 at the end:
+         * ds_ds = S D X_s, ds_du = S E_u, ds_dp = S (D X_p + E_p) + S_p. */
+        c->arg[0] = x0;
+        c->arg[1] = x1;
+        if (np > 0) {
+            c->arg[2] = c->q;
+        }
+        c->res[0] = c->x0_s0;
+        c->res[1] = c->s1_x1;
+        if (np > 0) {
+            c->res[2] = c->x0_p;
+            c->res[3] = c->s1_p;
+        }
+        if (cg_evaluate(model->joint_maps, c)) {
+            return CHAINGEN_EVALUATION_FAILED;
+        }
+        for (j = 0; j < NS + nu + np; ++j) {
+            double *column = c->chain_column;   /* D X_s, E_u or D X_p + E_p: column j */
+            double *out = ds_ds + j * NS;
+            for (i = 0; i < nx; ++i) {
+                double sum = 0.0;
+                if (j < NS) {
+                    for (k = 0; k < nx; ++k) {
+                        sum += composed[i + k * nx] * c->x0_s0[k + j * nx];
+                    }
+                } else if (j < NS + nu) {
+                    sum = composed[i + (nx + j - NS) * nx];
+                } else {
+                    sum = composed[i + (nx + nu + j - NS - nu) * nx];
+                    for (k = 0; k < nx; ++k) {
+                        sum += composed[i + k * nx] * c->x0_p[k + (j - NS - nu) * nx];
+                    }
+                }
+                column[i] = sum;
+            }
+            if (nu > 0 && j >= NS && j < NS + nu) {
+                out = ds_du + (j - NS) * NS;
+            }
+            if (np > 0 && j >= NS + nu) {
+                out = ds_dp + (j - NS - nu) * NS;
+            }
+            for (i = 0; i < NS; ++i) {
+                double sum = 0.0;
+                for (k = 0; k < nx; ++k) {
+                    sum += c->s1_x1[i + k * NS] * column[k];
+                }
+                if (np > 0 && j >= NS + nu) {
+                    sum += c->s1_p[i + (j - NS - nu) * NS];
+                }
+                if (!isfinite(sum)) {
+                    return CHAINGEN_NONFINITE;
+                }
+                out[i] = sum;
+            }
+        }
+    } else {
+        memcpy(ds_ds, composed, sizeof(double) * (size_t)NS * (size_t)NS);
+        if (nu > 0) {
+            memcpy(ds_du, composed + NS * NS, sizeof(double) * (size_t)NS * (size_t)nu);
+        }
+        if (np > 0) {
+            memcpy(ds_dp, composed + NS * (NS + nu), sizeof(double) * (size_t)NS * (size_t)np);
+        }
+    }
+    return CHAINGEN_OK;
+}
+
+CHAINGEN_LINKAGE int chaingen_step_sensitivities(const chaingen_model *table, const double *x0,
+                                                 const double *u, int nu, const double *p, int np,
+                                                 double dt, double *x1, double *ds_ds,
+                                                 double *ds_du, double *ds_dp,
+                                                 const chaingen_options *options,
+                                                 const chaingen_workspace *workspace,
+                                                 int *iterations)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver;
+    if (model && !model->sensitivities) {
+        return CHAINGEN_UNAVAILABLE;
+    }
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, &solver);
+    if (model->nstage > 0) {
+        return cg_composed_sensitivities(model, &solver, x0, u, p, dt, x1, ds_ds, ds_du, ds_dp,
+                                         options, iterations);
+    }
+    return cg_stage_sensitivities(model, &solver, x0, u, p, dt, x1, ds_ds, ds_du, ds_dp, options,
+                                  iterations, 1);
+}
+
+/* s = (phi, omega) of the state x, s[2 N]. */
+static int cg_joint_state(const chaingen_model *table, const cg_solver *c, const double *x,
+                          const double *p, double *s)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    return cg_outputs(model, c, x, p, s, s + model->n_joints, NULL, NULL);
+}
+
+/* Adaptive steps (options->rtol > 0 or options->atol > 0). Each sample interval of length dt is
+ * covered by steps of the model's order whose lengths a PI controller chooses, landing on the
+ * interval's end. The local error of a step of length h from x is estimated by step doubling:
+ * one step of h and two of h/2 from x, in the joint-space state s = (phi, omega),
+ *     e = (s_two_halves - s_one_step) / (2^ORDER - 1),
+ * and the step passes when max_i |e_i| / (atol + rtol max(|s_i(x)|, |s_i(two halves)|)) <= 1,
+ * over the model's error_entries first entries of s: 2N (angles and rates), or N, the angles
+ * alone, for "es" at order 2, whose rates are off the velocity constraint C(q) v = 0 by O(dt^2)
+ * in every step, without accumulating: step doubling would see that, not the local error (at
+ * order 4 the rates come from the projected velocity and are tested too).
+ * The two halves are kept (no extrapolation, which would lose the scheme's structure): "es"
+ * conserves energy on any sequence of step lengths, so its energy stays at round-off while the
+ * step adapts. A step that Newton fails (its ladder without splits), or that collapses a spring
+ * segment, is refused and retried at NEWTON_FACTOR of its length, as is one whose error test
+ * fails (at the controller's length); below MIN_STEP_FRACTION dt the run stops with the last
+ * failure's status, or STEP_TOO_SMALL when the error test refused it. PI control (Gustafsson;
+ * the exponents of Hairer and Wanner's DOPRI codes):
+ *     h_new = h SAFETY err^-(0.7 / (ORDER + 1)) err_previous^(0.4 / (ORDER + 1)).
+ * rtol and atol are 0 or at least CHAINGEN_MIN_TOLERANCE (below it the error estimate is
+ * round-off). From x0 over the interval dt to x1; the controller's proposal carries over from
+ * interval to interval in the workspace. */
+static int cg_adaptive_interval(const chaingen_model *table, const cg_solver *c, const double *x0,
+                                const double *u, const double *p, double dt, double *x1,
+                                double *flows, const chaingen_options *options, int *iterations,
+                                chaingen_stats *counters)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    chaingen_workspace_scalars *ws = c->s;
+    const int n = model->n_joints, nx = model->nx, order = model->order;
+    const double alpha = 0.7 / (order + 1), beta = 0.4 / (order + 1);
+    double *start = c->joint_start, *whole = c->joint_whole, *ends = c->joint_ends;
+    double *from = c->adaptive_state;
+    double *one = c->adaptive_state + nx;
+    double *middle = c->adaptive_state + 2 * nx;
+    double *two = c->adaptive_state + 3 * nx;
+    double halves[2][2], total[2] = {0.0, 0.0};
+    double elapsed = 0.0;
+    int status, failure = CHAINGEN_STEP_TOO_SMALL, refused = 0, i;
+    memcpy(from, x0, sizeof(double) * (size_t)nx);
+    status = cg_joint_state(model, c, from, p, start);
+    if (!(ws->proposed_dt > 0.0)) {
+        ws->proposed_dt = dt;
+        ws->previous_error = 1.0;
+    }
+    while (status == CHAINGEN_OK && elapsed < dt) {
+        double remaining = dt - elapsed, h = ws->proposed_dt, error = 0.0, factor;
+        int landing = 0;
+        if (h >= remaining * (1.0 - 1e-12)) {
+            h = remaining;
+            landing = 1;
+        } else if (h > 0.5 * remaining) {
+            h = 0.5 * remaining;   /* two even steps rather than one and a sliver */
+        }
+        if (h < CHAINGEN_MIN_STEP_FRACTION * dt) {
+            status = failure;
+            break;
+        }
+        status = cg_take_step(model, c, from, u, p, h, one, NULL, options, iterations,
+                              CHAINGEN_MAX_SPLIT);
+        if (status == CHAINGEN_OK) {
+            status = cg_take_step(model, c, from, u, p, 0.5 * h, middle, halves[0], options,
+                                  iterations, CHAINGEN_MAX_SPLIT);
+        }
+        if (status == CHAINGEN_OK) {
+            status = cg_take_step(model, c, middle, u, p, 0.5 * h, two, halves[1], options,
+                                  iterations, CHAINGEN_MAX_SPLIT);
+        }
+        if (status == CHAINGEN_OK) {
+            status = cg_joint_state(model, c, one, p, whole);
+        }
+        if (status == CHAINGEN_OK) {
+            status = cg_joint_state(model, c, two, p, ends);
+        }
+        if (status == CHAINGEN_OK) {
+            for (i = 0; i < model->error_entries; ++i) {
+                double difference = ends[i] - whole[i];
+                double scale = options->atol + options->rtol * fmax(fabs(start[i]), fabs(ends[i]));
+                double ratio;
+                if (i < n) {
+                    difference = remainder(difference, CG_TWO_PI);   /* angles are wrapped */
+                }
+                ratio = fabs(difference) / ((double)((1 << order) - 1) * scale);
+                if (!(ratio <= error)) {
+                    error = ratio;   /* NaN propagates */
+                }
+            }
+            if (!isfinite(error)) {
+                status = CHAINGEN_NONFINITE;
+            }
+        }
+        if (cg_shorter_may_pass(model, status)) {
+            /* Newton or the step failed: refuse it and try a much shorter one. */
+            failure = status;
+            status = CHAINGEN_OK;
+            ++counters->rejected_steps;
+            ws->proposed_dt = CG_NEWTON_FACTOR * h;
+            ws->previous_error = 1.0;
+            refused = 1;
+            continue;
+        }
+        if (status != CHAINGEN_OK) {
+            break;
+        }
+        if (error <= 1.0) {
+            double proposal;
+            memcpy(from, two, sizeof(double) * (size_t)nx);
+            memcpy(start, ends, sizeof(double) * 2 * (size_t)n);
+            elapsed = landing ? dt : elapsed + h;
+            if (model->flows) {
+                total[0] += halves[0][0] + halves[1][0];
+                total[1] += halves[0][1] + halves[1][1];
+            }
+            counters->accepted_steps += 2;   /* two steps of h/2 */
+            if (counters->smallest_dt == 0.0 || 0.5 * h < counters->smallest_dt) {
+                counters->smallest_dt = 0.5 * h;
+            }
+            if (0.5 * h > counters->largest_dt) {
+                counters->largest_dt = 0.5 * h;
+            }
+            factor = CG_SAFETY * pow(fmax(error, 1e-10), -alpha) * pow(ws->previous_error, beta);
+            factor = fmin(CG_MAX_FACTOR, fmax(CG_MIN_FACTOR, factor));
+            if (refused) {
+                factor = fmin(factor, 1.0);   /* no growth right after a refusal */
+            }
+            proposal = h * factor;
+            /* A step shortened to land keeps the controller's longer proposal. */
+            if (!landing || proposal > ws->proposed_dt) {
+                ws->proposed_dt = proposal;
+            }
+            ws->previous_error = fmax(error, 1e-4);
+            failure = CHAINGEN_STEP_TOO_SMALL;
+            refused = 0;
+        } else {
+            ++counters->rejected_steps;
+            factor = fmax(CG_MIN_FACTOR, CG_SAFETY * pow(error, -1.0 / (order + 1)));
+            ws->proposed_dt = h * fmin(factor, 0.9);
+            failure = CHAINGEN_STEP_TOO_SMALL;
+            refused = 1;
+        }
+    }
+    if (status == CHAINGEN_OK) {
+        memcpy(x1, from, sizeof(double) * (size_t)nx);
+        if (model->flows && flows) {
+            flows[0] = total[0];
+            flows[1] = total[1];
+        }
+    }
+    return status;
+}
+
+CHAINGEN_LINKAGE long chaingen_sample_count(const chaingen_model *table, long n_steps, long every)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    long whole;
+    if (n_steps < 0 || every < 1) {
+        return 0;
+    }
+    if (!model || model->nsample < 1) {
+        return -1;
+    }
+    whole = n_steps / every;   /* the rows are whole + 1 */
+    if (whole >= LONG_MAX / model->nsample
+        || (size_t)whole >= SIZE_MAX / (sizeof(double) * (size_t)model->nsample)) {
+        return -1;   /* more rows than memory can address */
+    }
+    return whole + 1;
+}
+
+/* Neumaier's compensated sum: the energy flows of many steps, accurate to round-off. */
+typedef struct {
+    double sum;
+    double compensation;
+} cg_compensated_sum;
+
+static void cg_add(cg_compensated_sum *total, double value)
+{
+    double t = total->sum + value;
+    if (fabs(total->sum) >= fabs(value)) {
+        total->compensation += (total->sum - t) + value;
+    } else {
+        total->compensation += (value - t) + total->sum;
+    }
+    total->sum = t;
+}
+
+/* Write one sample row: t, phi, omega, energy, constraint error, and with energy flows the
+ * input work and the energy dissipated. */
+static int cg_write_sample(const chaingen_model *table, const cg_solver *c, const double *x,
+                           const double *p, double t, const cg_compensated_sum *totals, double *row)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    const int n = model->n_joints;
+    row[0] = t;
+    if (model->flows) {
+        row[3 + 2 * n] = totals[0].sum + totals[0].compensation;
+        row[4 + 2 * n] = totals[1].sum + totals[1].compensation;
+    }
+    return cg_outputs(model, c, x, p, row + 1, row + 1 + n, row + 1 + 2 * n, row + 2 + 2 * n);
+}
+
+/* The loop of simulate_observed and simulate_controlled: the inputs of step k from u, or, with
+ * u NULL, from the controller, called every `hold` steps with the joint state (the outputs of the
+ * state the step starts from) and held in between (zeros without a controller); recorded into
+ * torques (may be NULL). */
+static int cg_run(const chaingen_model *table, const cg_solver *c,
+                  const chaingen_workspace *workspace, const double *x0, double t0, double dt,
+                  long n_steps, long every, const double *u, const double *p,
+                  const chaingen_options *options, double *samples, double *x_final,
+                  chaingen_stats *stats, chaingen_observer observer, void *context, long interval,
+                  chaingen_control *control, chaingen_controller controller,
+                  void *controller_context, long hold, double *torques)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    const int nx = model->nx, nu = model->nu;
+    chaingen_options defaults;
+    chaingen_stats counters;
+    cg_compensated_sum totals[2] = {{0.0, 0.0}, {0.0, 0.0}};
+    double *phi = c->phi, *omega = c->omega, *held = c->held;   /* the controller's arguments */
+    double *current, *next;
+    long k;
+    int status, adaptive;
+    if (!x0 || (!p && model->np > 0) || !samples || n_steps < 0 || every < 1 || !(dt > 0.0)
+        || !isfinite(dt) || !isfinite(t0) || interval < 1
+        || chaingen_sample_count(model, n_steps, every) < 0) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!options) {
+        defaults = model->defaults;
+        options = &defaults;
+    }
+    if (!(options->rtol == 0.0
+          || (options->rtol >= CHAINGEN_MIN_TOLERANCE && isfinite(options->rtol)))
+        || !(options->atol == 0.0
+             || (options->atol >= CHAINGEN_MIN_TOLERANCE && isfinite(options->atol)))) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    adaptive = options->rtol > 0.0 || options->atol > 0.0;
+    memset(&counters, 0, sizeof counters);
+    if (!adaptive && n_steps > 0) {
+        counters.smallest_dt = dt;
+        counters.largest_dt = dt;
+    }
+    chaingen_workspace_init(model, workspace);   /* a new trajectory: no history carried in */
+    memset(held, 0, sizeof(double) * (size_t)nu);
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    current = c->state[0];
+    next = c->state[1];
+    memcpy(current, x0, sizeof(double) * (size_t)nx);
+    status = cg_write_sample(model, c, current, p, t0, totals, samples);
+    if (model->nsegment > 0 && status == CHAINGEN_OK) {
+        /* The start; every later state is a step's checked x1. */
+        status = cg_start_segments(model, c, current);
+    }
+    if (control && control->stop && status == CHAINGEN_OK) {
+        status = CHAINGEN_INTERRUPTED;   /* stopped before it began: no step */
+    }
+    for (k = 1; k <= n_steps && status == CHAINGEN_OK; ++k) {
+        int iterations = 0;
+        double flows[2] = {0.0, 0.0};   /* written by a completed interval */
+        const double *inputs = NULL;
+        if (nu > 0) {
+            inputs = u ? u + (k - 1) * nu : held;
+            if (controller && (k - 1) % hold == 0) {
+                double energy, error;
+                status = cg_outputs(model, c, current, p, phi, omega, &energy, &error);
+                if (status == CHAINGEN_OK
+                    && controller(k - 1, t0 + (double)(k - 1) * dt, phi, omega, held,
+                                  controller_context)) {
+                    status = CHAINGEN_INTERRUPTED;
+                }
+                if (status != CHAINGEN_OK) {
+                    break;
+                }
+            }
+            if (torques && (k - 1) % every == 0) {   /* recorded as the samples are */
+                memcpy(torques + ((k - 1) / every) * nu, inputs, sizeof(double) * (size_t)nu);
+            }
+        }
+        c->s->step_fallbacks = 0;
+        c->s->step_splits = 0;
+        if (adaptive) {
+            status = cg_adaptive_interval(model, c, current, inputs, p, dt, next, flows, options,
+                                          &iterations, &counters);
+        } else {
+            status = cg_take_step(model, c, current, inputs, p, dt, next, flows, options,
+                                  &iterations, 0);
+            counters.accepted_steps = k;
+        }
+        counters.full_newton_fallbacks += c->s->step_fallbacks;
+        counters.split_steps += c->s->step_splits > 0;
+        if (status != CHAINGEN_OK) {
+            counters.failed_iterations = iterations;
+            break;
+        }
+        {
+            double *swap = current;
+            current = next;
+            next = swap;
+        }
+        if (model->flows) {
+            cg_add(&totals[0], flows[0]);
+            cg_add(&totals[1], flows[1]);
+        }
+        counters.steps = k;
+        counters.newton_iterations += iterations;
+        if (iterations > counters.max_newton_iterations) {
+            counters.max_newton_iterations = iterations;
+        }
+        if (k % every == 0) {
+            status = cg_write_sample(model, c, current, p, t0 + (double)k * dt, totals,
+                                     samples + (k / every) * model->nsample);
+        }
+        if (observer && status == CHAINGEN_OK && k % interval == 0 && observer(k, context)) {
+            status = CHAINGEN_INTERRUPTED;
+        }
+        if (control) {
+            control->steps = k;
+            if (control->stop && status == CHAINGEN_OK) {
+                status = CHAINGEN_INTERRUPTED;
+            }
+        }
+    }
+    if (x_final) {
+        memcpy(x_final, current, sizeof(double) * (size_t)nx);
+    }
+    if (stats) {
+        *stats = counters;
+    }
+    return status;
+}
+
+CHAINGEN_LINKAGE int chaingen_simulate_observed(const chaingen_model *table, const double *x0,
+                                                double t0, double dt, long n_steps, long every,
+                                                const double *u, int nu, const double *p, int np,
+                                                const chaingen_options *options,
+                                                const chaingen_workspace *workspace,
+                                                double *samples, double *x_final,
+                                                chaingen_stats *stats, chaingen_observer observer,
+                                                void *context, long interval,
+                                                chaingen_control *control)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver;
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 1, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, &solver);
+    /* u NULL: the loop's held inputs, zeros without a controller. */
+    return cg_run(model, &solver, workspace, x0, t0, dt, n_steps, every, u, p, options, samples,
+                  x_final, stats, observer, context, interval, control, NULL, NULL, 1, NULL);
+}
+
+CHAINGEN_LINKAGE int chaingen_simulate_controlled(const chaingen_model *table, const double *x0,
+                                                  double t0, double dt, long n_steps, long every,
+                                                  chaingen_controller controller, void *context,
+                                                  long hold, const double *p, int np,
+                                                  const chaingen_options *options,
+                                                  const chaingen_workspace *workspace,
+                                                  double *samples, double *torques, double *x_final,
+                                                  chaingen_stats *stats, chaingen_control *control)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver;
+    if (model && model->nu <= 0) {
+        return CHAINGEN_UNAVAILABLE;
+    }
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, NULL, model->nu, 1, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!controller || hold < 1) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, &solver);
+    return cg_run(model, &solver, workspace, x0, t0, dt, n_steps, every, NULL, p, options, samples,
+                  x_final, stats, NULL, NULL, 1, control, controller, context, hold, torques);
+}
