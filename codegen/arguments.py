@@ -7,11 +7,15 @@ import math
 from pathlib import Path
 
 from .runtime import contract
-from .scene import METHODS, ORDERS
-from .scene.values import GALERKIN_ORDER
-from .symbolic.composition import GALERKIN_MIN_QUADRATURE
+from .scene.solver_rules import (
+    GALERKIN_MIN_QUADRATURE,
+    GALERKIN_ORDER,
+    METHODS,
+    ORDERS,
+    request_refusal,
+)
 
-#: The orders of the step each method takes (chaingen.symbolic.composition), said once.
+#: The orders of the step each method takes (chaingen.scene.solver_rules), said once.
 ORDERS_TAKEN = (f"every method: {', '.join(map(str, ORDERS[:-1]))} and {ORDERS[-1]}; es at "
                 f"{GALERKIN_ORDER} composes its k = 1 Galerkin step and needs K >= "
                 f"{GALERKIN_MIN_QUADRATURE}")
@@ -31,6 +35,13 @@ def positive_int(text: str, bits: int = 64) -> int:
     return value
 
 
+def integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+
+
 def positive_c_int(text: str) -> int:
     """positive_int for a C int (32 bits): an int field of the Newton options."""
     return positive_int(text, 32)
@@ -48,7 +59,8 @@ def add_scheme_options(parser: argparse.ArgumentParser,
     parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format.md)")
     parser.add_argument("--method", choices=METHODS,
                         help="time-stepping scheme (default: the scene's [simulation].method)")
-    parser.add_argument("--quadrature", type=positive_int, metavar="K",
+    # K's range is the rules' (run_settings): one message for 0 and for 21.
+    parser.add_argument("--quadrature", type=integer, metavar="K",
                         help="Gauss-Legendre points for the spring terms of 'es' "
                              "(default: the scene's)")
     parser.add_argument("--order", type=int, choices=ORDERS,
@@ -98,10 +110,11 @@ JACOBIAN_CHOICES = {mode.name.removeprefix("JACOBIAN_").lower().replace("_", "-"
 
 
 def adaptive_tolerance(text: str) -> float:
+    """--rtol, --atol: a number the rule of adaptive tolerances takes (solver_rules)."""
     value = number(text)
-    if not contract.is_adaptive_tolerance(value):
-        raise argparse.ArgumentTypeError(f"must be {contract.ADAPTIVE_TOLERANCE_RULE}, got "
-                                         f"{text!r}")
+    refused = request_refusal({"rtol": value})
+    if refused:
+        raise argparse.ArgumentTypeError(refused.message)
     return value
 
 

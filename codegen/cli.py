@@ -193,9 +193,8 @@ def command_generate(args) -> int:
     target = args.output or Path(package_prefix(scene, settings.method))
     check_output_directory(target, "-o", [args.scene])
     check_package_target(target)
-    package = generate_package(scene, settings.method, settings.quadrature,
-                               sensitivities=args.sensitivities, parameters=args.parameters,
-                               order=settings.order)
+    package = generate_package(settings.solver_spec(scene, sensitivities=args.sensitivities,
+                                                     parameters=args.parameters))
     directory = write_package(package, target)
     print(f"wrote {directory}/: {', '.join(package.files)}")
     return 0
@@ -235,8 +234,7 @@ def command_check(args) -> int:
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature, dt=args.dt,
                             order=args.order, source=str(args.scene))
-    scheme = build_scheme(scene, settings.method, settings.quadrature, args.parameters,
-                          settings.order)
+    scheme = build_scheme(settings.solver_spec(scene, parameters=args.parameters))
     solver = Solver.from_files(render_package(scheme, sensitivities=True).files)
     report = check_solver(scheme, solver, samples=args.samples, seed=args.seed, dt=settings.dt)
     print(report.table())

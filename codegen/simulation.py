@@ -12,10 +12,9 @@ from dataclasses import dataclass
 from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
-from .runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from .runtime.solver import MAX_SAMPLE_BYTES  # samples are held in memory before they are written
-from .scene import METHODS, QUADRATURE_RANGE, Scene
-from .symbolic.composition import order_error, quadrature_error
+from .scene import Scene, SolverSpec
+from .scene.solver_rules import REQUEST_KEYS, request_refusal
 
 #: A run of more steps is refused: at about 1 us a step it would take days.
 MAX_STEPS = 10 ** 12
@@ -42,6 +41,12 @@ class RunSettings:
     def n_steps(self) -> int:
         return max(1, round(self.t_end / self.dt))
 
+    def solver_spec(self, scene: Scene, *, sensitivities: bool = True,
+                    parameters=()) -> SolverSpec:
+        """The request for the solver these settings run with."""
+        return SolverSpec(scene, self.method, self.quadrature, order=self.order,
+                          parameters=parameters, sensitivities=sensitivities)
+
 
 def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=None,
                  every=None, order=None, rtol=None, atol=None,
@@ -61,11 +66,14 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
         order=order if order is not None else defaults.order,
         rtol=rtol if rtol is not None else defaults.rtol,
         atol=atol if atol is not None else defaults.atol)
-    if settings.method not in METHODS:
-        where = "--method" if method is not None else f"{scene_source}simulation.method"
-        raise SettingsError(
-            f"{where}: method {settings.method!r} is not available in this version of chaingen "
-            f"(available: {', '.join(METHODS)})")
+    given = {"method": method, "quadrature": quadrature, "order": order, "rtol": rtol,
+             "atol": atol}
+    refused = request_refusal({key: getattr(settings, key) for key in REQUEST_KEYS})
+    if refused:
+        # A value from the command line is named by its option, one from the scene by its key.
+        where = (refused.option if given[refused.key] is not None
+                 else f"{scene_source}simulation.{refused.key}")
+        raise SettingsError(f"{where}: {refused.message}")
     for name in ("dt", "t_end"):
         value = getattr(settings, name)
         if not (math.isfinite(value) and value > 0):
@@ -81,40 +89,28 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
             f"--every: {settings.n_steps} steps sampled every {settings.every} would hold "
             f"{samples / 2 ** 30:.1f} GiB of samples (limit {MAX_SAMPLE_BYTES / 2 ** 30:.0f} GiB); "
             "sample less often with a larger --every")
-    low, high = QUADRATURE_RANGE
-    if not low <= settings.quadrature <= high:
-        raise SettingsError(f"--quadrature: must be between {low} and {high}, got "
-                            f"{settings.quadrature}")
     if settings.every < 1:
         raise SettingsError(f"--every: must be >= 1, got {settings.every}")
-    given = {"rtol": rtol, "atol": atol}
-    for name in ADAPTIVE_TOLERANCES:
-        value = getattr(settings, name)
-        if not is_adaptive_tolerance(value):
-            where = (f"--{name}" if given[name] is not None
-                     else f"{scene_source}simulation.{name}")
-            raise SettingsError(f"{where}: must be {ADAPTIVE_TOLERANCE_RULE}, got {value}")
-    refused = order_error(settings.method, settings.order)
-    if refused:
-        raise SettingsError(f"--order: {refused}")
-    refused = quadrature_error(settings.method, settings.order, settings.quadrature)
-    if refused:
-        raise SettingsError(f"--quadrature: {refused}")
     return settings
 
 
-def build_solver(scene: Scene, method: str | None = None, quadrature: int | None = None, *,
-                 sensitivities: bool = True, parameters=(), order: int | None = None) -> Solver:
-    """Generate and build (or load from the cache) a scene's solver; on a terminal a progress
-    bar names the stage (SymPy, CasADi, C, compiling), which for large n takes a while.
+def build_solver(scene: Scene | SolverSpec, method: str | None = None,
+                 quadrature: int | None = None, *, sensitivities: bool = True, parameters=(),
+                 order: int | None = None) -> Solver:
+    """Generate and build (or load from the cache) the solver of a SolverSpec, or of `scene`
+    with the keywords a SolverSpec is made of; on a terminal a progress bar names the stage
+    (SymPy, CasADi, C, compiling), which for large n takes a while.
     method, quadrature and order: the scene's own ([simulation]) by default.
     parameters: key paths of the scene's numbers the solver takes at run time (every call
     then takes their values, the scene's own by default). order: of the step, 2 (the
-    scheme's own), 4 or 6 (a symmetric composition of its steps).
+    scheme's own), 4 or 6 (a symmetric composition of its steps). A request the rules refuse
+    raises SolverSpecError (a SettingsError) before anything is generated.
 
     A solver built before from the same inputs (scene, method, options, chaingen's code, the
     tool versions, the compiler: codegen/generate/key.py) loads from the build cache's index
     without running SymPy or CasADi."""
+    spec = solver_spec(scene, method, quadrature, sensitivities=sensitivities,
+                       parameters=parameters, order=order)
     from .generate.key import solver_key
     from .runtime.build import (
         DEFAULT_OPTIMISATION,
@@ -124,28 +120,39 @@ def build_solver(scene: Scene, method: str | None = None, quadrature: int | None
         remember,
     )
 
-    method = scene.simulation.method if method is None else method
-    quadrature = scene.simulation.quadrature if quadrature is None else quadrature
-    order = scene.simulation.order if order is None else order
-    key = solver_key(scene, method, quadrature, sensitivities=sensitivities,
-                     parameters=tuple(parameters), order=order,
-                     build=(compiler(), *DEFAULT_OPTIMISATION))
+    key = solver_key(spec, build=(compiler(), *DEFAULT_OPTIMISATION))
     found = indexed_library(key)
     if found is not None:
         library, manifest = found
         return Solver(library.path, manifest, build_hash=library.build_hash)
     from .generate.package import GENERATE_STAGES, generate_package
 
-    with Progress(f"generate {scene.name} ({method})", total=GENERATE_STAGES + 1,
+    with Progress(f"generate {spec.scene.name} ({spec.method})", total=GENERATE_STAGES + 1,
                   unit="stages") as progress:
-        package = generate_package(scene, method, quadrature, sensitivities=sensitivities,
-                                   parameters=parameters, order=order, progress=progress)
+        # The spec's fields as keywords: generate_package makes the same SolverSpec of them.
+        package = generate_package(spec.scene, spec.method, spec.quadrature,
+                                   sensitivities=spec.sensitivities, parameters=spec.parameters,
+                                   order=spec.order, progress=progress)
         progress.update(GENERATE_STAGES)
         with progress.phase("compiling (or loading the cached build)"):
             solver = Solver.from_files(package.files)
     with contextlib.suppress(OSError):      # an index that cannot be written only costs time
         remember(key, BuiltLibrary(solver.library_path, solver.build_hash), solver.manifest)
     return solver
+
+
+def solver_spec(scene: Scene | SolverSpec, method: str | None = None,
+                quadrature: int | None = None, *, sensitivities: bool = True, parameters=(),
+                order: int | None = None) -> SolverSpec:
+    """The SolverSpec build_solver builds from its arguments: a given SolverSpec as it is
+    (TypeError if method, quadrature or order are given beside it), else SolverSpec.create."""
+    if isinstance(scene, SolverSpec):
+        if method is not None or quadrature is not None or order is not None:
+            raise TypeError("build_solver: a SolverSpec carries its method, quadrature and "
+                            "order; give them to the SolverSpec")
+        return scene
+    return SolverSpec.create(scene, method, quadrature, order=order, parameters=parameters,
+                             sensitivities=sensitivities)
 
 
 def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None = None,
@@ -158,8 +165,7 @@ def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None
         options = {**{name: getattr(settings, name) for name in ("rtol", "atol")
                       if getattr(settings, name)}, **(options or {})}
     # A forward run needs no step sensitivities: leaving them out builds faster.
-    solver = solver or build_solver(scene, settings.method, settings.quadrature,
-                                    sensitivities=False, order=settings.order)
+    solver = solver or build_solver(settings.solver_spec(scene, sensitivities=False))
     with Progress(f"simulate {scene.name}", total=settings.n_steps, unit="steps") as progress:
         return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=settings.dt,
                                n_steps=settings.n_steps, every=settings.every, options=options,

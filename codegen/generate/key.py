@@ -1,8 +1,8 @@
 """What a generated package depends on, as hashes computed without SymPy or CasADi.
 
-- `input_hash`: the scene's code-relevant numbers, the method and its options, and the tool
-  versions. It is the package's identity (the manifest's "input_hash", the banner of every
-  generated file), so generated/ stays reproducible byte for byte.
+- `input_hash`: of a SolverSpec: the scene's code-relevant numbers, the method and its
+  options, and the tool versions. It is the package's identity (the manifest's "input_hash",
+  the banner of every generated file), so generated/ stays reproducible byte for byte.
 - `solver_key`: input_hash and everything else that decides the compiled library: chaingen's own
   code and templates as installed (an edited template must not load yesterday's build, also in
   an editable install whose version did not move), the compiler and the build flags. It keys the
@@ -22,20 +22,28 @@ import importlib.resources
 import json
 from pathlib import Path
 
-from ..scene import Scene, quadrature_used
+from ..scene import Scene, SolverSpec, quadrature_used
 from ..version import VERSION
 
 #: The files of the installed package whose text decides the generated code and its build.
 CODE_SUFFIXES = (".py", ".j2", ".h")
 
 
-def input_hash(scene: Scene, method: str, quadrature: int, sensitivities: bool = True,
-               parameters=(), order: int = 2) -> str:
-    """sha256 of everything the generated code depends on, and nothing else.
+def input_hash(spec: SolverSpec | Scene, method: str | None = None,
+               quadrature: int | None = None, sensitivities: bool = True, parameters=(),
+               order: int = 2) -> str:
+    """sha256 of everything the generated code of a SolverSpec depends on, and nothing else.
 
     The initial state and the simulation defaults do not enter the code; the tool versions and
-    the paths of the run-time parameters do.
+    the paths of the run-time parameters do. Also of the fields of a built scheme (scene,
+    method, quadrature, sensitivities, parameter paths, order), which the scheme has from its
+    checked SolverSpec: its quadrature may be the one in use (None where K plays no role).
     """
+    if isinstance(spec, SolverSpec):
+        scene, method, quadrature = spec.scene, spec.method, spec.quadrature
+        sensitivities, parameters, order = spec.sensitivities, spec.parameters, spec.order
+    else:
+        scene = spec
     code_relevant = dataclasses.asdict(scene)
     for key in ("initial_angles", "initial_velocities", "simulation"):
         code_relevant.pop(key)
@@ -71,10 +79,14 @@ def folders_digest(folders) -> str:
     return digest.hexdigest()
 
 
-def solver_key(scene: Scene, method: str, quadrature: int, *, sensitivities: bool,
-               parameters=(), order: int = 2, build: tuple[str, ...] = ()) -> str:
-    """The build cache index's key of the solver build_solver makes: input_hash, chaingen's
-    code (code_digest) and `build` (the compiler and flags)."""
-    payload = [input_hash(scene, method, quadrature, sensitivities, parameters, order),
-               code_digest(), list(build)]
+def solver_key(spec: SolverSpec | Scene, method: str | None = None,
+               quadrature: int | None = None, *, sensitivities: bool = True, parameters=(),
+               order: int = 2, build: tuple[str, ...] = ()) -> str:
+    """The build cache index's key of the solver build_solver makes of a SolverSpec (or of
+    the keywords it is made of): input_hash, chaingen's code (code_digest) and `build` (the
+    compiler and flags)."""
+    if not isinstance(spec, SolverSpec):
+        spec = SolverSpec(spec, method, quadrature, order=order, parameters=parameters,
+                          sensitivities=sensitivities)
+    payload = [input_hash(spec), code_digest(), list(build)]
     return hashlib.sha256(json.dumps(payload).encode()).hexdigest()[:32]

@@ -23,7 +23,7 @@ from ..errors import ChaingenError, PackageWriteError, RunFailedError, SceneErro
 from ..runtime import contract
 from ..runtime.contract import Features
 from ..runtime.files import write_directory
-from ..scene import Scene
+from ..scene import Scene, SolverSpec
 from ..scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE, ZERO_SEGMENT_RELATIVE_TOLERANCE
 from ..symbolic.schemes import DiscreteScheme, build_scheme
 from ..version import VERSION
@@ -405,17 +405,20 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     return GeneratedPackage(prefix=prefix, files=dict(sorted(files.items())), manifest=manifest)
 
 
-def generate_package(scene: Scene, method: str, quadrature: int, *,
-                     sensitivities: bool = True, parameters=(), order: int = 2,
-                     progress=None) -> GeneratedPackage:
-    """Scene -> scheme -> C package, all in memory. parameters: key paths of the scene's
-    numbers the solver takes at run time; order: 2 (the scheme's step), 4 or 6 (composed).
-    progress: see render_package."""
-    package_prefix(scene, method)   # a name too long for C and file names fails before SymPy
+def generate_package(scene: Scene | SolverSpec, method: str | None = None,
+                     quadrature: int | None = None, *, sensitivities: bool = True,
+                     parameters=(), order: int = 2, progress=None) -> GeneratedPackage:
+    """SolverSpec -> scheme -> C package, all in memory; or of `scene` with the keywords a
+    SolverSpec is made of. parameters: key paths of the scene's numbers the solver takes at
+    run time; order: 2 (the scheme's step), 4 or 6 (composed). progress: see render_package."""
+    spec = scene if isinstance(scene, SolverSpec) else SolverSpec(
+        scene, method, quadrature, order=order, parameters=parameters,
+        sensitivities=sensitivities)
+    package_prefix(spec.scene, spec.method)   # a name too long for C fails before SymPy
     if progress is not None:
         progress.update(0, "deriving the model and the scheme (SymPy)")
-    package = render_package(build_scheme(scene, method, quadrature, parameters, order),
-                             sensitivities=sensitivities, progress=progress)
+    package = render_package(build_scheme(spec), sensitivities=spec.sensitivities,
+                             progress=progress)
     if progress is not None:
         progress.update(GENERATE_STAGES)
     return package

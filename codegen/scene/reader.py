@@ -17,10 +17,13 @@ from typing import Any, NoReturn
 
 from ..errors import SceneError
 from ..runtime import contract
-from ..runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
+from ..runtime.contract import ADAPTIVE_TOLERANCES
 from . import kinematics
+from .display import printable as _printable
+from .display import shown as _show
 from .shipped import scene_file
-from .values import METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
+from .solver_rules import REQUEST_KEYS, Refusal, request_refusal
+from .values import Link, Scene, Simulation, Spring
 
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 """A scene name: a letter, then letters, digits, '_' or '-' (usable in C after `c_identifier`)."""
@@ -37,7 +40,6 @@ _INITIAL_KEYS = ("angles", "velocities")
 _SIMULATION_KEYS = ("method", "quadrature", "order", "dt", "t_end", "rtol", "atol")
 
 _MISSING = object()
-_SHOW_LIMIT = 120
 
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
@@ -88,43 +90,6 @@ def parse_scene(text: str, source: str, default_name: str) -> Scene:
     return SceneReader(source, default_name).read(document)
 
 
-#: Nesting that `_show` writes out; deeper arrays and tables are shown as "...".
-_SHOW_DEPTH = 8
-
-
-def _show(value: Any, depth: int = 0) -> str:
-    """A value as it would be written in TOML, on one line and shortened if long."""
-    if depth > _SHOW_DEPTH and isinstance(value, (list, dict)):
-        return "..."
-    if isinstance(value, bool):
-        text = "true" if value else "false"
-    elif isinstance(value, (int, float)):
-        text = repr(value)
-    elif isinstance(value, str):
-        text = json.dumps(value, ensure_ascii=False)
-    elif isinstance(value, list):
-        text = "[" + ", ".join(_show(item, depth + 1) for item in value) + "]"
-    elif isinstance(value, dict):
-        text = "{" + ", ".join(f"{key} = {_show(item, depth + 1)}"
-                               for key, item in value.items()) + "}"
-    elif hasattr(value, "isoformat"):
-        text = value.isoformat()
-    else:
-        text = repr(value)
-    text = _printable(text)
-    if len(text) > _SHOW_LIMIT:
-        text = text[: _SHOW_LIMIT - 3] + "..."
-    return text
-
-
-_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
-
-
-def _printable(text: str) -> str:
-    """Control characters (newlines, carriage returns, ...) written as escapes: one line."""
-    return _CONTROL.sub(lambda match: match.group().encode("unicode_escape").decode(), text)
-
-
 def _key(key: str) -> str:
     """A key as it would be written in a key path: bare if it can be, else quoted."""
     return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key, ensure_ascii=False)
@@ -168,6 +133,11 @@ class SceneReader:
         if value is not _MISSING:
             message += f", got {_show(value)}"
         raise SceneError(message)
+
+    def refuse(self, path: str, refusal: Refusal | None) -> None:
+        """Fail at `path` if a rule of a solver request (solver_rules) refuses its value."""
+        if refusal is not None:
+            self.fail(path, refusal.message)
 
     def unknown_key(self, path: str, key: str, value: Any, allowed: tuple[str, ...]) -> NoReturn:
         close = difflib.get_close_matches(key, allowed, n=1)
@@ -447,35 +417,21 @@ class SceneReader:
         fields: dict[str, Any] = {}
         for key, item in table.items():
             where = f"simulation.{key}"
-            if key == "method":
-                if not isinstance(item, str) or item not in METHODS:
-                    self.fail(where, "must be one of " + ", ".join(f'"{m}"' for m in METHODS),
-                              item)
-                fields[key] = item
-            elif key == "quadrature":
-                low, high = QUADRATURE_RANGE
-                if not _is_integer(item) or not low <= item <= high:
-                    self.fail(where, f"must be an integer from {low} to {high} "
-                                     "(Gauss-Legendre points)", item)
-                fields[key] = item
-            elif key == "order":
-                if not _is_integer(item) or item not in ORDERS:
-                    self.fail(where, "must be one of " + ", ".join(map(str, ORDERS))
-                              + " (the order of the step)", item)
-                fields[key] = item
+            if key in REQUEST_KEYS:
+                self.refuse(where, request_refusal({key: item}))
+                fields[key] = float(item) if key in ADAPTIVE_TOLERANCES else item
             elif key == "dt":
                 fields[key] = self.bounded(where, item, "step in s")
             elif key == "t_end":
                 fields[key] = self.bounded(where, item, "duration in s")
-            elif key in ADAPTIVE_TOLERANCES:
-                if (isinstance(item, bool) or not isinstance(item, (int, float))
-                        or not is_adaptive_tolerance(item)):
-                    self.fail(where, f"must be {ADAPTIVE_TOLERANCE_RULE} (the local error "
-                                     "tolerance of adaptive steps)", item)
-                fields[key] = float(item)
             else:
                 self.unknown_key("simulation", key, item, _SIMULATION_KEYS)
-        return Simulation(**fields)
+        simulation = Simulation(**fields)
+        # The rule between keys (es at order 6 needs K >= 2), after each key's own.
+        self.refuse("simulation.quadrature", request_refusal(
+            {"method": simulation.method, "quadrature": simulation.quadrature,
+             "order": simulation.order}))
+        return simulation
 
     def refuse_zero_length_segments(self, scene: Scene) -> None:
         """Refuse a spring segment of (numerically) zero length at the initial angles.

@@ -7,31 +7,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-#: The time-stepping schemes a scene (simulation.method) or the command line may name.
-METHODS = ("es", "vi", "midpoint")
-#: Gauss-Legendre points of the spring terms (simulation.quadrature, --quadrature).
-QUADRATURE_RANGE = (1, 20)
-#: Orders of the step (simulation.order, --order): the scheme itself (2), or a symmetric
-#: composition of it (chaingen.symbolic.composition).
-ORDERS = (2, 4, 6)
-
-
-#: The order from which "es" takes its k = 1 Galerkin step in joint angles (docs/model.md,
-#: section 16), whose quadrature rule integrates every term of the step.
-GALERKIN_ORDER = 6
-
-
-def quadrature_used(scene: Scene, method: str, quadrature: int, order: int = 2) -> int | None:
-    """The quadrature a scheme of `scene` runs with, None where K plays no role.
-
-    Only "es" uses K: up to order 4 it averages the spring gradient over the step by
-    Gauss-Legendre quadrature (docs/model.md, section 4), so without springs there is nothing
-    to average; at order 6 its Galerkin step integrates every term by the (K + 1)-point
-    Gauss-Lobatto rule (section 16).
-    """
-    if method != "es":
-        return None
-    return quadrature if scene.springs or order >= GALERKIN_ORDER else None
+# The rules of a request (methods, K, orders) are chaingen.scene.solver_rules'; named here too
+# for the simulation defaults below and for the modules that import them from here.
+from .solver_rules import GALERKIN_ORDER as GALERKIN_ORDER
+from .solver_rules import METHODS as METHODS
+from .solver_rules import ORDERS as ORDERS
+from .solver_rules import QUADRATURE_RANGE as QUADRATURE_RANGE
+from .solver_rules import quadrature_used as quadrature_used
 
 
 def c_identifier(name: str) -> str:

@@ -39,8 +39,8 @@ from ..errors import NewtonError, OrderStudyError
 from ..progress import Progress
 from ..runtime import NewtonOptions, SimulationResult, Solver
 from ..runtime.contract import JACOBIAN_EVERY_ITERATE, JACOBIAN_MODES
-from ..scene import METHODS, ORDERS, Scene, load_scene, quadrature_used
-from ..symbolic.composition import order_error
+from ..scene import METHODS, ORDERS, Scene, SolverSpec, SolverSpecError, load_scene
+from ..scene.solver_rules import orders_taken, request_refusal
 from .order_fit import MIN_FIT_POINTS as MIN_FIT_POINTS
 from .order_fit import SLOPE_TOLERANCE as SLOPE_TOLERANCE
 from .order_fit import OrderFit as OrderFit
@@ -186,17 +186,24 @@ def _largest(values) -> float | None:
 
 
 def allowed_orders(method: str) -> tuple[int, ...]:
-    """The order options `method` takes (chaingen.symbolic.composition.order_error)."""
-    return tuple(order for order in ORDERS if order_error(method, order) is None)
+    """The order options `method` takes (chaingen.scene.solver_rules.orders_taken)."""
+    return orders_taken(method)
 
 
 def study_newton_options(order: int, overrides=None) -> dict:
     """The Newton settings of a study of `order` (ORDER_NEWTON_OPTIONS), with `overrides` (a
     dict of option fields, e.g. from the command line) taking precedence."""
-    if order not in ORDER_NEWTON_OPTIONS:
-        raise OrderStudyError(f"order {order!r}: must be one of "
-                              f"{', '.join(map(str, ORDER_NEWTON_OPTIONS))}")
+    if refused := request_refusal({"order": order}):
+        raise OrderStudyError(refused.stated)
     return {**ORDER_NEWTON_OPTIONS[order], **(overrides or {})}
+
+
+def study_solver_spec(scene: Scene, method: str, quadrature: int, order: int) -> SolverSpec:
+    """A study's solver request (no step sensitivities), or OrderStudyError: order 3: ..."""
+    try:
+        return SolverSpec(scene, method, quadrature, order=order, sensitivities=False)
+    except SolverSpecError as error:
+        raise OrderStudyError(error.refusal.stated) from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -246,13 +253,8 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
-    if method not in METHODS:
-        raise OrderStudyError(f"method {method!r} is not available (available: "
-                              f"{', '.join(METHODS)})")
-    refused = order_error(method, order)
-    if refused:
-        raise OrderStudyError(f"order {order}: {refused}")
-    quadrature_in_use = quadrature_used(scene, method, quadrature, order)
+    spec = study_solver_spec(scene, method, quadrature, order)
+    quadrature_in_use = spec.quadrature_used
     if dts is None:
         dts = order_dts(method, order)
     if options is None:
@@ -277,7 +279,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
 
     if solver is None:
         from ..simulation import build_solver
-        solver = build_solver(scene, method, quadrature, sensitivities=False, order=order)
+        solver = build_solver(spec)
     else:
         manifest = solver.manifest
         if manifest.get("order", 2) != order:
@@ -388,9 +390,7 @@ def order_studies(scene: Scene | str | os.PathLike, method: str, quadrature: int
     available = allowed_orders(method) if method in METHODS else ORDERS
     orders = available if orders is None else tuple(sorted(set(orders)))
     for order in orders:
-        refused = order_error(method, order)
-        if refused:
-            raise OrderStudyError(f"order {order}: {refused}")
+        study_solver_spec(scene, method, quadrature, order)
     solvers = dict(solvers or {})
     return tuple(order_study(scene, method, quadrature, t_end=t_end, order=order,
                              solver=solvers.get(order),

@@ -21,7 +21,8 @@ p = 1 / (4 - 4^(1/5)), the same construction one order up.
 from __future__ import annotations
 
 from ..scene import ORDERS
-from ..scene.values import GALERKIN_ORDER
+from ..scene.solver_rules import GALERKIN_MIN_QUADRATURE as GALERKIN_MIN_QUADRATURE
+from ..scene.solver_rules import request_refusal
 
 _P = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
 _P6 = 1.0 / (4.0 - 4.0 ** (1.0 / 5.0))
@@ -42,24 +43,17 @@ FROM_ORDER_4 = (_P6, _P6, 1.0 - 4.0 * _P6, _P6, _P6)
 
 
 def order_error(method: str, order: int) -> str | None:
-    """Why `method` cannot take `order` (a sentence), or None when it can."""
-    if order not in COMPOSITIONS:
-        return f"must be one of {', '.join(map(str, ORDERS))}, got {order!r}"
-    return None
-
-
-#: The fewest Gauss points K es takes at GALERKIN_ORDER: its Galerkin step's Gauss-Lobatto rule
-#: has K + 1 >= 3 nodes, exact to degree 3, which its equations of order 4 need.
-GALERKIN_MIN_QUADRATURE = 2
+    """Why `method` cannot take `order` (a sentence), or None when it can
+    (chaingen.scene.solver_rules)."""
+    refused = request_refusal({"order": order})
+    return refused.message if refused else None
 
 
 def quadrature_error(method: str, order: int, quadrature: int) -> str | None:
-    """Why `method` at `order` cannot take `quadrature` K (a sentence), or None when it can."""
-    if method == "es" and order >= GALERKIN_ORDER and quadrature < GALERKIN_MIN_QUADRATURE:
-        return (f"es at order {order} takes its k = 1 Galerkin step, whose Gauss-Lobatto rule "
-                f"needs K >= {GALERKIN_MIN_QUADRATURE} (K + 1 nodes, exact to degree 2K - 1; "
-                f"docs/model.md, section 16), got {quadrature}")
-    return None
+    """Why `method` at `order` cannot take `quadrature` K (a sentence), or None when it can
+    (the rule between fields of chaingen.scene.solver_rules)."""
+    refused = request_refusal({"method": method, "order": order, "quadrature": quadrature})
+    return refused.message if refused and refused.key == "quadrature" else None
 
 
 def composition(order: int) -> tuple[float, ...]:

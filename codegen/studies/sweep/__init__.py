@@ -90,9 +90,7 @@ def _build(spec: SweepSpec):
     if key not in _BUILT:
         with Progress(f"generate {spec.scene.name} ({spec.method})",
                       total=GENERATE_STAGES + 1, unit="stages") as progress:
-            package = generate_package(spec.scene, spec.method, spec.quadrature,
-                                       sensitivities=False, parameters=spec.parameters,
-                                       order=spec.order, progress=progress)
+            package = generate_package(spec.solver, progress=progress)
             progress.update(GENERATE_STAGES, "compiling (or loading the cached build)")
             manifest = package.manifest
             library = build_shared_library(manifest["prefix"], package.files,

@@ -28,11 +28,11 @@ from typing import Any
 import numpy as np
 
 from ...errors import ChaingenError, SceneError
-from ...runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
-from ...scene import METHODS, QUADRATURE_RANGE, Scene, load_scene
+from ...runtime.contract import ADAPTIVE_TOLERANCES
+from ...scene import Scene, SolverSpec, load_scene
 from ...scene.parameters import NumberPath, number_path
+from ...scene.solver_rules import REQUEST_KEYS, request_refusal
 from ...simulation import MAX_SAMPLE_BYTES, MAX_STEPS
-from ...symbolic.composition import order_error, quadrature_error
 from .checks import check_runs
 
 MODES = ("product", "zip", "sample")
@@ -160,6 +160,13 @@ class SweepSpec:
         """The varied numbers compiled into the solver, which it takes as parameters."""
         return tuple(axis.path for axis in self.axes if axis.number.compiled)
 
+    @property
+    def solver(self) -> SolverSpec:
+        """The request of the sweep's one solver: the spec's scheme, its varied numbers as
+        run-time parameters, no step sensitivities."""
+        return SolverSpec(self.scene, self.method, self.quadrature, order=self.order,
+                          parameters=self.parameters, sensitivities=False)
+
     @functools.cached_property
     def digest(self) -> str:
         """What identifies the sweep's results: the expanded spec and the base scene (as read
@@ -234,27 +241,12 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
         scene = load_scene(scene_path)
     except SceneError as error:
         raise SweepError(f"{source}: scene: {error}") from None
-    method = document.get("method", scene.simulation.method)
-    if method not in METHODS:
-        raise fail("method", f"must be one of {', '.join(METHODS)}, got {method!r}")
-    quadrature = document.get("quadrature", scene.simulation.quadrature)
-    low, high = QUADRATURE_RANGE
-    if not (_integer(quadrature) and low <= quadrature <= high):
-        raise fail("quadrature", f"must be an integer from {low} to {high}, got {quadrature!r}")
-    order = document.get("order", scene.simulation.order)
-    refused = order_error(method, order) if _integer(order) else "must be an integer"
+    request = {key: document.get(key, getattr(scene.simulation, key)) for key in REQUEST_KEYS}
+    refused = request_refusal(request)
     if refused:
-        raise fail("order", refused)
-    refused = quadrature_error(method, order, quadrature)
-    if refused:
-        raise fail("quadrature", refused)
-    tolerances = {}
-    for name in ADAPTIVE_TOLERANCES:
-        value = document.get(name, getattr(scene.simulation, name))
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not is_adaptive_tolerance(float(value)):
-            raise fail(name, f"must be {ADAPTIVE_TOLERANCE_RULE}, got {value!r}")
-        tolerances[name] = float(value)
+        raise fail(refused.key, refused.message)
+    method, quadrature, order = request["method"], request["quadrature"], request["order"]
+    tolerances = {name: float(request[name]) for name in ADAPTIVE_TOLERANCES}
     mode = document.get("mode", "product")
     if mode not in MODES:
         raise fail("mode", f"must be one of {', '.join(MODES)}, got {mode!r}")

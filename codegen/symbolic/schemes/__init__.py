@@ -10,10 +10,8 @@ import dataclasses
 import sympy as sp
 from sympy import ImmutableMatrix
 
-from ...errors import SceneError, SettingsError
-from ...scene import METHODS, Scene
-from ...scene.parameters import compiled_paths, number_path, with_symbols
-from ...scene.values import GALERKIN_ORDER
+from ...scene import METHODS, Scene, SolverSpec
+from ...scene.parameters import with_symbols
 from ..composition import FROM_ORDER_4, composition
 from . import es, galerkin, midpoint, vi
 from .base import DiscreteScheme, FlowDescription, Layout, LinearSolve, segment_tolerances
@@ -23,38 +21,20 @@ if tuple(BUILDERS) != METHODS:
     raise ImportError(f"schemes {tuple(BUILDERS)} do not match the methods {METHODS}")
 
 
-def build_scheme(scene: Scene, method: str, quadrature: int,
-                 parameters=(), order: int = 2) -> DiscreteScheme:
-    """The discrete scheme `method` for `scene` (quadrature: Gauss points for spring terms),
-    with the numbers at the key paths `parameters` as run-time parameters p, in that order
-    ("all": every number of the scene a solver can take, chaingen.scene.parameters.
-    compiled_paths), its step composed to `order` (chaingen.symbolic.composition; es at order
-    6 composes its k = 1 Galerkin step, chaingen.symbolic.schemes.galerkin)."""
-    galerkin_step = method == "es" and order >= GALERKIN_ORDER
-    try:
-        stages = FROM_ORDER_4 if galerkin_step else composition(order)
-    except ValueError as error:
-        raise SettingsError(f"--order: {error}") from None
-    try:
-        builder = galerkin.build if galerkin_step else BUILDERS[method]
-    except KeyError:
-        raise SettingsError(
-            f"method {method!r} is not available in this version of chaingen "
-            f"(available: {', '.join(METHODS)})") from None
-    if tuple(parameters) == ("all",):
-        parameters = compiled_paths(scene)
-    numbers = []
-    for path in parameters:
-        try:
-            number = number_path(scene, path)
-        except SceneError as error:
-            raise SettingsError(f"--parameters: {str(error)}") from None
-        if not number.compiled:
-            raise SettingsError(f"--parameters: {path}: a run-time value every solver takes "
-                                "per run (initial state, dt), not a parameter")
-        if number.path in [known.path for known in numbers]:
-            raise SettingsError(f"--parameters: {path}: named twice")
-        numbers.append(number)
+def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
+                 quadrature: int | None = None, parameters=(), order: int = 2) -> DiscreteScheme:
+    """The discrete scheme of a SolverSpec, or of `scene` with `method`, `quadrature` (Gauss
+    points for spring terms), the numbers at the key paths `parameters` as run-time parameters
+    p, in that order ("all": every number of the scene a solver can take, chaingen.scene.
+    parameters.compiled_paths), its step composed to `order` (chaingen.symbolic.composition;
+    es at order 6 composes its k = 1 Galerkin step, chaingen.symbolic.schemes.galerkin).
+    SolverSpecError (a SettingsError) for a request the rules refuse."""
+    spec = scene if isinstance(scene, SolverSpec) else SolverSpec(
+        scene, method, quadrature, order=order, parameters=parameters)
+    scene, quadrature, order = spec.scene, spec.quadrature, spec.order
+    stages = FROM_ORDER_4 if spec.galerkin_step else composition(order)
+    builder = galerkin.build if spec.galerkin_step else BUILDERS[spec.method]
+    numbers = spec.parameter_numbers
     # Dummies: a parameter can never be mistaken for a symbol of the model (vi calls its
     # momenta p1, p2, ...).
     symbols = {number.path: sp.Dummy(f"parameter{index}", real=True)

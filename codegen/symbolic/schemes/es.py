@@ -17,12 +17,11 @@ from __future__ import annotations
 import sympy as sp
 from sympy import ImmutableMatrix
 
-from ...errors import SettingsError
 from ...runtime.contract import JACOBIAN_PER_STEP
 from ...scene import Scene, quadrature_used
+from ...scene.solver_rules import require
 from ..com_model import com_frame_map, com_model, coordinates, number
 from ..com_recursion import es_step, joint_space_start, state_quantities
-from ..composition import order_error
 from ..recursion import Definitions
 from .base import (
     ArmSpace,
@@ -83,9 +82,7 @@ def build(scene: Scene, quadrature: int, order: int = 2,
     velocity projected onto C(q) v = 0 (tangent_velocity_solve). arm_solve: whether the
     package solves the Newton systems by the factors of the Jacobian (ArmSpace) instead of
     dense LU; None: from ARM_SOLVE_MIN_LINKS links on."""
-    refused = order_error("es", order)
-    if refused:
-        raise SettingsError(f"--order {order}: {refused}")
+    require(method="es", quadrature=quadrature, order=order)
     if order > 4:
         raise ValueError("es composes its own step to order 4 at most: order 6 is "
                          "chaingen.symbolic.schemes.galerkin's")

@@ -30,12 +30,10 @@ import numpy as np
 import sympy as sp
 from sympy import ImmutableMatrix
 
-from ...errors import SettingsError
 from ...runtime.contract import JACOBIAN_PER_STEP
 from ...scene import Scene
-from ...scene.values import GALERKIN_ORDER
+from ...scene.solver_rules import GALERKIN_ORDER, require
 from ..com_model import number
-from ..composition import quadrature_error
 from ..joint_model import angle_directions, joint_space_model
 from .base import (
     DiscreteScheme,
@@ -70,9 +68,7 @@ def gauss_lobatto_nodes(points: int) -> tuple[tuple[float, ...], tuple[float, ..
 
 def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> DiscreteScheme:
     """The k = 1 step of `scene` with the (quadrature + 1)-point Gauss-Lobatto rule."""
-    refused = quadrature_error("es", GALERKIN_ORDER, quadrature)
-    if refused:
-        raise SettingsError(f"--quadrature: {refused}")
+    require(method="es", quadrature=quadrature, order=GALERKIN_ORDER)
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
     phi0 = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))

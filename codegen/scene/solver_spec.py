@@ -1,0 +1,113 @@
+"""One request for a solver: the scene, the scheme (method, K, order), the numbers it takes at
+run time and whether it computes step sensitivities, checked once when it is made.
+
+`build_solver`, `generate_package`, `build_scheme`, the cache key (chaingen.generate.key), the
+sweep spec and the order study take a SolverSpec (or the keywords it is made of); its rules
+are chaingen.scene.solver_rules', which the scene reader and the command line ask too.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..errors import SceneError
+from .parameters import NumberPath, compiled_paths, number_path
+from .solver_rules import (
+    GALERKIN_ORDER,
+    Refusal,
+    SolverSpecError,
+    quadrature_used,
+    request_refusal,
+)
+from .values import Scene
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    """What a solver is built from, validated at construction (SolverSpecError, a
+    SettingsError that names the option: --order: must be one of 2, 4, 6 ...).
+
+    parameters: key paths of the scene's numbers the solver takes at run time, in that order
+    (chaingen.scene.parameters); "all" (or ("all",)) is every number a solver can take
+    (compiled_paths), stored expanded. order: of the step, 2 (the scheme's own), 4 or 6 (a
+    symmetric composition of its steps). A SolverSpec is hashable: two equal requests are one
+    solver.
+    """
+
+    scene: Scene
+    method: str
+    quadrature: int
+    order: int = 2
+    parameters: tuple[str, ...] = ()
+    sensitivities: bool = True
+
+    def __post_init__(self):
+        if not isinstance(self.scene, Scene):
+            raise TypeError(f"SolverSpec.scene: a Scene (chaingen.load_scene), not "
+                            f"{type(self.scene).__name__}")
+        refused = request_refusal({"method": self.method, "quadrature": self.quadrature,
+                                   "order": self.order})
+        if refused:
+            raise SolverSpecError(refused)
+        paths = ((self.parameters,) if isinstance(self.parameters, str)
+                 else tuple(self.parameters))
+        if paths == ("all",):
+            paths = compiled_paths(self.scene)
+        refused = parameters_refusal(self.scene, paths)
+        if refused:
+            raise SolverSpecError(refused)
+        # Plain Python values: they enter the JSON of the input hash (numpy's ints do not).
+        object.__setattr__(self, "quadrature", int(self.quadrature))
+        object.__setattr__(self, "order", int(self.order))
+        object.__setattr__(self, "parameters", paths)
+        object.__setattr__(self, "sensitivities", bool(self.sensitivities))
+
+    @classmethod
+    def create(cls, scene: Scene, method: str | None = None, quadrature: int | None = None, *,
+               order: int | None = None, parameters=(), sensitivities: bool = True
+               ) -> SolverSpec:
+        """A spec with the scene's own method, quadrature and order ([simulation]) where
+        they are None."""
+        defaults = scene.simulation if isinstance(scene, Scene) else None
+        return cls(scene=scene,
+                   method=defaults.method if method is None and defaults else method,
+                   quadrature=(defaults.quadrature if quadrature is None and defaults
+                               else quadrature),
+                   order=defaults.order if order is None and defaults else order,
+                   parameters=parameters, sensitivities=sensitivities)
+
+    @property
+    def parameter_numbers(self) -> tuple[NumberPath, ...]:
+        """The run-time parameters as numbers of the scene (path, unit, compiled)."""
+        return tuple(number_path(self.scene, path) for path in self.parameters)
+
+    @property
+    def galerkin_step(self) -> bool:
+        """Whether the step is es's k = 1 Galerkin step (es from GALERKIN_ORDER on)."""
+        return self.method == "es" and self.order >= GALERKIN_ORDER
+
+    @property
+    def quadrature_used(self) -> int | None:
+        """The K the scheme runs with, None where K plays no role (solver_rules.quadrature_used)."""
+        return quadrature_used(self.scene, self.method, self.quadrature, self.order)
+
+
+def parameters_refusal(scene: Scene, paths: tuple[str, ...]) -> Refusal | None:
+    """Why `paths` cannot be a solver's run-time parameters, or None: each must name a number
+    of `scene` compiled into the solver (not the initial state or dt, which every solver takes
+    per run), each once."""
+    seen = set()
+    for path in paths:
+        try:
+            number = number_path(scene, path)
+        except SceneError as error:
+            return Refusal("parameters", str(error))
+        except TypeError:
+            return Refusal("parameters", "must be key paths of the scene's numbers "
+                                         "(strings such as springs[0].stiffness)", path)
+        if not number.compiled:
+            return Refusal("parameters", f"{path}: a run-time value every solver takes per run "
+                                         "(initial state, dt), not a parameter")
+        if number.path in seen:
+            return Refusal("parameters", f"{path}: named twice")
+        seen.add(number.path)
+    return None
