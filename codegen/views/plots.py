@@ -22,7 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PlotError
+from ..runtime import contract
 from ..runtime.files import check_output_file
+from ..runtime.results import sample_joints, sample_slice
 from ..runtime.trajectory import metadata_path, read_trajectory
 from ..scene import ORDERS
 from .figure import matplotlib_figure, save_png
@@ -56,22 +58,25 @@ class TrajectoryRun:
 
     @property
     def t(self) -> np.ndarray:
-        return self.rows[:, 0]
+        return self.column("t")
 
     @property
     def phi(self) -> np.ndarray:
-        return self.rows[:, 1:1 + self.n]
+        return self.rows[:, sample_slice(self.columns, "phi{i}")]
 
     @property
     def balanced(self) -> bool:
         """True when the file carries the energy flows of an actuated or damped scene."""
-        return "input_work" in self.columns and "dissipated" in self.columns
+        return all(name in self.columns for name in contract.FLOW_ENTRIES)
 
     @property
-    def energy_error(self) -> np.ndarray:
+    def abs_balance_error(self) -> np.ndarray:
+        """|e_B| = |H - H_0 - W + D| at every sample (model.md section 8); without energy
+        flows in the file, |e_E| = |H - H_0|."""
         error = self.column("energy") - self.column("energy")[0]
         if self.balanced:
-            error = error - self.column("input_work") + self.column("dissipated")
+            work, dissipated = contract.FLOW_ENTRIES
+            error = error - self.column(work) + self.column(dissipated)
         return np.abs(error)
 
     @property
@@ -118,12 +123,12 @@ def load_run(path) -> TrajectoryRun:
         columns, rows = read_trajectory(path)
     except (ValueError, UnicodeDecodeError) as error:
         raise PlotError(f"{path}: not a trajectory file (scene-format.md): {error}") from None
-    n = sum(1 for name in columns if name.startswith("phi") and name[3:].isdigit())
-    expected = (["t"] + [f"phi{i}" for i in range(1, n + 1)]
-                + [f"omega{i}" for i in range(1, n + 1)] + ["energy", "constraint_error"])
+    n = sample_joints(columns)
+    expected = list(contract.sample_column_names(n))
     if n == 0 or list(columns[:len(expected)]) != expected:
-        wanted = (", ".join(expected) if n
-                  else "t, phi1..phin, omega1..omegan, energy, constraint_error")
+        wanted = ", ".join(expected) if n else ", ".join(
+            column.name.format(i=1) + ".." + column.name.format(i="n") if column.per_joint
+            else column.name for column in contract.SAMPLE_COLUMNS if not column.flows)
         raise PlotError(f"{path}: the header must start with the columns {wanted} "
                         f"(scene-format.md), got {', '.join(columns)}")
     if rows.shape[0] < 2:
@@ -151,7 +156,7 @@ def load_run(path) -> TrajectoryRun:
 
 def run_from_result(result, source) -> TrajectoryRun:
     """A TrajectoryRun of a SimulationResult in memory (source: what to call it)."""
-    n = sum(1 for name in result.columns if name.startswith("phi"))
+    n = sample_joints(result.columns)
     return TrajectoryRun(path=Path(source), columns=tuple(result.columns),
                          rows=np.asarray(result.samples), n=n, scene=result.scene,
                          method=result.method, quadrature=result.quadrature,
@@ -319,7 +324,7 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
     angles.grid(True, alpha=0.3)
     energy_label = ("|H - H0 - W + D| [J]" if any(run.balanced for run in runs)
                     else "|H - H0| [J]")
-    _error_axis(energy, runs, [run.energy_error for run in runs], energy_label,
+    _error_axis(energy, runs, [run.abs_balance_error for run in runs], energy_label,
                 "energy error 0 at every sample")
     _error_axis(constraint, runs, [run.constraint_error for run in runs],
                 "constraint error", "no constraints (minimal coordinates): error 0")

@@ -32,7 +32,7 @@ def run_summary(result, settings, out: Path | None) -> str:
         f"  t_realtime             {result.t_realtime:.3g}",
         f"  max |energy error|     {np.abs(result.energy_error).max():.3e} J{over}",
     ]
-    if "dissipated" in result.columns:
+    if result.has_flows:
         lines += [
             f"  input work, dissipated {result.input_work[-1]:.6g} J, "
             f"{result.dissipated[-1]:.6g} J",
