@@ -99,14 +99,16 @@ class OrderRow:
 
     dt: float
     n_steps: int
-    energy_error: float | None             # mean over the sample times of |H - H_0| (J)
+    #: mean over the sample times of |e_B| = |H - H_0 - W + D| (J, model.md 8): |H - H_0|
+    #: without energy flows
+    mean_balance_error: float | None
     trajectory_error: float | None         # mean over the sample times of max_i |dphi_i| (rad)
     mean_newton_iterations: float | None   # per step (of the steps done, if it failed)
     max_newton_iterations: int | None
     wall_time: float | None                # seconds in the C loop
     failure: str | None = None             # the solver's message when the run failed
     rate_error: float | None = None        # mean over the sample times of max_i |domega_i| (rad/s)
-    max_energy_error: float | None = None  # max over the sample times of |H - H_0| (J)
+    max_balance_error: float | None = None  # max over the sample times of |e_B| (J)
     max_constraint_error: float | None = None   # max over the sample times (model.md 8)
 
     @property
@@ -165,9 +167,9 @@ class OrderStudy:
         return tuple(row.dt for row in self.rows if row.failed)
 
     @property
-    def max_energy_error(self) -> float | None:
-        """The largest |energy (balance) error| at a sample time of any run that did not fail."""
-        return _largest(row.max_energy_error for row in self.rows if not row.failed)
+    def max_balance_error(self) -> float | None:
+        """The largest |e_B| (model.md 8) at a sample time of any run that did not fail."""
+        return _largest(row.max_balance_error for row in self.rows if not row.failed)
 
     @property
     def max_constraint_error(self) -> float | None:
@@ -326,7 +328,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
         except NewtonError as error:
             partial = error.result
             rows.append(OrderRow(
-                dt=dt, n_steps=round(t_end / dt), energy_error=None, trajectory_error=None,
+                dt=dt, n_steps=round(t_end / dt), mean_balance_error=None, trajectory_error=None,
                 mean_newton_iterations=partial.mean_newton_iterations if partial else None,
                 max_newton_iterations=partial.max_newton_iterations if partial else None,
                 wall_time=partial.wall_time if partial else None, failure=str(error)))
@@ -347,15 +349,15 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
         if not all(map(math.isfinite, (energy, trajectory, rate))):
             failure = "non-finite state in the samples (the run blew up)"
         rows.append(OrderRow(
-            dt=dt, n_steps=result.n_steps, energy_error=energy, trajectory_error=trajectory,
+            dt=dt, n_steps=result.n_steps, mean_balance_error=energy, trajectory_error=trajectory,
             mean_newton_iterations=result.mean_newton_iterations,
             max_newton_iterations=result.max_newton_iterations, wall_time=result.wall_time,
-            failure=failure, rate_error=rate, max_energy_error=float(np.max(balance)),
+            failure=failure, rate_error=rate, max_balance_error=float(np.max(balance)),
             max_constraint_error=float(np.max(np.abs(result.constraint_error[mine])))))
 
     scale = _energy_scale(solver, reference)
     # A failed dt counts as a gap: a fitted range never spans it.
-    energies = [None if row.failed else row.energy_error for row in rows]
+    energies = [None if row.failed else row.mean_balance_error for row in rows]
     trajectories = [None if row.failed else row.trajectory_error for row in rows]
     rates = [None if row.failed else row.rate_error for row in rows]
     energy_fit = fit_order(dts, energies, floor=energy_floor * scale, tolerance=slope_tolerance)
@@ -446,13 +448,13 @@ def format_table(study: OrderStudy) -> str:
         f"{'rate error [rad/s]':>19}  {'Newton mean/max':>15}  {'wall [s]':>9}",
     ]
     for row in study.rows:
-        if row.failed and row.energy_error is None:
+        if row.failed and row.mean_balance_error is None:
             lines.append(f"{row.dt:>8.4g}  failed: {row.failure}")
             continue
         marks = ["*" if row.dt in fit.dts else " "
                  for fit in (study.energy_fit, study.trajectory_fit, study.rate_fit)]
         newton = f"{row.mean_newton_iterations:.2f} / {row.max_newton_iterations}"
-        line = (f"{row.dt:>8.4g}  {row.energy_error:>15.3e} {marks[0]}  "
+        line = (f"{row.dt:>8.4g}  {row.mean_balance_error:>15.3e} {marks[0]}  "
                 f"{row.trajectory_error:>21.3e} {marks[1]}  {row.rate_error:>17.3e} {marks[2]}  "
                 f"{newton:>15}  {row.wall_time:>9.2e}")
         if row.failed:
@@ -492,7 +494,7 @@ def format_summary(studies) -> str:
         line = (f"{study.order:>12}  {_cell(study.trajectory_order, 11, '.2f')}  "
                 f"{_cell(study.rate_order, 10, '.2f')}  {_cell(study.energy_order, 13, '.2f')}")
         if conserving:
-            line += (f"  {_cell(study.max_energy_error, 21, '.2e')}  "
+            line += (f"  {_cell(study.max_balance_error, 21, '.2e')}  "
                      f"{_cell(study.max_constraint_error, 26, '.2e')}")
         if study.failed_dts:
             line += f"  (failed at dt = {', '.join(f'{dt:g}' for dt in study.failed_dts)} s)"

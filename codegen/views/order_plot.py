@@ -16,7 +16,7 @@ _PANELS = (
     ("angles", "trajectory error [rad]", "trajectory_error", "trajectory_fit",
      "trajectory_floor"),
     ("rates", "rate error [rad/s]", "rate_error", "rate_fit", "rate_floor"),
-    ("energy", "energy error [J]", "energy_error", "energy_fit", "energy_floor"),
+    ("energy", "energy error [J]", "mean_balance_error", "energy_fit", "energy_floor"),
 )
 _MARKERS = {2: "o", 4: "s", 6: "^"}
 
@@ -36,7 +36,7 @@ def plot_order(studies: OrderStudy | tuple[OrderStudy, ...] | list[OrderStudy],
     energy = first.energy_name
     for column, (title, ylabel, attribute, fit_name, floor_name) in enumerate(_PANELS):
         axes = figure.add_subplot(1, len(_PANELS), column + 1)
-        if attribute == "energy_error":
+        if attribute == "mean_balance_error":
             title, ylabel = energy, f"{energy} error [J]"
         lowest = []
         for index, study in enumerate(studies):
