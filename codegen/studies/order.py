@@ -3,7 +3,7 @@
 For each step size dt the scene is simulated to t_end and compared, at common sample times
 (every `sample_interval`, 0.2 s by default), with
 
-- its own initial energy: the average energy error mean_k |H(t_k) - H(0)|;
+- its own initial energy: the average balance error mean_k |e_B(t_k)| (mean_balance_error);
 - a reference run of the same scheme and order with a much smaller step (min(dts) / 10 by
   default): the average trajectory (angle) error mean_k max_i |wrap(phi_i(t_k) - phi_ref_i(t_k))|
   and the average rate error mean_k max_i |omega_i(t_k) - omega_ref_i(t_k)|.
@@ -14,9 +14,8 @@ and points where the scheme has left its asymptotic regime are left out, and the
 which step sizes it used. A dt at which Newton's method fails is recorded as failed (with the
 solver's message), not raised.
 
-For a scene with joint damping or torques the "energy error" is the energy-balance error
-H - H_0 - (input work) + (dissipated energy) (model.md section 7), which is H - H_0 when there
-are no energy flows; the output then calls it the balance error.
+e_B = H - H_0 - (input work) + (dissipated energy) (model.md sections 7 and 8) is H - H_0
+without energy flows: the output then calls it the energy error, else the balance error.
 
 Every order option of the step (2, and 4 and 6 composed, model.md section 14) has its own
 step sizes and Newton settings (ORDER_DTS, ORDER_NEWTON_OPTIONS): at orders 4 and 6 most of the
@@ -99,9 +98,7 @@ class OrderRow:
 
     dt: float
     n_steps: int
-    #: mean over the sample times of |e_B| = |H - H_0 - W + D| (J, model.md 8): |H - H_0|
-    #: without energy flows
-    mean_balance_error: float | None
+    mean_balance_error: float | None       # mean over the sample times of |e_B| (J, model.md 8)
     trajectory_error: float | None         # mean over the sample times of max_i |dphi_i| (rad)
     mean_newton_iterations: float | None   # per step (of the steps done, if it failed)
     max_newton_iterations: int | None
