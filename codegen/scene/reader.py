@@ -20,8 +20,7 @@ from ..runtime import contract
 from ..runtime.contract import ADAPTIVE_TOLERANCE_RULE, ADAPTIVE_TOLERANCES, is_adaptive_tolerance
 from . import kinematics
 from .shipped import scene_file
-from .values import (LINK_FIELDS, METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation,
-                     Spring)
+from .values import LINK_FIELDS, METHODS, ORDERS, QUADRATURE_RANGE, Link, Scene, Simulation, Spring
 
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 """A scene name: a letter, then letters, digits, '_' or '-' (usable in C after `c_identifier`)."""

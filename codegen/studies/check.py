@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..runtime import NewtonOptions, Solver
+from ..scene.labels import scheme_label
 from ..symbolic.schemes import DiscreteScheme
 
 #: Newton settings for the differenced step map: tight, so solver noise stays below the
@@ -58,8 +59,7 @@ class CheckReport:
         return all(row.passed for row in self.rows)
 
     def table(self) -> str:
-        label = f"method {self.method}" + (f", quadrature {self.quadrature}"
-                                           if self.quadrature is not None else "")
+        label = scheme_label(self.method, self.quadrature)
         lines = [f"{self.scene}: {label}, {self.samples} random states",
                  f"  {'quantity':<22} {'against':<22} {'worst rel. error':>16} "
                  f"{'tolerance':>10}  result"]

@@ -39,6 +39,7 @@ from ..progress import Progress
 from ..runtime import NewtonOptions, SimulationResult, Solver
 from ..runtime.contract import JACOBIAN_EVERY_ITERATE, JACOBIAN_MODES
 from ..scene import METHODS, ORDERS, Scene, load_scene, quadrature_used
+from ..scene.labels import scheme_label
 from ..symbolic.composition import order_error
 from .order_fit import MIN_FIT_POINTS as MIN_FIT_POINTS
 from .order_fit import SLOPE_TOLERANCE as SLOPE_TOLERANCE
@@ -401,18 +402,6 @@ def order_studies(scene: Scene | str | os.PathLike, method: str, quadrature: int
 # Output
 # --------------------------------------------------------------------------------------------
 
-def scheme_label(study: OrderStudy) -> str:
-    """The scheme of a study: its method and, where it uses one, its quadrature."""
-    label = f"method {study.method}"
-    if study.quadrature is not None:
-        label += f", quadrature {study.quadrature}"
-    return label
-
-
-def study_label(study: OrderStudy) -> str:
-    return f"{scheme_label(study)}, order {study.order}"
-
-
 def newton_label(study: OrderStudy) -> str:
     """The Newton settings of the study's runs, as far as they are not the package's."""
     if not study.newton_settings:
@@ -435,8 +424,9 @@ def format_table(study: OrderStudy) -> str:
 
     With energy flows the energy column and its order are the balance error's."""
     energy = study.energy_name
+    label = scheme_label(study.method, study.quadrature, study.order, style="study")
     lines = [
-        f"{study.scene}: {study_label(study)}; t_end {study.t_end:g} s; reference: same method "
+        f"{study.scene}: {label}; t_end {study.t_end:g} s; reference: same method "
         f"and order, dt_ref {study.dt_ref:g} s ({study.reference_wall_time:.3g} s); errors "
         f"averaged over samples every {study.sample_interval:g} s",
         f"step sizes of order {study.order}: {', '.join(f'{dt:g}' for dt in study.dts)} s; "
@@ -485,7 +475,8 @@ def format_summary(studies) -> str:
               f"{f'{energy} order':>13}")
     if conserving:    # es's constraints c_i(q) are in m^2 (model.md section 8)
         header += f"  {f'max {energy} error [J]':>21}  {'max constraint error [m^2]':>26}"
-    lines = [f"{first.scene}: {scheme_label(first)}; t_end {first.t_end:g} s; fitted orders "
+    label = scheme_label(first.method, first.quadrature)
+    lines = [f"{first.scene}: {label}; t_end {first.t_end:g} s; fitted orders "
              "(slope of log error against log dt; --: no linear range above the floor)", header]
     for study in studies:
         line = (f"{study.order:>12}  {_cell(study.trajectory_order, 11, '.2f')}  "

@@ -8,7 +8,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..studies.order import OrderStudy, scheme_label
+from ..scene.labels import scheme_label
+from ..studies.order import OrderStudy
 from .figure import matplotlib_figure, save_png
 
 #: The panels: title, y label, OrderRow attribute, fit and floor attributes of OrderStudy.
@@ -67,7 +68,7 @@ def plot_order(studies: OrderStudy | tuple[OrderStudy, ...] | list[OrderStudy],
         axes.set_ylabel(f"average {ylabel}")
         axes.grid(True, which="both", alpha=0.3)
         axes.legend(fontsize=8, loc="best")
-    figure.suptitle(f"{first.scene}: {scheme_label(first)}, t_end {first.t_end:g} s "
-                    "(dashed: the fitted ranges)")
+    label = scheme_label(first.method, first.quadrature)
+    figure.suptitle(f"{first.scene}: {label}, t_end {first.t_end:g} s (dashed: the fitted ranges)")
     figure.tight_layout()
     return save_png(figure, path)

@@ -27,6 +27,7 @@ from ..runtime.files import check_output_file
 from ..runtime.results import sample_joints, sample_slice
 from ..runtime.trajectory import metadata_path, read_trajectory
 from ..scene import ORDERS
+from ..scene.labels import scheme_label
 from .figure import matplotlib_figure, save_png
 
 #: Figure size in inches and resolution: 1500 x 1200 pixels.
@@ -93,11 +94,8 @@ class TrajectoryRun:
     @property
     def label(self) -> str:
         """'es K=3, dt = 0.01 s', as much of it as is known."""
-        parts = [self.method or self.path.stem]
-        if self.quadrature is not None:
-            parts[0] += f" K={self.quadrature}"
-        if self.order != 2:
-            parts[0] += f" order {self.order}"
+        parts = [self.path.stem if self.method is None
+                 else scheme_label(self.method, self.quadrature, self.order, style="short")]
         if self.dt is not None:
             parts.append(f"dt = {self.dt:g} s")
         parts += [f"{path} = {self.parameters[path]:g}" for path in self.named

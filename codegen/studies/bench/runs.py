@@ -28,6 +28,7 @@ from ...errors import NewtonError, ScipyPeerError
 from ...generate.package import generate_package
 from ...runtime import Solver
 from ...scene import Scene, quadrature_used
+from ...scene.labels import scheme_label
 from .config import (
     ADAPTIVE_BRACKET_DTS,
     ADAPTIVE_SCENE,
@@ -83,8 +84,7 @@ class RunRow:
 
 
 def method_label(scene: Scene, method: str, quadrature: int, order: int = 2) -> str:
-    used = quadrature_used(scene, method, quadrature, order)
-    return method if used is None else f"{method} K={used}"
+    return scheme_label(method, quadrature_used(scene, method, quadrature, order), style="short")
 
 
 def angle_error(phi, reference) -> float:
