@@ -73,6 +73,10 @@ class Status:
     when: str | None = None
 
 
+#: Adaptive steps: the shortest step tried, as a fraction of the sample interval dt; a step
+#: that fails below it stops the run (STEP_TOO_SMALL).
+MIN_STEP_FRACTION = 1e-12
+
 STATUSES = (
     Status("OK", 0, "success", "success"),
     Status("NOT_CONVERGED", 1, "Newton: max_iterations reached without convergence",
@@ -102,8 +106,9 @@ STATUSES = (
                              "controller or control->stop asked to stop",
            "interrupted"),
     Status("STEP_TOO_SMALL", 8, "adaptive steps: the error test or Newton failed at a step "
-                                "below 1e-12 dt", "the adaptive step fell below 1e-12 of the "
-                                "sample interval dt without passing the error test and Newton"),
+                                f"below {MIN_STEP_FRACTION:g} dt",
+           f"the adaptive step fell below {MIN_STEP_FRACTION:g} of the sample interval dt "
+           "without passing the error test and Newton"),
     Status("ENERGY_JUMP", 9,
            "the converged step missed the energy balance by more than energy_tol times the "
            "kinetic energy at its ends: a spurious root of a step too long for the motion",
