@@ -35,6 +35,8 @@ FIGURE_SIZE = (10.0, 8.0)
 DPI = 150
 #: Errors whose positive values span more decades than this are drawn on a log scale.
 LOG_DECADES = 2.0
+#: The joint angles' column of the sample row, which names them in the legends.
+ANGLE_COLUMN = contract.SAMPLE_COLUMNS[1].name
 
 
 @dataclass(frozen=True)
@@ -63,7 +65,7 @@ class TrajectoryRun:
 
     @property
     def phi(self) -> np.ndarray:
-        return self.rows[:, sample_slice(self.columns, "phi{i}")]
+        return self.rows[:, sample_slice(self.columns, ANGLE_COLUMN)]
 
     @property
     def balanced(self) -> bool:
@@ -307,7 +309,7 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
             angles.plot(run.t, broken_at_wraps(run.phi[:, joint]),
                         color=f"C{joint % 10}" if single else style["color"],
                         linestyle="-" if single else joint_line_style(joint), linewidth=1.0,
-                        label=f"phi{joint + 1}" if single else None)
+                        label=ANGLE_COLUMN.format(i=joint + 1) if single else None)
     if single:
         angles.legend(fontsize=8, loc="upper right", ncol=min(4, runs[0].n))
     else:
@@ -315,7 +317,7 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
         handles = [Line2D([], [], **style, label=run.label)
                    for run, style in zip(runs, _styles(len(runs)))]
         handles += [Line2D([], [], color="0.3", linestyle=joint_line_style(joint),
-                           label=f"phi{joint + 1}")
+                           label=ANGLE_COLUMN.format(i=joint + 1))
                     for joint in range(max(run.n for run in runs))]
         angles.legend(handles=handles, fontsize=7, loc="upper right", ncol=2)
     angles.set_ylabel("joint angle phi_i [rad]")
