@@ -177,7 +177,7 @@ def chains_state(scheme: DiscreteScheme) -> bool:
     """Whether a composed step's sensitivities chain its stages in the whole state x (es,
     whose x carries a normal velocity the joint-space state does not see) rather than in
     joint space (SchemeFunctions.joint_maps)."""
-    return len(scheme.composition) > 1 and not scheme.state_from_joint_space
+    return len(scheme.metadata.composition) > 1 and not scheme.maps.state_from_joint_space
 
 
 def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
@@ -191,56 +191,58 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     sensitivities=False leaves out the step-map Jacobians, the largest generated functions
     (for "vi" about three times the Newton Jacobian), when a package does not need them.
     """
-    nz, nx, nu = scheme.unknowns.shape[0], scheme.state.shape[0], scheme.inputs.shape[0]
-    n, n_p = scheme.scene.n, scheme.parameters.shape[0]
-    if 2 * len(scheme.segment_tolerances) != scheme.segment_vectors.shape[0]:
-        raise ValueError(f"{scheme.method}: one segment tolerance per spring segment")
+    maps = scheme.maps
+    nz, nx, nu = (scheme.step.unknowns.shape[0], maps.state.shape[0],
+                  scheme.flows.inputs.shape[0])
+    n, n_p = scheme.scene.n, scheme.run_parameters.symbols.shape[0]
+    if 2 * len(scheme.segments.tolerances) != scheme.segments.vectors.shape[0]:
+        raise ValueError(f"{scheme.metadata.method}: one segment tolerance per spring segment")
     z, x0, u = ca.SX.sym("z", nz), ca.SX.sym("x0", nx), ca.SX.sym("u", nu)
     p, dt = ca.SX.sym("p", n_p), ca.SX.sym("dt")
-    parameters = list(scheme.parameters)
+    parameters = list(scheme.run_parameters.symbols)
     step_inputs = scheme.step_inputs
-    for symbol, expression in scheme.definitions:
+    for symbol, expression in scheme.step.definitions:
         check_free_symbols(f"definition of {symbol}", [expression], step_inputs)
         step_inputs.append(symbol)
-    for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state),
-                        ("energy flows", [scheme.input_work, scheme.dissipated])):
+    for name, exprs in (("residual", scheme.step.residual), ("next_state", scheme.step.next_state),
+                        ("energy flows", [scheme.flows.input_work, scheme.flows.dissipated])):
         check_free_symbols(name, exprs, step_inputs)
-    solve = scheme.output_solve
+    solve = scheme.maps.output_solve
     solved = list(solve.symbols) if solve else []
-    state_inputs = list(scheme.state) + parameters
-    for symbol, expression in scheme.state_definitions:
+    state_inputs = list(scheme.maps.state) + parameters
+    for symbol, expression in scheme.maps.state_definitions:
         check_free_symbols(f"state definition of {symbol}", [expression], state_inputs)
         state_inputs.append(symbol)
-    initial_inputs = list(scheme.initial_angles) + list(scheme.initial_velocities) + parameters
-    for symbol, expression in scheme.initial_definitions:
+    initial_inputs = list(maps.initial_angles) + list(maps.initial_velocities) + parameters
+    for symbol, expression in scheme.maps.initial_definitions:
         check_free_symbols(f"initial definition of {symbol}", [expression], initial_inputs)
         initial_inputs.append(symbol)
-    check_free_symbols("predictor", scheme.predictor, state_inputs + solved + [scheme.dt])
+    check_free_symbols("predictor", scheme.step.predictor, state_inputs + solved + [scheme.step.dt])
     if solve:
         check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), state_inputs)
-    check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
-                       + [scheme.energy] + list(scheme.constraint_residuals)
-                       + [e for e in [scheme.kinetic_energy] if e is not None],
+    check_free_symbols("outputs", list(maps.joint_angles) + list(maps.joint_velocities)
+                       + [scheme.maps.energy] + list(scheme.maps.constraint_residuals)
+                       + [e for e in [scheme.maps.kinetic_energy] if e is not None],
                        state_inputs + solved)
-    check_free_symbols("segment_vectors", scheme.segment_vectors, state_inputs)
-    if scheme.holding_torques is not None:
-        check_free_symbols("holding_torques", scheme.holding_torques,
-                           list(scheme.initial_angles) + parameters)
-    check_free_symbols("initial_state", scheme.initial_state, initial_inputs)
+    check_free_symbols("segment_vectors", scheme.segments.vectors, state_inputs)
+    if scheme.maps.holding_torques is not None:
+        check_free_symbols("holding_torques", scheme.maps.holding_torques,
+                           list(scheme.maps.initial_angles) + parameters)
+    check_free_symbols("initial_state", scheme.maps.initial_state, initial_inputs)
 
     parameter_bindings = dict(zip(parameters, ca.vertsplit(p)))
-    bindings = dict(zip(scheme.unknowns, ca.vertsplit(z)))
-    bindings.update(zip(scheme.state, ca.vertsplit(x0)))
-    bindings.update(zip(scheme.inputs, ca.vertsplit(u)))
+    bindings = dict(zip(scheme.step.unknowns, ca.vertsplit(z)))
+    bindings.update(zip(scheme.maps.state, ca.vertsplit(x0)))
+    bindings.update(zip(scheme.flows.inputs, ca.vertsplit(u)))
     bindings.update(parameter_bindings)
-    bindings[scheme.dt] = dt
+    bindings[scheme.step.dt] = dt
     step = SympyToCasadi(bindings, parameters)
-    for symbol, expression in scheme.definitions:
+    for symbol, expression in scheme.step.definitions:
         step.bind(symbol, step(expression), step.is_parametric(expression))
-    residual = _vector(step, scheme.residual)
+    residual = _vector(step, scheme.step.residual)
     jacobian = unrolled_jacobian(residual, z, [z, x0, u, p, dt])
     directions = None if jacobian is not None else JACOBIAN_CHUNK
-    x1 = _vector(step, scheme.next_state)
+    x1 = _vector(step, scheme.step.next_state)
     options = {"cse": True}
 
     def bind_all(translate: SympyToCasadi, definitions) -> SympyToCasadi:
@@ -251,10 +253,10 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     def state_translator(state: ca.SX, extra: dict | None = None) -> SympyToCasadi:
         """Expressions in the state, p, the state definitions and the output_solve symbols,
         bound to `state`."""
-        state_bindings = dict(zip(scheme.state, ca.vertsplit(state)))
+        state_bindings = dict(zip(scheme.maps.state, ca.vertsplit(state)))
         state_bindings.update(parameter_bindings)
         state_bindings.update(extra or {})
-        bound = bind_all(SympyToCasadi(state_bindings, parameters), scheme.state_definitions)
+        bound = bind_all(SympyToCasadi(state_bindings, parameters), scheme.maps.state_definitions)
         if solve:
             matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
                                   for row in solve.matrix.tolist()])
@@ -266,23 +268,23 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     def joint_space(state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
         translate = state_translator(state)
-        return (_vector(translate, scheme.joint_angles),
-                _vector(translate, scheme.joint_velocities), translate(scheme.energy),
-                _vector(translate, scheme.constraint_residuals))
+        return (_vector(translate, scheme.maps.joint_angles),
+                _vector(translate, scheme.maps.joint_velocities), translate(scheme.maps.energy),
+                _vector(translate, scheme.maps.constraint_residuals))
 
     x = ca.SX.sym("x", nx)
     phi, phidot = ca.SX.sym("phi", n), ca.SX.sym("phidot", n)
-    initial = bind_all(SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
-                                      **dict(zip(scheme.initial_velocities,
+    initial = bind_all(SympyToCasadi({**dict(zip(scheme.maps.initial_angles, ca.vertsplit(phi))),
+                                      **dict(zip(scheme.maps.initial_velocities,
                                                  ca.vertsplit(phidot))),
                                       **parameter_bindings}, parameters),
-                       scheme.initial_definitions)
-    initial_state = _vector(initial, scheme.initial_state)
+                       scheme.maps.initial_definitions)
+    initial_state = _vector(initial, scheme.maps.initial_state)
 
     with_p = ([p] if n_p else [], ["p"] if n_p else [])
     step_args = [z, x0] + ([u] if nu else []) + with_p[0] + [dt]
     step_names = ["z", "x0"] + (["u"] if nu else []) + with_p[1] + ["dt"]
-    flows = ([ca.vertcat(step(scheme.input_work), step(scheme.dissipated))]
+    flows = ([ca.vertcat(step(scheme.flows.input_work), step(scheme.flows.dissipated))]
              if scheme.has_energy_flows else [])
 
     specs: dict[str, tuple] = {}
@@ -355,30 +357,30 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     elif sensitivities:
         sensitivity_rhs, sensitivity_map = sensitivity_functions()
     margins = None
-    if scheme.segment_vectors.shape[0]:
+    if scheme.segments.vectors.shape[0]:
         # The segments at the scene's own numbers: their tolerances are the scene's.
-        tolerances = ca.DM(list(scheme.segment_tolerances))
-        before = ca.reshape(_vector(state_translator(x0), scheme.segment_vectors), 2, -1)
-        after = ca.reshape(_vector(state_translator(x), scheme.segment_vectors), 2, -1)
+        tolerances = ca.DM(list(scheme.segments.tolerances))
+        before = ca.reshape(_vector(state_translator(x0), scheme.segments.vectors), 2, -1)
+        after = ca.reshape(_vector(state_translator(x), scheme.segments.vectors), 2, -1)
         lengths_before = ca.sqrt(ca.sum1(before ** 2)).T
         lengths_after = ca.sqrt(ca.sum1(after ** 2)).T
         turn = ca.sum1(before * after).T / (lengths_before * lengths_after)
         margins = fn("segment_margins", [x0, x] + with_p[0], ["x0", "x1"] + with_p[1],
                      [ca.vertcat(lengths_after / tolerances, turn)], ["margins"])
     check = None
-    if scheme.kinetic_energy is not None:
+    if scheme.maps.kinetic_energy is not None:
         at = state_translator(x)
         check = fn("energy_check", [x] + with_p[0], ["x"] + with_p[1],
-                   [ca.vertcat(at(scheme.energy), at(scheme.kinetic_energy))], ["H_T"])
+                   [ca.vertcat(at(scheme.maps.energy), at(scheme.maps.kinetic_energy))], ["H_T"])
     holding = None
-    if scheme.holding_torques is not None:
-        torques = _vector(SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
+    if scheme.maps.holding_torques is not None:
+        torques = _vector(SympyToCasadi({**dict(zip(scheme.maps.initial_angles, ca.vertsplit(phi))),
                                          **parameter_bindings}, parameters),
-                          scheme.holding_torques)
+                          scheme.maps.holding_torques)
         holding = fn("holding_torques", [phi] + with_p[0], ["phi"] + with_p[1], [torques],
                      ["tau"])
     factors, pattern = None, None
-    if scheme.arm_space is not None:
+    if scheme.step.arm_space is not None:
         arm_factors, pattern = _arm_factors(scheme, bindings, parameters, step, z)
         factors = fn("newton_factors", step_args, step_names, [residual, arm_factors],
                      ["F", "factors"])
@@ -412,18 +414,18 @@ def _arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
     dh/dw and dc/dw are CasADi's sparse symbolic Jacobians (a few entries per link), then w is
     put back as the function of z it is. Raises ValueError if h or c depend on dv other than
     through w, or the blocks of G_mu and G_c are not one 2-vector per link."""
-    arms = scheme.arm_space
+    arms = scheme.step.arm_space
     n = scheme.scene.n
     w = ca.SX.sym("w", 2 * n)
     free = dict(zip(arms.arm_increments, ca.vertsplit(w)))
     local = SympyToCasadi(dict(bindings), parameters)
-    for symbol, expression in scheme.definitions:
+    for symbol, expression in scheme.step.definitions:
         if symbol in free:
             local.bind(symbol, free[symbol])
         else:
             local.bind(symbol, local(expression), local.is_parametric(expression))
     forces = _vector(local, arms.forces)
-    rows = _vector(local, scheme.residual[2 * n:, :])
+    rows = _vector(local, scheme.step.residual[2 * n:, :])
     if ca.jacobian(ca.vertcat(forces, rows), z[:2 * n]).nnz():
         raise ValueError("es: the arm forces depend on dv other than through w = B dv")
     H = ca.jacobian(forces, w)
@@ -484,6 +486,6 @@ def _build(specs: dict[str, tuple], prefix: str, p: ca.SX, options: dict,
 
 def _predictor(scheme: DiscreteScheme, x0: ca.SX, dt: ca.SX, state_translator) -> ca.SX:
     """The first Newton guess; it may use the output_solve symbols (vi: w = M^-1 p)."""
-    if not any(scheme.predictor):
-        return ca.SX.zeros(scheme.unknowns.shape[0], 1)
-    return _vector(state_translator(x0, {scheme.dt: dt}), scheme.predictor)
+    if not any(scheme.step.predictor):
+        return ca.SX.zeros(scheme.step.unknowns.shape[0], 1)
+    return _vector(state_translator(x0, {scheme.step.dt: dt}), scheme.step.predictor)
