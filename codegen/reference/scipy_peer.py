@@ -43,8 +43,8 @@ from scipy import integrate
 from sympy import ImmutableMatrix
 
 from ..errors import ScipyPeerError
-from ..generate.casadi_functions import SympyToCasadi, check_free_symbols
 from ..generate.casadi_source import casadi_c_source, work_sizes
+from ..generate.translation import SympyToCasadi, check_free_symbols
 from ..runtime.build import build_shared_library, cache_directory
 from ..scene import Scene
 from ..symbolic.joint_model import angle_directions, coriolis, joint_space_model
