@@ -7,6 +7,7 @@ import ast
 import dataclasses
 
 from chaingen.symbolic.schemes.base import FLAT_NAMES, RECORDS, DiscreteScheme
+
 from helpers import ROOT
 
 #: Private imports left for the files this branch may not edit; the lead removes each entry
