@@ -272,13 +272,14 @@ def command_order(args) -> int:
 
 def command_bench(args) -> int:
     from .studies.bench import bench_config, run_bench
+    from .views import bench_figures
 
     config = bench_config(quick=args.quick, dts=args.dts, scaling_n=args.scaling_n,
                           timeout=args.timeout, skip_scaling=args.skip_scaling,
                           skip_reference=args.skip_reference, skip_sweep=args.skip_sweep,
                           out=args.out,
                           figures=args.figures)
-    run_bench(config)
+    run_bench(config, figures=bench_figures)
     return 0
 
 

@@ -57,9 +57,7 @@ class Features:
         return bool(getattr(self, when))
 
 
-# --------------------------------------------------------------------------------------------
-# Status codes
-# --------------------------------------------------------------------------------------------
+# --- Status codes --------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class Status:
@@ -72,6 +70,10 @@ class Status:
     message: str
     when: str | None = None
 
+
+#: Adaptive steps: the shortest step tried, as a fraction of the sample interval dt; a step
+#: that fails below it stops the run (STEP_TOO_SMALL).
+MIN_STEP_FRACTION = 1e-12
 
 STATUSES = (
     Status("OK", 0, "success", "success"),
@@ -101,8 +103,9 @@ STATUSES = (
                              "controller or control->stop asked to stop",
            "interrupted"),
     Status("STEP_TOO_SMALL", 8, "adaptive steps: the error test or Newton failed at a step "
-                                "below 1e-12 dt", "the adaptive step fell below 1e-12 of the "
-                                "sample interval dt without passing the error test and Newton"),
+                                f"below {MIN_STEP_FRACTION:g} dt",
+           f"the adaptive step fell below {MIN_STEP_FRACTION:g} of the sample interval dt "
+           "without passing the error test and Newton"),
     Status("ENERGY_JUMP", 9,
            "the converged step missed the energy balance by more than energy_tol times the "
            "kinetic energy at its ends: a spurious root of a step too long for the motion",
@@ -129,9 +132,7 @@ def status_message(code: int, segment_tolerance: float | None = None) -> str:
     return f"unknown status {code}"
 
 
-# --------------------------------------------------------------------------------------------
-# Ranges of the scene's numbers
-# --------------------------------------------------------------------------------------------
+# --- Ranges of the scene's numbers ---------------------------------------------------------
 
 @dataclass(frozen=True)
 class LowerBound:
@@ -179,9 +180,7 @@ def lower_bound(path: str) -> LowerBound | None:
 MAX_SCENE_NAME_LENGTH = 128
 
 
-# --------------------------------------------------------------------------------------------
-# Newton options
-# --------------------------------------------------------------------------------------------
+# --- Newton options ------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class JacobianMode:
@@ -248,11 +247,6 @@ ADAPTIVE_TOLERANCES = ("rtol", "atol")
 ADAPTIVE_TOLERANCE_RULE = f"0 (fixed steps) or from {MIN_ADAPTIVE_TOLERANCE:g} up, and finite"
 
 
-#: Adaptive steps stop with STEP_TOO_SMALL when the step the error test or Newton needs falls
-#: below this fraction of the sample interval dt.
-MIN_STEP_FRACTION = 1e-12
-
-
 def is_adaptive_tolerance(value: float) -> bool:
     """Whether `value` may be an rtol or atol (ADAPTIVE_TOLERANCE_RULE)."""
     return value == 0 or MIN_ADAPTIVE_TOLERANCE <= value < float("inf")
@@ -270,9 +264,7 @@ SIMPLIFIED_MARGIN = 0.1
 CHORD_MARGIN = 1e-3
 
 
-# --------------------------------------------------------------------------------------------
-# Counters of a run, and the sample row
-# --------------------------------------------------------------------------------------------
+# --- Counters of a run, and the sample row -------------------------------------------------
 
 @dataclass(frozen=True)
 class StructField:
@@ -316,30 +308,64 @@ MAX_SPLIT_DEPTH = 4
 FLOW_ENTRIES = ("input_work", "dissipated")
 
 
+@dataclass(frozen=True)
+class SampleColumn:
+    """An entry of a sample row of simulate, which is also a column of the trajectory file
+    (docs/scene-format.md): its name (with "{i}": one column per joint i = 1..n, named
+    phi1 .. phin), its meaning, its unit ("": none), and whether only a package with the
+    feature `flows` writes it."""
+
+    name: str
+    meaning: str
+    unit: str
+    flows: bool = False
+
+    @property
+    def per_joint(self) -> bool:
+        return "{i}" in self.name
+
+    def names(self, n: int) -> tuple[str, ...]:
+        """The names of its columns in a row of a chain of n joints."""
+        if self.per_joint:
+            return tuple(self.name.format(i=i) for i in range(1, n + 1))
+        return (self.name,)
+
+    def described(self, i: int | None = None) -> str:
+        """Its meaning with the unit, as the header's comments give it."""
+        meaning = self.meaning.format(i=i) if self.per_joint else self.meaning
+        return f"{meaning} ({self.unit})" if self.unit else meaning
+
+
+#: The sample row, in order. A scene with energy flows adds them (FLOW_ENTRIES), cumulative
+#: since the start, so that H - H_0 = input_work - dissipated can be read off every row
+#: (docs/model.md, section 7). The C writer, the trajectory file, SimulationResult and
+#: `chaingen plot` read the row by this table (chaingen.runtime.results.sample_slice).
+SAMPLE_COLUMNS = (
+    SampleColumn("t", "time", "s"),
+    SampleColumn("phi{i}", "relative angle of joint {i}, wrapped to (-pi, pi]", "rad"),
+    SampleColumn("omega{i}", "relative angular velocity of joint {i}", "rad/s"),
+    SampleColumn("energy", "H = T + V", "J"),
+    SampleColumn("constraint_error", "largest structural error of the state's coordinates", ""),
+    SampleColumn(FLOW_ENTRIES[0], "work of the joint torques since the start", "J", flows=True),
+    SampleColumn(FLOW_ENTRIES[1], "energy dissipated by joint damping since the start, >= 0",
+                 "J", flows=True),
+)
+
+
 def sample_columns(n: int, flows: bool = False) -> tuple[tuple[str, str], ...]:
-    """(name, meaning) of the entries of one sample row of simulate, which are also the
-    columns of the trajectory file (docs/scene-format.md).
-
-    A scene with energy flows adds them, cumulative since the start, so that
-    H - H_0 = input_work - dissipated can be read off every row (docs/model.md, section 7).
-    """
-    columns = ([("t", "time (s)")]
-               + [(f"phi{i}", f"relative angle of joint {i}, wrapped to (-pi, pi] (rad)")
-                  for i in range(1, n + 1)]
-               + [(f"omega{i}", f"relative angular velocity of joint {i} (rad/s)")
-                  for i in range(1, n + 1)]
-               + [("energy", "H = T + V (J)"),
-                  ("constraint_error", "largest structural error of the state's coordinates")])
-    if flows:
-        columns += [("input_work", "work of the joint torques since the start (J)"),
-                    ("dissipated", "energy dissipated by joint damping since the start, >= 0 "
-                                   "(J)")]
-    return tuple(columns)
+    """(name, meaning) of the entries of one sample row of simulate (SAMPLE_COLUMNS) for a
+    chain of n joints, with the energy-flow columns when `flows`."""
+    return tuple((name, column.described(i))
+                 for column in SAMPLE_COLUMNS if flows or not column.flows
+                 for i, name in enumerate(column.names(n), start=1))
 
 
-# --------------------------------------------------------------------------------------------
-# Entry points
-# --------------------------------------------------------------------------------------------
+def sample_column_names(n: int, flows: bool = False) -> tuple[str, ...]:
+    """The names of the entries of one sample row (the trajectory file's header)."""
+    return tuple(name for name, _ in sample_columns(n, flows))
+
+
+# --- Entry points --------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class Parameter:

@@ -1,9 +1,28 @@
 """What a solver returns: a simulation's samples and counters, one step, a step's Jacobians."""
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from . import contract
+
+
+def sample_joints(columns) -> int:
+    """The number of joints of a sample row with these column names (contract.SAMPLE_COLUMNS):
+    its phi<i> columns."""
+    pattern = re.compile(contract.SAMPLE_COLUMNS[1].name.replace("{i}", "[0-9]+"))
+    return sum(1 for name in columns if pattern.fullmatch(name))
+
+
+def sample_slice(columns, name: str) -> slice:
+    """The entries of the column `name` of contract.SAMPLE_COLUMNS (e.g. "phi{i}": every
+    joint's) in a row with these column names."""
+    column = next(column for column in contract.SAMPLE_COLUMNS if column.name == name)
+    names = column.names(sample_joints(columns))
+    start = list(columns).index(names[0])
+    return slice(start, start + len(names))
 
 
 @dataclass(frozen=True)
@@ -45,19 +64,19 @@ class SimulationResult:
 
     @property
     def n_joints(self) -> int:
-        return sum(1 for name in self.columns if name.startswith("phi"))
+        return sample_joints(self.columns)
 
     @property
     def t(self) -> np.ndarray:
-        return self.samples[:, 0]
+        return self.column("t")
 
     @property
     def phi(self) -> np.ndarray:
-        return self.samples[:, 1:1 + self.n_joints]
+        return self.samples[:, sample_slice(self.columns, "phi{i}")]
 
     @property
     def omega(self) -> np.ndarray:
-        return self.samples[:, 1 + self.n_joints:1 + 2 * self.n_joints]
+        return self.samples[:, sample_slice(self.columns, "omega{i}")]
 
     @property
     def energy(self) -> np.ndarray:
@@ -65,7 +84,8 @@ class SimulationResult:
 
     @property
     def energy_error(self) -> np.ndarray:
-        """e_E = H - H_0 (model.md section 8)."""
+        """e_E = H - H_0 at every sample, signed (model.md section 8); with energy flows the
+        scheme's error is `balance_error`."""
         return self.energy - self.energy[0]
 
     @property
@@ -73,18 +93,27 @@ class SimulationResult:
         return self.column("constraint_error")
 
     @property
+    def has_flows(self) -> bool:
+        """True when the rows carry the energy flows (contract.FLOW_ENTRIES) of an actuated or
+        damped scene."""
+        return all(name in self.columns for name in contract.FLOW_ENTRIES)
+
+    @property
     def input_work(self) -> np.ndarray:
         """Work of the joint torques since t = 0 (zero for a scene without energy flows)."""
-        return self.column("input_work") if "input_work" in self.columns else 0 * self.t
+        name = contract.FLOW_ENTRIES[0]
+        return self.column(name) if name in self.columns else 0 * self.t
 
     @property
     def dissipated(self) -> np.ndarray:
         """Energy dissipated by joint damping since t = 0 (zero for a scene without)."""
-        return self.column("dissipated") if "dissipated" in self.columns else 0 * self.t
+        name = contract.FLOW_ENTRIES[1]
+        return self.column(name) if name in self.columns else 0 * self.t
 
     @property
     def balance_error(self) -> np.ndarray:
-        """H - H_0 - input_work + dissipated: the energy the scheme created (model.md 7)."""
+        """e_B = H - H_0 - input_work + dissipated at every sample, signed: the energy the
+        scheme created (model.md 7 and 8); e_E (energy_error) for a scene without flows."""
         return self.energy_error - self.input_work + self.dissipated
 
     @property
@@ -129,14 +158,18 @@ class SimulationResult:
         import xarray as xr
 
         joints = np.arange(1, self.n_joints + 1)
-        variables = {"phi": (("t", "joint"), self.phi, {"units": "rad"}),
-                     "omega": (("t", "joint"), self.omega, {"units": "rad/s"}),
-                     "energy": ("t", self.energy, {"units": "J"}),
-                     "constraint_error": ("t", self.constraint_error)}
-        for name in ("input_work", "dissipated"):
-            if name in self.columns:
-                variables[name] = ("t", self.column(name), {"units": "J"})
-        coordinates = {"t": ("t", self.t, {"units": "s"}), "joint": joints}
+        variables = {}
+        for column in contract.SAMPLE_COLUMNS[1:]:      # t is the coordinate
+            units = {"units": column.unit} if column.unit else {}
+            if column.per_joint:
+                name = column.name.replace("{i}", "")
+                variables[name] = (("t", "joint"),
+                                   self.samples[:, sample_slice(self.columns,
+                                                                         column.name)], units)
+            elif column.name in self.columns:
+                variables[column.name] = ("t", self.column(column.name), units)
+        coordinates = {"t": ("t", self.t, {"units": contract.SAMPLE_COLUMNS[0].unit}),
+                       "joint": joints}
         sampled = self._sampled_torques()
         if sampled is not None:
             variables["u"] = (("t", "actuated_joint"), sampled, {"units": "N m"})

@@ -69,7 +69,7 @@ def test_energy_order(method, quadrature, order):
 
 def test_gauss3_energy_error_is_sixth_order_until_round_off():
     result = study(MONO, "es", 3)
-    energy = {row.dt: row.energy_error for row in result.rows}
+    energy = {row.dt: row.mean_balance_error for row in result.rows}
     # the largest steps are in the asymptotic regime: halving dt divides the error by ~2^6
     assert 2 ** 5.5 < energy[0.2] / energy[0.1] < 2 ** 6.5
     # the small steps are at round-off, and the fit leaves them out
@@ -95,7 +95,7 @@ def test_energy_exact_without_springs_has_no_order():
     """es with gravity only conserves energy exactly: every point is at round-off."""
     result = study("three_link_gravity", "es", 3)
     assert result.quadrature is None
-    assert all(row.energy_error < 1e-12 * result.energy_scale for row in result.rows)
+    assert all(row.mean_balance_error < 1e-12 * result.energy_scale for row in result.rows)
     assert result.energy_order is None and "usable" in result.energy_fit.reason
     assert result.trajectory_order == pytest.approx(2.0, abs=0.3)
     assert "energy order      --" in format_table(result)
@@ -114,7 +114,7 @@ def test_a_failing_dt_is_recorded_not_raised():
     result = failing_study()
     assert result.failed_dts == (10.0,)
     row = result.rows[-1]
-    assert row.failed and row.energy_error is None and row.trajectory_error is None
+    assert row.failed and row.mean_balance_error is None and row.trajectory_error is None
     assert row.rate_error is None
     assert "failed" in row.failure
     assert 10.0 not in result.energy_fit_dts + result.trajectory_fit_dts
@@ -222,7 +222,7 @@ def test_composed_steps_reach_their_order_in_angles_and_rates(method, order, tol
 def test_es_keeps_its_energy_and_constraints_at_every_order():
     for result in every_order(MONO, "es"):
         assert result.quadrature == ES_QUADRATURE
-        assert result.max_energy_error <= 1e-12, format_table(result)
+        assert result.max_balance_error <= 1e-12, format_table(result)
         assert result.max_constraint_error <= 1e-13, format_table(result)
         assert result.energy_order is None      # at round-off: nothing to fit
     summary = format_summary(every_order(MONO, "es"))

@@ -1,123 +1,23 @@
 """From a DiscreteScheme (SymPy) to CasADi Functions and their C code.
 
-SymPy expressions are translated node by node into CasADi SX, memoised on the expression so
-that a subexpression SymPy shares is built once; CasADi's CSE then shares the rest. The Newton
-Jacobian dF/dz comes from CasADi's algorithmic differentiation of the translated residual. This
-stage only translates: everything it needs is on the DiscreteScheme.
+Each generated function is one record (GeneratedFunction: name, arguments, results) made by
+one builder from the scheme's expressions, translated by chaingen.generate.translation over
+the arguments (SchemeTranslation) after their free symbols were checked. The Newton Jacobian
+dF/dz comes from CasADi's algorithmic differentiation of the translated residual. This stage
+only translates: everything it needs is on the DiscreteScheme.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import casadi as ca
-import sympy as sp
 
 from ..symbolic.schemes import DiscreteScheme
 from .jacobians import JACOBIAN_CHUNK, jacobian_by_directions, unrolled_jacobian
-
-#: SymPy functions with a CasADi counterpart of the same meaning.
-_FUNCTIONS = {
-    sp.sin: ca.sin, sp.cos: ca.cos, sp.tan: ca.tan, sp.exp: ca.exp, sp.log: ca.log,
-    sp.atan: ca.atan, sp.Abs: ca.fabs, sp.atan2: ca.atan2,
-}
-
-
-class MissingInputError(ValueError):
-    """An expression has a free symbol that is not an input of the function being built."""
-
-
-def check_free_symbols(name: str, expressions, inputs) -> None:
-    """Every free symbol of `expressions` must be one of `inputs` (style.md), or raise."""
-    declared = set(inputs)
-    missing = set()
-    for expr in expressions:
-        missing |= set(expr.free_symbols) - declared
-    if missing:
-        names = ", ".join(sorted(map(str, missing)))
-        raise MissingInputError(f"{name}: free symbols {names} are not inputs of the function")
-
-
-class SympyToCasadi:
-    """Translate SymPy expressions into CasADi SX over given symbol -> SX bindings.
-
-    `parametric`: symbols of run-time parameters. A sum or product then combines its terms that
-    depend on parameters alone first, so that they form subexpressions of their own (m1 * m2 *
-    x as (m1 * m2) * x): those are what `extract_parametric` hoists out of the step.
-    """
-
-    def __init__(self, bindings: dict[sp.Symbol, ca.SX], parametric=()):
-        self._memo: dict[sp.Basic, ca.SX] = dict(bindings)
-        self._parametric: set[sp.Basic] = set(parametric)
-        self._grouping = bool(self._parametric)
-
-    def bind(self, symbol: sp.Symbol, value: ca.SX, parametric: bool = False) -> None:
-        """Bind one more symbol (an intermediate defined by earlier bindings)."""
-        self._memo[symbol] = value
-        if parametric:
-            self._parametric.add(symbol)
-
-    def is_parametric(self, expr: sp.Basic) -> bool:
-        """Whether a translated expression depends on the parameters (and numbers) alone."""
-        return expr in self._parametric or expr.is_Number
-
-    def __call__(self, expr: sp.Basic) -> ca.SX:
-        # Iterative post-order walk: deep recursive expressions (long chains) must not hit
-        # Python's recursion limit.
-        memo = self._memo
-        stack = [(expr, False)]
-        while stack:
-            node, expanded = stack.pop()
-            if node in memo:
-                continue
-            if node.is_Number:
-                memo[node] = ca.SX(float(node))
-                continue
-            if node.is_Symbol:
-                raise MissingInputError(f"symbol {node} has no binding")
-            if not expanded:
-                stack.append((node, True))
-                stack.extend((arg, False) for arg in node.args if arg not in memo)
-                continue
-            args = node.args
-            if self._grouping:
-                flags = [self.is_parametric(arg) for arg in args]
-                if all(flags):
-                    self._parametric.add(node)
-                elif (node.is_Add or node.is_Mul) and any(flags):
-                    # parameter-only terms first: they combine into one hoistable subtotal
-                    args = tuple(arg for arg, flag in zip(args, flags) if flag) + tuple(
-                        arg for arg, flag in zip(args, flags) if not flag)
-            memo[node] = self._combine(node, [memo[arg] for arg in args])
-        return memo[expr]
-
-    @staticmethod
-    def _combine(node: sp.Basic, args: list[ca.SX]) -> ca.SX:
-        if node.is_Add:
-            total = args[0]
-            for term in args[1:]:
-                total = total + term
-            return total
-        if node.is_Mul:
-            product = args[0]
-            for factor in args[1:]:
-                product = product * factor
-            return product
-        if node.is_Pow:
-            base, exponent = args
-            e = node.exp
-            if e == sp.Rational(1, 2):
-                return ca.sqrt(base)
-            if e == -sp.Rational(1, 2):
-                return 1 / ca.sqrt(base)
-            if e == -1:
-                return 1 / base
-            if e.is_Integer and e > 0:
-                return ca.constpow(base, exponent)
-            return ca.power(base, exponent)
-        for sympy_function, casadi_function in _FUNCTIONS.items():
-            if isinstance(node, sympy_function):
-                return casadi_function(*args)
-        raise NotImplementedError(f"no CasADi translation for {type(node).__name__}: {node}")
+from .translation import MissingInputError as MissingInputError
+from .translation import SympyToCasadi as SympyToCasadi
+from .translation import check_free_symbols as check_free_symbols
+from .translation import sx_vector
 
 
 @dataclass(frozen=True)
@@ -168,16 +68,272 @@ class SchemeFunctions:
         return tuple(function for function in functions if function is not None)
 
 
-def _vector(translate: SympyToCasadi, matrix) -> ca.SX:
-    entries = [translate(e) for e in matrix]
-    return ca.vertcat(*entries) if entries else ca.SX(0, 1)
-
-
 def chains_state(scheme: DiscreteScheme) -> bool:
     """Whether a composed step's sensitivities chain its stages in the whole state x (es,
     whose x carries a normal velocity the joint-space state does not see) rather than in
     joint space (SchemeFunctions.joint_maps)."""
-    return len(scheme.composition) > 1 and not scheme.state_from_joint_space
+    return len(scheme.metadata.composition) > 1 and not scheme.maps.state_from_joint_space
+
+
+@dataclass(frozen=True)
+class GeneratedFunction:
+    """One function of the generated C, as SymPy's Routine is one routine: its name (without
+    the package prefix), its arguments and its results, each with its name. The builders below
+    make one each, from expressions that `SchemeTranslation.translated` checked for free
+    symbols before translating them."""
+
+    name: str
+    inputs: tuple[ca.SX, ...]
+    input_names: tuple[str, ...]
+    outputs: tuple[ca.SX, ...]
+    output_names: tuple[str, ...]
+
+
+class SchemeTranslation:
+    """The CasADi arguments of a scheme's functions, and its SymPy expressions translated over
+    them: step functions take (z, x0, u, p, dt), the state's (x, p), the initial state's (phi,
+    phidot, p). u is left out where the scene has no inputs, p where it has no parameters.
+
+    Every expression is checked before it is translated: each free symbol must be an input of
+    the function it goes into or a definition (StepSystem.definitions and the state's and the
+    initial state's) made of those, or MissingInputError names the missing ones."""
+
+    def __init__(self, scheme: DiscreteScheme):
+        self.scheme = scheme
+        maps, step = scheme.maps, scheme.step
+        self.nz, self.nx = step.unknowns.shape[0], maps.state.shape[0]
+        self.nu = scheme.flows.inputs.shape[0]
+        self.n, self.n_p = scheme.scene.n, scheme.run_parameters.symbols.shape[0]
+        if 2 * len(scheme.segments.tolerances) != scheme.segments.vectors.shape[0]:
+            raise ValueError(f"{scheme.metadata.method}: one segment tolerance per spring "
+                             "segment")
+        self.parameters = list(scheme.run_parameters.symbols)
+        # The symbols each kind of function may use: its inputs, then its definitions in order.
+        self.step_symbols = defined("definition", scheme.step_inputs, step.definitions)
+        self.state_symbols = defined("state definition", list(maps.state) + self.parameters,
+                                     maps.state_definitions)
+        self.initial_symbols = defined(
+            "initial definition",
+            list(maps.initial_angles) + list(maps.initial_velocities) + self.parameters,
+            maps.initial_definitions)
+        self.solve = maps.output_solve
+        if self.solve:
+            check_free_symbols("output_solve", list(self.solve.matrix) + list(self.solve.rhs),
+                               self.state_symbols)
+        self.solved = list(self.solve.symbols) if self.solve else []
+
+        self.z, self.x0 = ca.SX.sym("z", self.nz), ca.SX.sym("x0", self.nx)
+        self.u, self.p, self.dt = ca.SX.sym("u", self.nu), ca.SX.sym("p", self.n_p), ca.SX.sym("dt")
+        self.x = ca.SX.sym("x", self.nx)
+        self.phi, self.phidot = ca.SX.sym("phi", self.n), ca.SX.sym("phidot", self.n)
+        self.parameter_bindings = dict(zip(self.parameters, ca.vertsplit(self.p)))
+        self.bindings = dict(zip(step.unknowns, ca.vertsplit(self.z)))
+        self.bindings.update(zip(maps.state, ca.vertsplit(self.x0)))
+        self.bindings.update(zip(scheme.flows.inputs, ca.vertsplit(self.u)))
+        self.bindings.update(self.parameter_bindings)
+        self.bindings[step.dt] = self.dt
+        self.step = bind_all(SympyToCasadi(self.bindings, self.parameters), step.definitions)
+        self.with_p = ([self.p] if self.n_p else [], ["p"] if self.n_p else [])
+        self.step_args = ([self.z, self.x0] + ([self.u] if self.nu else []) + self.with_p[0]
+                          + [self.dt])
+        self.step_names = (["z", "x0"] + (["u"] if self.nu else []) + self.with_p[1] + ["dt"])
+        self.residual = self.translated("residual", step.residual, self.step, self.step_symbols)
+        self.jacobian = unrolled_jacobian(self.residual, self.z,
+                                          [self.z, self.x0, self.u, self.p, self.dt])
+        self.next_state = self.translated("next_state", step.next_state, self.step,
+                                          self.step_symbols)
+        initial = bind_all(SympyToCasadi({**dict(zip(maps.initial_angles,
+                                                     ca.vertsplit(self.phi))),
+                                          **dict(zip(maps.initial_velocities,
+                                                     ca.vertsplit(self.phidot))),
+                                          **self.parameter_bindings}, self.parameters),
+                           maps.initial_definitions)
+        self.initial_state = self.translated("initial_state", maps.initial_state, initial,
+                                             self.initial_symbols)
+        flows = scheme.flows
+        self.flows = ([self.translated("energy flows", [flows.input_work, flows.dissipated],
+                                       self.step, self.step_symbols)]
+                      if scheme.has_energy_flows else [])
+
+    @staticmethod
+    def translated(name: str, expressions, translate: SympyToCasadi, symbols) -> ca.SX:
+        """`expressions` as a CasADi column, once every free symbol of theirs is one of
+        `symbols` (else MissingInputError, naming `name` and the missing ones)."""
+        check_free_symbols(name, expressions, symbols)
+        return sx_vector(translate, expressions)
+
+    def state_translator(self, state: ca.SX, extra: dict | None = None) -> SympyToCasadi:
+        """Expressions in the state, p, the state definitions and the output_solve symbols,
+        bound to `state`."""
+        bindings = dict(zip(self.scheme.maps.state, ca.vertsplit(state)))
+        bindings.update(self.parameter_bindings)
+        bindings.update(extra or {})
+        bound = bind_all(SympyToCasadi(bindings, self.parameters),
+                         self.scheme.maps.state_definitions)
+        if self.solve:
+            matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
+                                  for row in self.solve.matrix.tolist()])
+            solution = ca.solve(matrix, sx_vector(bound, self.solve.rhs))
+            for symbol, value in zip(self.solve.symbols, ca.vertsplit(solution)):
+                bound.bind(symbol, value)
+        return bound
+
+    def joint_space(self, state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+        """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
+        maps, translate = self.scheme.maps, self.state_translator(state)
+        symbols = self.state_symbols + self.solved
+        return (self.translated("outputs", maps.joint_angles, translate, symbols),
+                self.translated("outputs", maps.joint_velocities, translate, symbols),
+                self.translated("outputs", [maps.energy], translate, symbols),
+                self.translated("outputs", maps.constraint_residuals, translate, symbols))
+
+    def state_maps(self) -> tuple[ca.SX, ca.SX]:
+        """X_s = dx0/ds0 and X_p = dx0/dp of x0 = X(s0, p) (initial_state) at s0 = S(x0, p)."""
+        s_of_x0 = ca.vertcat(*self.joint_space(self.x0)[:2])
+        maps = ca.Function("X", [self.phi, self.phidot, self.p],
+                           [ca.jacobian(self.initial_state, ca.vertcat(self.phi, self.phidot)),
+                            ca.jacobian(self.initial_state, self.p)])
+        return maps(s_of_x0[:self.n], s_of_x0[self.n:], self.p)
+
+    def step_function(self, name: str, outputs, output_names) -> GeneratedFunction:
+        """A function of the step's arguments (z, x0, u, p, dt)."""
+        return GeneratedFunction(name, tuple(self.step_args), tuple(self.step_names),
+                                 tuple(outputs), tuple(output_names))
+
+
+def defined(kind: str, inputs, definitions) -> list:
+    """`inputs` followed by the symbols of `definitions`, each checked to be made of the
+    inputs and the definitions before it."""
+    symbols = list(inputs)
+    for symbol, expression in definitions:
+        check_free_symbols(f"{kind} of {symbol}", [expression], symbols)
+        symbols.append(symbol)
+    return symbols
+
+
+def bind_all(translate: SympyToCasadi, definitions) -> SympyToCasadi:
+    """`translate` with the symbols of `definitions` bound, in order."""
+    for symbol, expression in definitions:
+        translate.bind(symbol, translate(expression), translate.is_parametric(expression))
+    return translate
+
+
+# -- one builder per generated function ----------------------------------------------------
+
+def sensitivity_functions(t: SchemeTranslation) -> tuple[GeneratedFunction, GeneratedFunction]:
+    """The controller's state is s = (phi, omega); x0 = X(s0, p) (initial_state), s1 =
+    S(x1, p) (outputs). With F(z*, x0, u, p) = 0, dz*/d(s0, u, p) = -J^-1 [F_x0 X_s, F_u,
+    F_x0 X_p + F_p] (the C code solves it with one LU of J at z*), and ds1/d(s0, u, p) =
+    S_x1 (x1_z dz* + [x1_x0 X_s, x1_u, x1_x0 X_p + x1_p]) + [0, 0, S_p]. X is evaluated at
+    s0 = S(x0, p), so the functions take x0 as the step does."""
+    x_s, x_p = t.state_maps()
+    s1 = ca.vertcat(*t.joint_space(t.next_state)[:2])
+    f_x0 = ca.jacobian(t.residual, t.x0)
+    rhs = ca.densify(ca.horzcat(ca.mtimes(f_x0, x_s), ca.jacobian(t.residual, t.u),
+                                ca.mtimes(f_x0, x_p) + ca.jacobian(t.residual, t.p)))
+    s1_z = ca.densify(ca.jacobian(s1, t.z))
+    s1_x0 = ca.jacobian(s1, t.x0)
+    s1_s0 = ca.densify(ca.mtimes(s1_x0, x_s))
+    s1_u = ca.densify(ca.jacobian(s1, t.u))
+    s1_p = ca.densify(ca.mtimes(s1_x0, x_p) + ca.jacobian(s1, t.p))
+    outputs = [s1_z, s1_s0] + ([s1_u] if t.nu else []) + ([s1_p] if t.n_p else [])
+    names = ["s1_z", "s1_s0"] + (["s1_u"] if t.nu else []) + (["s1_p"] if t.n_p else [])
+    return (t.step_function("sensitivity_rhs", [rhs], ["R"]),
+            t.step_function("sensitivity_map", outputs, names))
+
+
+def state_chain_functions(t: SchemeTranslation) -> tuple[GeneratedFunction, ...]:
+    """The stage Jacobians in the whole state x (SchemeFunctions.joint_maps): with
+    F(z*, x0, u, p) = 0, dx1/d(x0, u, p) = x1_z dz* + [x1_x0, x1_u, x1_p] and
+    dz* = -J^-1 [F_x0, F_u, F_p]; the composed step's ds1/ds0 = S_x1 D X_s."""
+    x1 = t.next_state
+    rhs = ca.densify(ca.horzcat(ca.jacobian(t.residual, t.x0), ca.jacobian(t.residual, t.u),
+                                ca.jacobian(t.residual, t.p)))
+    outputs = [ca.densify(ca.jacobian(x1, t.z)), ca.densify(ca.jacobian(x1, t.x0))]
+    names = ["x1_z", "x1_x0"]
+    if t.nu:
+        outputs.append(ca.densify(ca.jacobian(x1, t.u)))
+        names.append("x1_u")
+    if t.n_p:
+        outputs.append(ca.densify(ca.jacobian(x1, t.p)))
+        names.append("x1_p")
+    x_s, x_p = t.state_maps()
+    s1 = ca.vertcat(*t.joint_space(t.x)[:2])
+    maps = [ca.densify(x_s), ca.densify(ca.jacobian(s1, t.x))]
+    map_names = ["x0_s0", "s1_x1"]
+    if t.n_p:
+        maps += [ca.densify(x_p), ca.densify(ca.jacobian(s1, t.p))]
+        map_names += ["x0_p", "s1_p"]
+    return (t.step_function("sensitivity_rhs", [rhs], ["R"]),
+            t.step_function("sensitivity_map", outputs, names),
+            GeneratedFunction("joint_maps", tuple([t.x0, t.x] + t.with_p[0]),
+                              tuple(["x0", "x1"] + t.with_p[1]), tuple(maps),
+                              tuple(map_names)))
+
+
+def segment_margins(t: SchemeTranslation) -> GeneratedFunction | None:
+    """(x0, x1) -> (s_j(x1) / tol_j, cos of each segment's turn over the step), at the scene's
+    own numbers (its tolerances are the scene's); None for a scene without springs."""
+    vectors = t.scheme.segments.vectors
+    if not vectors.shape[0]:
+        return None
+    tolerances = ca.DM(list(t.scheme.segments.tolerances))
+    before = ca.reshape(t.translated("segment_vectors", vectors, t.state_translator(t.x0),
+                                     t.state_symbols), 2, -1)
+    after = ca.reshape(t.translated("segment_vectors", vectors, t.state_translator(t.x),
+                                    t.state_symbols), 2, -1)
+    lengths_before = ca.sqrt(ca.sum1(before ** 2)).T
+    lengths_after = ca.sqrt(ca.sum1(after ** 2)).T
+    turn = ca.sum1(before * after).T / (lengths_before * lengths_after)
+    return GeneratedFunction("segment_margins", tuple([t.x0, t.x] + t.with_p[0]),
+                             tuple(["x0", "x1"] + t.with_p[1]),
+                             (ca.vertcat(lengths_after / tolerances, turn),), ("margins",))
+
+
+def energy_check(t: SchemeTranslation) -> GeneratedFunction | None:
+    """(x) -> (H, T), for a scheme with a kinetic_energy (the energy check, model.md 13)."""
+    maps = t.scheme.maps
+    if maps.kinetic_energy is None:
+        return None
+    energies = t.translated("outputs", [maps.energy, maps.kinetic_energy],
+                            t.state_translator(t.x), t.state_symbols + t.solved)
+    return GeneratedFunction("energy_check", tuple([t.x] + t.with_p[0]),
+                             tuple(["x"] + t.with_p[1]), (energies,), ("H_T",))
+
+
+def holding_torques(t: SchemeTranslation) -> GeneratedFunction | None:
+    """(phi) -> dV/dphi, for an actuated scene."""
+    maps = t.scheme.maps
+    if maps.holding_torques is None:
+        return None
+    translate = SympyToCasadi({**dict(zip(maps.initial_angles, ca.vertsplit(t.phi))),
+                               **t.parameter_bindings}, t.parameters)
+    torques = t.translated("holding_torques", maps.holding_torques, translate,
+                           list(maps.initial_angles) + t.parameters)
+    return GeneratedFunction("holding_torques", tuple([t.phi] + t.with_p[0]),
+                             tuple(["phi"] + t.with_p[1]), (torques,), ("tau",))
+
+
+def newton_factors(t: SchemeTranslation) -> tuple[GeneratedFunction | None, tuple | None]:
+    """es's Newton matrix by its factors (ArmSpace): -> (F, factors), and H's pattern."""
+    if t.scheme.step.arm_space is None:
+        return None, None
+    factors, pattern = arm_factors(t.scheme, t.bindings, t.parameters, t.step, t.z)
+    return t.step_function("newton_factors", [t.residual, factors], ["F", "factors"]), pattern
+
+
+def predictor(t: SchemeTranslation) -> GeneratedFunction:
+    """(x0, p, dt) -> z: the first Newton guess; it may use the output_solve symbols (vi:
+    w = M^-1 p)."""
+    step = t.scheme.step
+    if not any(step.predictor):
+        guess = ca.SX.zeros(step.unknowns.shape[0], 1)
+    else:
+        guess = t.translated("predictor", step.predictor,
+                             t.state_translator(t.x0, {step.dt: t.dt}),
+                             t.state_symbols + t.solved + [step.dt])
+    return GeneratedFunction("predictor", tuple([t.x0] + t.with_p[0] + [t.dt]),
+                             tuple(["x0"] + t.with_p[1] + ["dt"]), (guess,), ("z",))
 
 
 def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
@@ -187,243 +343,63 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     Every function that depends on the model takes the run-time parameters (when the scheme
     has any) after its state-like inputs: step functions (z, x0, u, q, dt), the predictor
     (x0, q, dt), outputs (x, q), initial_state (phi, phidot, q), holding_torques (phi, q),
-    where q = parameters(p) are the derived parameters (see _build).
+    where q = parameters(p) are the derived parameters (see build_functions).
     sensitivities=False leaves out the step-map Jacobians, the largest generated functions
     (for "vi" about three times the Newton Jacobian), when a package does not need them.
     """
-    nz, nx, nu = scheme.unknowns.shape[0], scheme.state.shape[0], scheme.inputs.shape[0]
-    n, n_p = scheme.scene.n, scheme.parameters.shape[0]
-    if 2 * len(scheme.segment_tolerances) != scheme.segment_vectors.shape[0]:
-        raise ValueError(f"{scheme.method}: one segment tolerance per spring segment")
-    z, x0, u = ca.SX.sym("z", nz), ca.SX.sym("x0", nx), ca.SX.sym("u", nu)
-    p, dt = ca.SX.sym("p", n_p), ca.SX.sym("dt")
-    parameters = list(scheme.parameters)
-    step_inputs = scheme.step_inputs
-    for symbol, expression in scheme.definitions:
-        check_free_symbols(f"definition of {symbol}", [expression], step_inputs)
-        step_inputs.append(symbol)
-    for name, exprs in (("residual", scheme.residual), ("next_state", scheme.next_state),
-                        ("energy flows", [scheme.input_work, scheme.dissipated])):
-        check_free_symbols(name, exprs, step_inputs)
-    solve = scheme.output_solve
-    solved = list(solve.symbols) if solve else []
-    state_inputs = list(scheme.state) + parameters
-    for symbol, expression in scheme.state_definitions:
-        check_free_symbols(f"state definition of {symbol}", [expression], state_inputs)
-        state_inputs.append(symbol)
-    initial_inputs = list(scheme.initial_angles) + list(scheme.initial_velocities) + parameters
-    for symbol, expression in scheme.initial_definitions:
-        check_free_symbols(f"initial definition of {symbol}", [expression], initial_inputs)
-        initial_inputs.append(symbol)
-    check_free_symbols("predictor", scheme.predictor, state_inputs + solved + [scheme.dt])
-    if solve:
-        check_free_symbols("output_solve", list(solve.matrix) + list(solve.rhs), state_inputs)
-    check_free_symbols("outputs", list(scheme.joint_angles) + list(scheme.joint_velocities)
-                       + [scheme.energy] + list(scheme.constraint_residuals)
-                       + [e for e in [scheme.kinetic_energy] if e is not None],
-                       state_inputs + solved)
-    check_free_symbols("segment_vectors", scheme.segment_vectors, state_inputs)
-    if scheme.holding_torques is not None:
-        check_free_symbols("holding_torques", scheme.holding_torques,
-                           list(scheme.initial_angles) + parameters)
-    check_free_symbols("initial_state", scheme.initial_state, initial_inputs)
-
-    parameter_bindings = dict(zip(parameters, ca.vertsplit(p)))
-    bindings = dict(zip(scheme.unknowns, ca.vertsplit(z)))
-    bindings.update(zip(scheme.state, ca.vertsplit(x0)))
-    bindings.update(zip(scheme.inputs, ca.vertsplit(u)))
-    bindings.update(parameter_bindings)
-    bindings[scheme.dt] = dt
-    step = SympyToCasadi(bindings, parameters)
-    for symbol, expression in scheme.definitions:
-        step.bind(symbol, step(expression), step.is_parametric(expression))
-    residual = _vector(step, scheme.residual)
-    jacobian = unrolled_jacobian(residual, z, [z, x0, u, p, dt])
-    directions = None if jacobian is not None else JACOBIAN_CHUNK
-    x1 = _vector(step, scheme.next_state)
-    options = {"cse": True}
-
-    def bind_all(translate: SympyToCasadi, definitions) -> SympyToCasadi:
-        for symbol, expression in definitions:
-            translate.bind(symbol, translate(expression), translate.is_parametric(expression))
-        return translate
-
-    def state_translator(state: ca.SX, extra: dict | None = None) -> SympyToCasadi:
-        """Expressions in the state, p, the state definitions and the output_solve symbols,
-        bound to `state`."""
-        state_bindings = dict(zip(scheme.state, ca.vertsplit(state)))
-        state_bindings.update(parameter_bindings)
-        state_bindings.update(extra or {})
-        bound = bind_all(SympyToCasadi(state_bindings, parameters), scheme.state_definitions)
-        if solve:
-            matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
-                                  for row in solve.matrix.tolist()])
-            solution = ca.solve(matrix, _vector(bound, solve.rhs))
-            for symbol, value in zip(solve.symbols, ca.vertsplit(solution)):
-                bound.bind(symbol, value)
-        return bound
-
-    def joint_space(state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
-        """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
-        translate = state_translator(state)
-        return (_vector(translate, scheme.joint_angles),
-                _vector(translate, scheme.joint_velocities), translate(scheme.energy),
-                _vector(translate, scheme.constraint_residuals))
-
-    x = ca.SX.sym("x", nx)
-    phi, phidot = ca.SX.sym("phi", n), ca.SX.sym("phidot", n)
-    initial = bind_all(SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
-                                      **dict(zip(scheme.initial_velocities,
-                                                 ca.vertsplit(phidot))),
-                                      **parameter_bindings}, parameters),
-                       scheme.initial_definitions)
-    initial_state = _vector(initial, scheme.initial_state)
-
-    with_p = ([p] if n_p else [], ["p"] if n_p else [])
-    step_args = [z, x0] + ([u] if nu else []) + with_p[0] + [dt]
-    step_names = ["z", "x0"] + (["u"] if nu else []) + with_p[1] + ["dt"]
-    flows = ([ca.vertcat(step(scheme.input_work), step(scheme.dissipated))]
-             if scheme.has_energy_flows else [])
-
-    specs: dict[str, tuple] = {}
-
-    def fn(name, inputs, input_names, outputs, output_names):
-        """Record a function (built at the end, once its parameter-only parts are known)."""
-        specs[name] = (inputs, input_names, outputs, output_names)
-        return name
-
-    def sensitivity_functions() -> tuple[ca.Function, ca.Function]:
-        """The controller's state is s = (phi, omega); x0 = X(s0, p) (initial_state), s1 =
-        S(x1, p) (outputs). With F(z*, x0, u, p) = 0, dz*/d(s0, u, p) = -J^-1 [F_x0 X_s, F_u,
-        F_x0 X_p + F_p] (the C code solves it with one LU of J at z*), and ds1/d(s0, u, p) =
-        S_x1 (x1_z dz* + [x1_x0 X_s, x1_u, x1_x0 X_p + x1_p]) + [0, 0, S_p]. X is evaluated at
-        s0 = S(x0, p), so the functions take x0 as the step does."""
-        s_of_x0 = ca.vertcat(*joint_space(x0)[:2])
-        joint_state = ca.vertcat(phi, phidot)
-        state_maps = ca.Function("X", [phi, phidot, p],
-                                 [ca.jacobian(initial_state, joint_state),
-                                  ca.jacobian(initial_state, p)])
-        x_s, x_p = state_maps(s_of_x0[:n], s_of_x0[n:], p)
-        s1 = ca.vertcat(*joint_space(x1)[:2])
-        f_x0 = ca.jacobian(residual, x0)
-        rhs = ca.densify(ca.horzcat(ca.mtimes(f_x0, x_s), ca.jacobian(residual, u),
-                                    ca.mtimes(f_x0, x_p) + ca.jacobian(residual, p)))
-        s1_z = ca.densify(ca.jacobian(s1, z))
-        s1_x0 = ca.jacobian(s1, x0)
-        s1_s0 = ca.densify(ca.mtimes(s1_x0, x_s))
-        s1_u = ca.densify(ca.jacobian(s1, u))
-        s1_p = ca.densify(ca.mtimes(s1_x0, x_p) + ca.jacobian(s1, p))
-        outputs = [s1_z, s1_s0] + ([s1_u] if nu else []) + ([s1_p] if n_p else [])
-        names = ["s1_z", "s1_s0"] + (["s1_u"] if nu else []) + (["s1_p"] if n_p else [])
-        return (fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
-                fn("sensitivity_map", step_args, step_names, outputs, names))
-
-    def state_chain_functions() -> tuple[ca.Function, ca.Function, ca.Function]:
-        """The stage Jacobians in the whole state x (SchemeFunctions.joint_maps): with
-        F(z*, x0, u, p) = 0, dx1/d(x0, u, p) = x1_z dz* + [x1_x0, x1_u, x1_p] and
-        dz* = -J^-1 [F_x0, F_u, F_p]; the composed step's ds1/ds0 = S_x1 D X_s."""
-        rhs = ca.densify(ca.horzcat(ca.jacobian(residual, x0), ca.jacobian(residual, u),
-                                    ca.jacobian(residual, p)))
-        outputs = [ca.densify(ca.jacobian(x1, z)), ca.densify(ca.jacobian(x1, x0))]
-        names = ["x1_z", "x1_x0"]
-        if nu:
-            outputs.append(ca.densify(ca.jacobian(x1, u)))
-            names.append("x1_u")
-        if n_p:
-            outputs.append(ca.densify(ca.jacobian(x1, p)))
-            names.append("x1_p")
-        joint_state = ca.vertcat(phi, phidot)
-        state_maps = ca.Function("X", [phi, phidot, p],
-                                 [ca.jacobian(initial_state, joint_state),
-                                  ca.jacobian(initial_state, p)])
-        s_of_x0 = ca.vertcat(*joint_space(x0)[:2])
-        x_s, x_p = state_maps(s_of_x0[:n], s_of_x0[n:], p)
-        s1 = ca.vertcat(*joint_space(x)[:2])
-        maps = [ca.densify(x_s), ca.densify(ca.jacobian(s1, x))]
-        map_names = ["x0_s0", "s1_x1"]
-        if n_p:
-            maps += [ca.densify(x_p), ca.densify(ca.jacobian(s1, p))]
-            map_names += ["x0_p", "s1_p"]
-        return (fn("sensitivity_rhs", step_args, step_names, [rhs], ["R"]),
-                fn("sensitivity_map", step_args, step_names, outputs, names),
-                fn("joint_maps", [x0, x] + with_p[0], ["x0", "x1"] + with_p[1], maps,
-                   map_names))
-
-    sensitivity_rhs = sensitivity_map = joint_maps = None
+    t = SchemeTranslation(scheme)
+    found: dict[str, GeneratedFunction | None] = dict.fromkeys(
+        ("sensitivity_rhs", "sensitivity_map", "joint_maps"))
     if sensitivities and chains_state(scheme):
-        sensitivity_rhs, sensitivity_map, joint_maps = state_chain_functions()
+        found.update(zip(found, state_chain_functions(t)))
     elif sensitivities:
-        sensitivity_rhs, sensitivity_map = sensitivity_functions()
-    margins = None
-    if scheme.segment_vectors.shape[0]:
-        # The segments at the scene's own numbers: their tolerances are the scene's.
-        tolerances = ca.DM(list(scheme.segment_tolerances))
-        before = ca.reshape(_vector(state_translator(x0), scheme.segment_vectors), 2, -1)
-        after = ca.reshape(_vector(state_translator(x), scheme.segment_vectors), 2, -1)
-        lengths_before = ca.sqrt(ca.sum1(before ** 2)).T
-        lengths_after = ca.sqrt(ca.sum1(after ** 2)).T
-        turn = ca.sum1(before * after).T / (lengths_before * lengths_after)
-        margins = fn("segment_margins", [x0, x] + with_p[0], ["x0", "x1"] + with_p[1],
-                     [ca.vertcat(lengths_after / tolerances, turn)], ["margins"])
-    check = None
-    if scheme.kinetic_energy is not None:
-        at = state_translator(x)
-        check = fn("energy_check", [x] + with_p[0], ["x"] + with_p[1],
-                   [ca.vertcat(at(scheme.energy), at(scheme.kinetic_energy))], ["H_T"])
-    holding = None
-    if scheme.holding_torques is not None:
-        torques = _vector(SympyToCasadi({**dict(zip(scheme.initial_angles, ca.vertsplit(phi))),
-                                         **parameter_bindings}, parameters),
-                          scheme.holding_torques)
-        holding = fn("holding_torques", [phi] + with_p[0], ["phi"] + with_p[1], [torques],
-                     ["tau"])
-    factors, pattern = None, None
-    if scheme.arm_space is not None:
-        arm_factors, pattern = _arm_factors(scheme, bindings, parameters, step, z)
-        factors = fn("newton_factors", step_args, step_names, [residual, arm_factors],
-                     ["F", "factors"])
-    names = dict(
-        residual=fn("residual", step_args, step_names, [residual], ["F"]),
-        residual_jacobian=fn("residual_jacobian", step_args, step_names,
-                             [residual, residual if jacobian is None else jacobian],
-                             ["F", "J"]),
-        predictor=fn("predictor", [x0] + with_p[0] + [dt], ["x0"] + with_p[1] + ["dt"],
-                     [_predictor(scheme, x0, dt, state_translator)], ["z"]),
-        next_state=fn("next_state", step_args, step_names, [x1] + flows,
-                      ["x1"] + (["flows"] if flows else [])),
-        outputs=fn("outputs", [x] + with_p[0], ["x"] + with_p[1], list(joint_space(x)),
-                   ["phi", "omega", "energy", "constraint"]),
-        initial_state=fn("initial_state", [phi, phidot] + with_p[0],
-                         ["phi", "phidot"] + with_p[1], [initial_state], ["x"]),
-        sensitivity_rhs=sensitivity_rhs, sensitivity_map=sensitivity_map, joint_maps=joint_maps,
-        holding_torques=holding, segment_margins=margins, energy_check=check,
-        newton_factors=factors,
-    )
-    built = _build(specs, prefix, p, options, directions)
-    return SchemeFunctions(**{field: None if name is None else built[name]
-                              for field, name in names.items()},
+        found.update(zip(found, sensitivity_functions(t)))
+    found["segment_margins"] = segment_margins(t)
+    found["energy_check"] = energy_check(t)
+    found["holding_torques"] = holding_torques(t)
+    found["newton_factors"], pattern = newton_factors(t)
+    jacobian = t.residual if t.jacobian is None else t.jacobian
+    found.update(
+        residual=t.step_function("residual", [t.residual], ["F"]),
+        residual_jacobian=t.step_function("residual_jacobian", [t.residual, jacobian],
+                                          ["F", "J"]),
+        predictor=predictor(t),
+        next_state=t.step_function("next_state", [t.next_state] + t.flows,
+                                   ["x1"] + (["flows"] if t.flows else [])),
+        outputs=GeneratedFunction("outputs", tuple([t.x] + t.with_p[0]),
+                                  tuple(["x"] + t.with_p[1]), tuple(t.joint_space(t.x)),
+                                  ("phi", "omega", "energy", "constraint")),
+        initial_state=GeneratedFunction("initial_state",
+                                        tuple([t.phi, t.phidot] + t.with_p[0]),
+                                        tuple(["phi", "phidot"] + t.with_p[1]),
+                                        (t.initial_state,), ("x",)))
+    directions = None if t.jacobian is not None else JACOBIAN_CHUNK
+    built = build_functions([function for function in found.values() if function is not None],
+                            prefix, t.p, {"cse": True}, directions)
+    return SchemeFunctions(**{field: None if function is None else built[function.name]
+                              for field, function in found.items()},
                            parameters=built.get(PARAMETERS_FUNCTION), arm_pattern=pattern)
 
 
-def _arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
+def arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
                  step: SympyToCasadi, z: ca.SX) -> tuple[ca.SX, tuple]:
     """The factors of es's Newton matrix (ArmSpace) as one vector in the step's inputs, and
     H's pattern. h and c are translated with the arm increments w as free symbols, so that
     dh/dw and dc/dw are CasADi's sparse symbolic Jacobians (a few entries per link), then w is
     put back as the function of z it is. Raises ValueError if h or c depend on dv other than
     through w, or the blocks of G_mu and G_c are not one 2-vector per link."""
-    arms = scheme.arm_space
+    arms = scheme.step.arm_space
     n = scheme.scene.n
     w = ca.SX.sym("w", 2 * n)
     free = dict(zip(arms.arm_increments, ca.vertsplit(w)))
     local = SympyToCasadi(dict(bindings), parameters)
-    for symbol, expression in scheme.definitions:
+    for symbol, expression in scheme.step.definitions:
         if symbol in free:
             local.bind(symbol, free[symbol])
         else:
             local.bind(symbol, local(expression), local.is_parametric(expression))
-    forces = _vector(local, arms.forces)
-    rows = _vector(local, scheme.residual[2 * n:, :])
+    forces = sx_vector(local, arms.forces)
+    rows = sx_vector(local, scheme.step.residual[2 * n:, :])
     if ca.jacobian(ca.vertcat(forces, rows), z[:2 * n]).nnz():
         raise ValueError("es: the arm forces depend on dv other than through w = B dv")
     H = ca.jacobian(forces, w)
@@ -438,7 +414,7 @@ def _arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
     local_values = ca.vertcat(*H.nonzeros(), g_mu, g_c)
     local_values = ca.substitute(local_values, w,
                                  ca.vertcat(*[step(symbol) for symbol in arms.arm_increments]))
-    factors = ca.vertcat(local_values, _vector(step, arms.masses), _vector(step, arms.maps))
+    factors = ca.vertcat(local_values, sx_vector(step, arms.masses), sx_vector(step, arms.maps))
     rows_h, columns_h = H.sparsity().get_triplet()
     return factors, (tuple(rows_h), tuple(columns_h))
 
@@ -447,14 +423,15 @@ def _arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
 PARAMETERS_FUNCTION = "parameters"
 
 
-def _build(specs: dict[str, tuple], prefix: str, p: ca.SX, options: dict,
-           directions: int | None = None) -> dict:
-    """The recorded functions as CasADi Functions. With run-time parameters p, every
-    subexpression that depends on p alone is hoisted out of them (CasADi's extract_parametric,
-    one pass over all of them, so a subexpression they share is one entry): a function
-    `parameters` computes those, q = Q(p), and every other function takes q in p's place. The
-    C code evaluates Q once when p changes instead of in every residual of every step.
-    directions: the Newton Jacobian's forward directions per pass (None: unrolled)."""
+def build_functions(functions: list[GeneratedFunction], prefix: str, p: ca.SX, options: dict,
+                    directions: int | None = None) -> dict[str, ca.Function]:
+    """The generated functions as CasADi Functions, by name. With run-time parameters p,
+    every subexpression that depends on p alone is hoisted out of them (CasADi's
+    extract_parametric, one pass over all of them, so a subexpression they share is one
+    entry): a function `parameters` computes those, q = Q(p), and every other function takes
+    q in p's place. The C code evaluates Q once when p changes instead of in every residual
+    of every step. directions: the Newton Jacobian's forward directions per pass (None:
+    unrolled)."""
     def function(name, inputs, input_names, outputs, output_names):
         if name == "residual_jacobian" and directions:   # z is the first input
             return jacobian_by_directions(f"{prefix}_model_{name}", inputs, input_names,
@@ -463,27 +440,20 @@ def _build(specs: dict[str, tuple], prefix: str, p: ca.SX, options: dict,
                            options)
 
     if p.shape[0] == 0:
-        return {name: function(name, *spec) for name, spec in specs.items()}
-    order = [(name, index) for name, spec in specs.items() for index in range(len(spec[2]))]
-    expressions = [specs[name][2][index] for name, index in order]
+        return {f.name: function(f.name, list(f.inputs), list(f.input_names), list(f.outputs),
+                                 list(f.output_names)) for f in functions}
+    expressions = [output for f in functions for output in f.outputs]
     hoisted, symbols, values = ca.extract_parametric(expressions, p,
                                                      {"extract_trivial": True, "prefix": "q_"})
     q = ca.vertcat(*symbols) if symbols else ca.SX(0, 1)
-    rewritten: dict[str, list] = {name: [] for name in specs}
-    for (name, _), expression in zip(order, hoisted):
-        rewritten[name].append(expression)
     built = {PARAMETERS_FUNCTION: function(PARAMETERS_FUNCTION, [p], ["p"],
                                            [ca.vertcat(*values) if values else ca.SX(0, 1)],
                                            ["q"])}
-    for name, (inputs, input_names, _, output_names) in specs.items():
-        inputs = [q if item is p else item for item in inputs]
-        input_names = ["q" if item == "p" else item for item in input_names]
-        built[name] = function(name, inputs, input_names, rewritten[name], output_names)
+    start = 0
+    for f in functions:
+        rewritten = list(hoisted[start:start + len(f.outputs)])
+        start += len(f.outputs)
+        inputs = [q if item is p else item for item in f.inputs]
+        input_names = ["q" if item == "p" else item for item in f.input_names]
+        built[f.name] = function(f.name, inputs, input_names, rewritten, list(f.output_names))
     return built
-
-
-def _predictor(scheme: DiscreteScheme, x0: ca.SX, dt: ca.SX, state_translator) -> ca.SX:
-    """The first Newton guess; it may use the output_solve symbols (vi: w = M^-1 p)."""
-    if not any(scheme.predictor):
-        return ca.SX.zeros(scheme.unknowns.shape[0], 1)
-    return _vector(state_translator(x0, {scheme.dt: dt}), scheme.predictor)

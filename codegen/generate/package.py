@@ -23,7 +23,7 @@ from ..errors import ChaingenError, PackageWriteError, RunFailedError, SceneErro
 from ..runtime import contract
 from ..runtime.contract import Features
 from ..runtime.files import write_directory
-from ..scene import Scene, SolverSpec
+from ..scene import Scene, SolverSpec, labels
 from ..scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE, ZERO_SEGMENT_RELATIVE_TOLERANCE
 from ..symbolic.schemes import DiscreteScheme, build_scheme
 from ..version import VERSION
@@ -123,14 +123,10 @@ def template_environment() -> jinja2.Environment:
 
 
 def scheme_label(scheme: DiscreteScheme) -> str:
-    label = f'method "{scheme.method}"'
-    if scheme.quadrature is not None:
-        label += ", " + (scheme.quadrature_rule or f"{scheme.quadrature}-point Gauss-Legendre "
-                                                    "quadrature of the spring terms")
-    if scheme.order != 2:
-        label += (f", order {scheme.order} by a symmetric composition of "
-                  f"{len(scheme.composition)} steps")
-    return label
+    """The scheme as a package's banner and header name it (chaingen.scene.labels)."""
+    return labels.scheme_label(scheme.method, scheme.quadrature, scheme.order, style="header",
+                               quadrature_rule=scheme.quadrature_rule,
+                               composition_steps=len(scheme.composition))
 
 
 def package_features(scheme: DiscreteScheme, sensitivities: bool) -> Features:

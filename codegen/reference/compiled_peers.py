@@ -68,7 +68,7 @@ from ..errors import ScipyPeerError
 from ..generate.casadi_source import mark_parameters_used
 from ..runtime.build import build_shared_library, cache_directory
 from ..scene import Scene
-from .scipy_peer import CompiledODE, ScipyRun, _read_only, compile_ode, ode_functions
+from .scipy_peer import CompiledODE, ScipyRun, compile_ode, ode_functions, read_only_array
 
 NUMBALSODA_METHODS = ("numbalsoda-LSODA", "numbalsoda-DOP853")
 CVODES_METHODS = ("CVODES-BDF", "CVODES-Adams")
@@ -331,8 +331,9 @@ def simulate_compiled(scene: Scene, method: str, rtol: float, atol: float, t_end
     return ScipyRun(
         method=method, rtol=float(rtol), atol=float(atol), t_end=float(t_end),
         cpu_time=cpu_time, wall_time=wall_time, **counts,
-        final_angles=_read_only(states[-1, :n]), final_velocities=_read_only(states[-1, n:]),
-        sample_times=_read_only(grid[where]), energies=_read_only(energies),
+        final_angles=read_only_array(states[-1, :n]),
+        final_velocities=read_only_array(states[-1, n:]),
+        sample_times=read_only_array(grid[where]), energies=read_only_array(energies),
         initial_energy=initial_energy,
         max_energy_error=float(np.abs(energies - initial_energy).max()),
         status=0, message="reached t_end")

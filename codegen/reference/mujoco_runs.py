@@ -37,7 +37,7 @@ class MujocoTrajectory:
     final_energy: float                  # H at t_end
 
 
-def _model_and_data(scene: Scene, dt: float, integrator: str):
+def mujoco_model_and_data(scene: Scene, dt: float, integrator: str):
     import mujoco
 
     model = mujoco.MjModel.from_xml_string(mjcf_from_scene(scene, dt=dt, integrator=integrator))
@@ -48,7 +48,7 @@ def _model_and_data(scene: Scene, dt: float, integrator: str):
     return model, data
 
 
-def _energy(data) -> float:
+def mujoco_energy(data) -> float:
     """H = V + T from mjData.energy, valid after mj_forward at the current state."""
     return float(data.energy[0] + data.energy[1])
 
@@ -71,8 +71,8 @@ def _read_only(a) -> np.ndarray:
 
 def initial_energy_mujoco(scene: Scene) -> float:
     """MuJoCo's H = V + T (model.md section 3) at the scene's initial state."""
-    _, data = _model_and_data(scene, dt=scene.simulation.dt, integrator="RK4")
-    return _energy(data)
+    _, data = mujoco_model_and_data(scene, dt=scene.simulation.dt, integrator="RK4")
+    return mujoco_energy(data)
 
 
 def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
@@ -96,7 +96,7 @@ def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
             raise ValueError(f"sample_times[{k}]: {sample_times[k]!r} s is after "
                              f"t_end = {t_end!r} s")
 
-    model, data = _model_and_data(scene, dt, integrator)
+    model, data = mujoco_model_and_data(scene, dt, integrator)
     if torques is not None:
         torques = np.asarray(torques, dtype=float)
         if torques.shape != (len(scene.actuated_joints),):
@@ -104,7 +104,7 @@ def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
                              f"shape {torques.shape}")
         for joint, torque in zip(scene.actuated_joints, torques):
             data.qfrc_applied[joint - 1] = torque
-    initial_energy = _energy(data)
+    initial_energy = mujoco_energy(data)
 
     n = scene.n
     angles = np.empty((len(steps), n))
@@ -118,7 +118,7 @@ def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
         for k in by_step.get(step, ()):
             angles[k] = data.qpos
             velocities[k] = data.qvel
-            energies[k] = _energy(data)
+            energies[k] = mujoco_energy(data)
 
     record(0)
     for step in range(1, n_steps + 1):
@@ -142,5 +142,5 @@ def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
         energies=_read_only(energies),
         final_angles=_read_only(data.qpos),
         final_velocities=_read_only(data.qvel),
-        final_energy=_energy(data),
+        final_energy=mujoco_energy(data),
     )

@@ -43,8 +43,8 @@ from scipy import integrate
 from sympy import ImmutableMatrix
 
 from ..errors import ScipyPeerError
-from ..generate.casadi_functions import SympyToCasadi, check_free_symbols
 from ..generate.casadi_source import casadi_c_source, work_sizes
+from ..generate.translation import SympyToCasadi, check_free_symbols
 from ..runtime.build import build_shared_library, cache_directory
 from ..scene import Scene
 from ..symbolic.joint_model import angle_directions, coriolis, joint_space_model
@@ -414,7 +414,7 @@ def _step_counting(solver_class, solvers: list):
     return StepCounting
 
 
-def _read_only(a) -> np.ndarray:
+def read_only_array(a) -> np.ndarray:
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
@@ -466,8 +466,8 @@ def simulate_scipy(scene: Scene, method: str, rtol: float, atol: float, t_end: f
         method=method, rtol=float(rtol), atol=float(atol), t_end=float(t_end),
         cpu_time=cpu_time, wall_time=wall_time, nfev=int(solution.nfev),
         njev=int(solution.njev), nlu=int(solution.nlu), n_steps=solver.accepted_steps,
-        final_angles=_read_only(solver.y[:n]), final_velocities=_read_only(solver.y[n:]),
-        sample_times=_read_only(solution.t), energies=_read_only(energies),
+        final_angles=read_only_array(solver.y[:n]), final_velocities=read_only_array(solver.y[n:]),
+        sample_times=read_only_array(solution.t), energies=read_only_array(energies),
         initial_energy=initial_energy,
         max_energy_error=float(np.abs(energies - initial_energy).max()),
         status=int(solution.status), message=str(solution.message))

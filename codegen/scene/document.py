@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import json
 
-from .values import Scene
+from .values import LINK_FIELDS, Scene
 
 
 def scene_document(scene: Scene) -> dict:
     """The TOML document (nested dicts and lists) that reads back as `scene`."""
     links = []
     for link in scene.links:
-        links.append({"mass": link.mass, "inertia": link.inertia, "length": link.length,
-                      "com": link.com, "com_normal": link.com_normal,
-                      "fastening": link.fastening, "damping": link.damping})
+        links.append({field.key: getattr(link, field.key) for field in LINK_FIELDS})
     springs = []
     for spring in scene.springs:
         entry = {"joints": [spring.first, spring.last], "stiffness": spring.stiffness,

@@ -15,11 +15,10 @@ from dataclasses import dataclass
 
 from ..errors import SceneError
 from ..runtime.keypaths import canonical_path, spelling_error
-from .values import Scene
+from .values import LINK_FIELDS, Scene
 
 #: The numbers of a link and of a spring that a solver may take as parameters, with their unit.
-LINK_NUMBERS = {"mass": "kg", "inertia": "kg m^2", "length": "m", "com": "m",
-                "com_normal": "m", "fastening": "m", "damping": "N m s/rad"}
+LINK_NUMBERS = {field.key: field.unit for field in LINK_FIELDS}
 SPRING_NUMBERS = {"stiffness": "N/m", "rest_length": "m"}
 #: Run-time numbers: every solver takes them per run; a study may vary them.
 RUN_NUMBERS = {"initial.angles": "rad", "initial.velocities": "rad/s", "simulation.dt": "s",

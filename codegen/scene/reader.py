@@ -23,7 +23,7 @@ from .display import printable as _printable
 from .display import shown as _show
 from .shipped import scene_file
 from .solver_rules import REQUEST_KEYS, Refusal, request_refusal
-from .values import Link, Scene, Simulation, Spring
+from .values import LINK_FIELDS, Link, Scene, Simulation, Spring
 
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 """A scene name: a letter, then letters, digits, '_' or '-' (usable in C after `c_identifier`)."""
@@ -32,8 +32,6 @@ _TOP_KEYS = ("name", "gravity", "base", "links", "springs", "actuation", "initia
              "simulation")
 _ACTUATION_KEYS = ("joints",)
 _BASE_KEYS = ("fastening",)
-_LINK_KEYS = ("mass", "inertia", "length", "com", "com_normal", "fastening", "damping")
-_LINK_REQUIRED = ("mass", "inertia", "length", "com")
 _SPRING_KEYS = ("joints", "stiffness", "rest_length", "offsets")
 _SPRING_REQUIRED = ("joints", "stiffness", "rest_length")
 _INITIAL_KEYS = ("angles", "velocities")
@@ -290,28 +288,21 @@ class SceneReader:
     def link(self, index: int, table: dict[str, Any]) -> Link:
         path = f"links[{index}]"
         i = index + 1
-        fields: dict[str, float] = {"com_normal": 0.0, "fastening": 0.0, "damping": 0.0}
+        known = {field.key: field for field in LINK_FIELDS}
+        fields: dict[str, float] = {field.key: field.default for field in LINK_FIELDS
+                                    if field.default is not None}
         for key, item in table.items():
+            field = known.get(key)
+            if field is None:
+                self.unknown_key(path, key, item, tuple(known))
             where = f"{path}.{key}"
-            if key == "mass":
-                fields[key] = self.bounded(where, item, f"m_{i} in kg, link {i}")
-            elif key == "inertia":
-                fields[key] = self.bounded(where, item, f"J_{i} in kg m^2, link {i}")
-            elif key == "length":
-                fields[key] = self.bounded(where, item, f"L_{i} in m, link {i}")
-            elif key == "com":
-                fields[key] = self.number(where, item, f"a_{i} in m, link {i}")
-            elif key == "com_normal":
-                fields[key] = self.number(where, item, f"b_{i} in m, link {i}")
-            elif key == "fastening":
-                fields[key] = self.number(where, item, f"r_{i + 1} in m, link {i}")
-            elif key == "damping":
-                fields[key] = self.bounded(where, item, f"d_{i} in N m s/rad, joint {i}")
+            if key in contract.NUMBER_BOUNDS:
+                fields[key] = self.bounded(where, item, field.meaning(i))
             else:
-                self.unknown_key(path, key, item, _LINK_KEYS)
-        for key in _LINK_REQUIRED:
-            if key not in fields:
-                self.fail(f"{path}.{key}", f"missing: required for every link (link {i})")
+                fields[key] = self.number(where, item, field.meaning(i))
+        for field in LINK_FIELDS:
+            if field.key not in fields:
+                self.fail(f"{path}.{field.key}", f"missing: required for every link (link {i})")
         return Link(**fields)
 
     def springs(self, value: Any) -> tuple[Spring, ...]:

@@ -22,6 +22,38 @@ def c_identifier(name: str) -> str:
 
 
 @dataclass(frozen=True)
+class LinkField:
+    """One number of a link: its key in a scene file's [[links]] table, which is also its
+    attribute of `Link` and its key path's last part (links[0].mass), its symbol in
+    docs/model.md, section 1, its unit, and its default (None: required)."""
+
+    key: str
+    symbol: str          # with the link's 1-based index i: "m_{i}", or "r_{i+1}"
+    unit: str
+    default: float | None
+    joint: bool = False  # a number of joint i (damping), named so in messages, not of link i
+
+    def meaning(self, i: int) -> str:
+        """How a message names this number of link i (1-based): "m_2 in kg, link 2"."""
+        symbol = self.symbol.replace("{i+1}", str(i + 1)).replace("{i}", str(i))
+        return f"{symbol} in {self.unit}, {'joint' if self.joint else 'link'} {i}"
+
+
+#: The numbers of a link, in the order of `Link`'s fields and of a scene file's keys
+#: (docs/scene-format.md): the reader, `Link`, the key paths of chaingen.scene.parameters and
+#: the scene document all read this table.
+LINK_FIELDS = (
+    LinkField("mass", "m_{i}", "kg", None),
+    LinkField("inertia", "J_{i}", "kg m^2", None),
+    LinkField("length", "L_{i}", "m", None),
+    LinkField("com", "a_{i}", "m", None),
+    LinkField("com_normal", "b_{i}", "m", 0.0),
+    LinkField("fastening", "r_{i+1}", "m", 0.0),
+    LinkField("damping", "d_{i}", "N m s/rad", 0.0, joint=True),
+)
+
+
+@dataclass(frozen=True)
 class Link:
     """Link i of docs/model.md, section 1 (SI units)."""
 
@@ -32,6 +64,7 @@ class Link:
     com_normal: float    # b_i, normal to the link
     fastening: float     # r_{i+1}, normal offset of the fastening at the distal joint
     damping: float       # d_i >= 0, viscous damping of joint i
+    # The fields are LINK_FIELDS' keys, in its order (tests/test_tables.py).
 
 
 @dataclass(frozen=True)

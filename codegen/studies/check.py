@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..runtime import NewtonOptions, Solver
+from ..scene.labels import scheme_label
 from ..symbolic.schemes import DiscreteScheme
 
 #: Newton settings for the differenced step map: tight, so solver noise stays below the
@@ -58,8 +59,7 @@ class CheckReport:
         return all(row.passed for row in self.rows)
 
     def table(self) -> str:
-        label = f"method {self.method}" + (f", quadrature {self.quadrature}"
-                                           if self.quadrature is not None else "")
+        label = scheme_label(self.method, self.quadrature)
         lines = [f"{self.scene}: {label}, {self.samples} random states",
                  f"  {'quantity':<22} {'against':<22} {'worst rel. error':>16} "
                  f"{'tolerance':>10}  result"]
@@ -95,19 +95,20 @@ class _SympyFunctions:
     """The scheme's expressions, lambdified over the same inputs as the C functions."""
 
     def __init__(self, scheme: DiscreteScheme):
-        solve = scheme.output_solve
+        solve = scheme.maps.output_solve
         solved = list(solve.symbols) if solve else []
-        self.residual = scheme.step_function(scheme.residual)
-        self.next_state = scheme.step_function(scheme.next_state)
-        self.composition = scheme.composition
+        self.residual = scheme.step_function(scheme.step.residual)
+        self.next_state = scheme.step_function(scheme.step.next_state)
+        self.composition = scheme.metadata.composition
         self.initial_state = scheme.initial_function()
-        self.outputs = scheme.state_function(list(scheme.joint_angles)
-                                             + list(scheme.joint_velocities) + [scheme.energy]
-                                             + list(scheme.constraint_residuals), solved)
+        maps = scheme.maps
+        self.outputs = scheme.state_function(list(maps.joint_angles) + list(maps.joint_velocities)
+                                             + [maps.energy] + list(maps.constraint_residuals),
+                                             solved)
         self.solve = ((scheme.state_function(list(solve.matrix)),
                        scheme.state_function(solve.rhs)) if solve else None)
         self.n = scheme.scene.n
-        self.nconstraint = scheme.constraint_residuals.shape[0]
+        self.nconstraint = scheme.maps.constraint_residuals.shape[0]
 
     def evaluate_outputs(self, x, p) -> np.ndarray:
         solved = []
@@ -210,7 +211,7 @@ def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
                           DERIVATIVE_TOLERANCE if name in against else VALUE_TOLERANCE)
                  for name, error in worst.items())
     quadrature = solver.manifest.get("quadrature")
-    return CheckReport(scene=scene.name, method=scheme.method, quadrature=quadrature,
+    return CheckReport(scene=scene.name, method=scheme.metadata.method, quadrature=quadrature,
                        samples=samples, rows=rows)
 
 

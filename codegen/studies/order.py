@@ -3,7 +3,7 @@
 For each step size dt the scene is simulated to t_end and compared, at common sample times
 (every `sample_interval`, 0.2 s by default), with
 
-- its own initial energy: the average energy error mean_k |H(t_k) - H(0)|;
+- its own initial energy: the average balance error mean_k |e_B(t_k)| (mean_balance_error);
 - a reference run of the same scheme and order with a much smaller step (min(dts) / 10 by
   default): the average trajectory (angle) error mean_k max_i |wrap(phi_i(t_k) - phi_ref_i(t_k))|
   and the average rate error mean_k max_i |omega_i(t_k) - omega_ref_i(t_k)|.
@@ -14,9 +14,8 @@ and points where the scheme has left its asymptotic regime are left out, and the
 which step sizes it used. A dt at which Newton's method fails is recorded as failed (with the
 solver's message), not raised.
 
-For a scene with joint damping or torques the "energy error" is the energy-balance error
-H - H_0 - (input work) + (dissipated energy) (model.md section 7), which is H - H_0 when there
-are no energy flows; the output then calls it the balance error.
+e_B = H - H_0 - (input work) + (dissipated energy) (model.md sections 7 and 8) is H - H_0
+without energy flows: the output then calls it the energy error, else the balance error.
 
 Every order option of the step (2, and 4 and 6 composed, model.md section 14) has its own
 step sizes and Newton settings (ORDER_DTS, ORDER_NEWTON_OPTIONS): at orders 4 and 6 most of the
@@ -40,6 +39,7 @@ from ..progress import Progress
 from ..runtime import NewtonOptions, SimulationResult, Solver
 from ..runtime.contract import JACOBIAN_EVERY_ITERATE, JACOBIAN_MODES
 from ..scene import METHODS, ORDERS, Scene, SolverSpec, SolverSpecError, load_scene
+from ..scene.labels import scheme_label
 from ..scene.solver_rules import orders_taken, request_refusal
 from .order_fit import MIN_FIT_POINTS as MIN_FIT_POINTS
 from .order_fit import SLOPE_TOLERANCE as SLOPE_TOLERANCE
@@ -99,14 +99,14 @@ class OrderRow:
 
     dt: float
     n_steps: int
-    energy_error: float | None             # mean over the sample times of |H - H_0| (J)
+    mean_balance_error: float | None       # mean over the sample times of |e_B| (J, model.md 8)
     trajectory_error: float | None         # mean over the sample times of max_i |dphi_i| (rad)
     mean_newton_iterations: float | None   # per step (of the steps done, if it failed)
     max_newton_iterations: int | None
     wall_time: float | None                # seconds in the C loop
     failure: str | None = None             # the solver's message when the run failed
     rate_error: float | None = None        # mean over the sample times of max_i |domega_i| (rad/s)
-    max_energy_error: float | None = None  # max over the sample times of |H - H_0| (J)
+    max_balance_error: float | None = None  # max over the sample times of |e_B| (J)
     max_constraint_error: float | None = None   # max over the sample times (model.md 8)
 
     @property
@@ -165,9 +165,9 @@ class OrderStudy:
         return tuple(row.dt for row in self.rows if row.failed)
 
     @property
-    def max_energy_error(self) -> float | None:
-        """The largest |energy (balance) error| at a sample time of any run that did not fail."""
-        return _largest(row.max_energy_error for row in self.rows if not row.failed)
+    def max_balance_error(self) -> float | None:
+        """The largest |e_B| (model.md 8) at a sample time of any run that did not fail."""
+        return _largest(row.max_balance_error for row in self.rows if not row.failed)
 
     @property
     def max_constraint_error(self) -> float | None:
@@ -328,7 +328,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
         except NewtonError as error:
             partial = error.result
             rows.append(OrderRow(
-                dt=dt, n_steps=round(t_end / dt), energy_error=None, trajectory_error=None,
+                dt=dt, n_steps=round(t_end / dt), mean_balance_error=None, trajectory_error=None,
                 mean_newton_iterations=partial.mean_newton_iterations if partial else None,
                 max_newton_iterations=partial.max_newton_iterations if partial else None,
                 wall_time=partial.wall_time if partial else None, failure=str(error)))
@@ -349,15 +349,15 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
         if not all(map(math.isfinite, (energy, trajectory, rate))):
             failure = "non-finite state in the samples (the run blew up)"
         rows.append(OrderRow(
-            dt=dt, n_steps=result.n_steps, energy_error=energy, trajectory_error=trajectory,
+            dt=dt, n_steps=result.n_steps, mean_balance_error=energy, trajectory_error=trajectory,
             mean_newton_iterations=result.mean_newton_iterations,
             max_newton_iterations=result.max_newton_iterations, wall_time=result.wall_time,
-            failure=failure, rate_error=rate, max_energy_error=float(np.max(balance)),
+            failure=failure, rate_error=rate, max_balance_error=float(np.max(balance)),
             max_constraint_error=float(np.max(np.abs(result.constraint_error[mine])))))
 
     scale = _energy_scale(solver, reference)
     # A failed dt counts as a gap: a fitted range never spans it.
-    energies = [None if row.failed else row.energy_error for row in rows]
+    energies = [None if row.failed else row.mean_balance_error for row in rows]
     trajectories = [None if row.failed else row.trajectory_error for row in rows]
     rates = [None if row.failed else row.rate_error for row in rows]
     energy_fit = fit_order(dts, energies, floor=energy_floor * scale, tolerance=slope_tolerance)
@@ -402,18 +402,6 @@ def order_studies(scene: Scene | str | os.PathLike, method: str, quadrature: int
 # Output
 # --------------------------------------------------------------------------------------------
 
-def scheme_label(study: OrderStudy) -> str:
-    """The scheme of a study: its method and, where it uses one, its quadrature."""
-    label = f"method {study.method}"
-    if study.quadrature is not None:
-        label += f", quadrature {study.quadrature}"
-    return label
-
-
-def study_label(study: OrderStudy) -> str:
-    return f"{scheme_label(study)}, order {study.order}"
-
-
 def newton_label(study: OrderStudy) -> str:
     """The Newton settings of the study's runs, as far as they are not the package's."""
     if not study.newton_settings:
@@ -436,8 +424,9 @@ def format_table(study: OrderStudy) -> str:
 
     With energy flows the energy column and its order are the balance error's."""
     energy = study.energy_name
+    label = scheme_label(study.method, study.quadrature, study.order, style="study")
     lines = [
-        f"{study.scene}: {study_label(study)}; t_end {study.t_end:g} s; reference: same method "
+        f"{study.scene}: {label}; t_end {study.t_end:g} s; reference: same method "
         f"and order, dt_ref {study.dt_ref:g} s ({study.reference_wall_time:.3g} s); errors "
         f"averaged over samples every {study.sample_interval:g} s",
         f"step sizes of order {study.order}: {', '.join(f'{dt:g}' for dt in study.dts)} s; "
@@ -446,13 +435,13 @@ def format_table(study: OrderStudy) -> str:
         f"{'rate error [rad/s]':>19}  {'Newton mean/max':>15}  {'wall [s]':>9}",
     ]
     for row in study.rows:
-        if row.failed and row.energy_error is None:
+        if row.failed and row.mean_balance_error is None:
             lines.append(f"{row.dt:>8.4g}  failed: {row.failure}")
             continue
         marks = ["*" if row.dt in fit.dts else " "
                  for fit in (study.energy_fit, study.trajectory_fit, study.rate_fit)]
         newton = f"{row.mean_newton_iterations:.2f} / {row.max_newton_iterations}"
-        line = (f"{row.dt:>8.4g}  {row.energy_error:>15.3e} {marks[0]}  "
+        line = (f"{row.dt:>8.4g}  {row.mean_balance_error:>15.3e} {marks[0]}  "
                 f"{row.trajectory_error:>21.3e} {marks[1]}  {row.rate_error:>17.3e} {marks[2]}  "
                 f"{newton:>15}  {row.wall_time:>9.2e}")
         if row.failed:
@@ -486,13 +475,14 @@ def format_summary(studies) -> str:
               f"{f'{energy} order':>13}")
     if conserving:    # es's constraints c_i(q) are in m^2 (model.md section 8)
         header += f"  {f'max {energy} error [J]':>21}  {'max constraint error [m^2]':>26}"
-    lines = [f"{first.scene}: {scheme_label(first)}; t_end {first.t_end:g} s; fitted orders "
+    label = scheme_label(first.method, first.quadrature)
+    lines = [f"{first.scene}: {label}; t_end {first.t_end:g} s; fitted orders "
              "(slope of log error against log dt; --: no linear range above the floor)", header]
     for study in studies:
         line = (f"{study.order:>12}  {_cell(study.trajectory_order, 11, '.2f')}  "
                 f"{_cell(study.rate_order, 10, '.2f')}  {_cell(study.energy_order, 13, '.2f')}")
         if conserving:
-            line += (f"  {_cell(study.max_energy_error, 21, '.2e')}  "
+            line += (f"  {_cell(study.max_balance_error, 21, '.2e')}  "
                      f"{_cell(study.max_constraint_error, 26, '.2e')}")
         if study.failed_dts:
             line += f"  (failed at dt = {', '.join(f'{dt:g}' for dt in study.failed_dts)} s)"

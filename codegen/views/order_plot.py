@@ -8,7 +8,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..studies.order import OrderStudy, scheme_label
+from ..scene.labels import scheme_label
+from ..studies.order import OrderStudy
 from .figure import matplotlib_figure, save_png
 
 #: The panels: title, y label, OrderRow attribute, fit and floor attributes of OrderStudy.
@@ -16,7 +17,7 @@ _PANELS = (
     ("angles", "trajectory error [rad]", "trajectory_error", "trajectory_fit",
      "trajectory_floor"),
     ("rates", "rate error [rad/s]", "rate_error", "rate_fit", "rate_floor"),
-    ("energy", "energy error [J]", "energy_error", "energy_fit", "energy_floor"),
+    ("energy", "energy error [J]", "mean_balance_error", "energy_fit", "energy_floor"),
 )
 _MARKERS = {2: "o", 4: "s", 6: "^"}
 
@@ -36,7 +37,7 @@ def plot_order(studies: OrderStudy | tuple[OrderStudy, ...] | list[OrderStudy],
     energy = first.energy_name
     for column, (title, ylabel, attribute, fit_name, floor_name) in enumerate(_PANELS):
         axes = figure.add_subplot(1, len(_PANELS), column + 1)
-        if attribute == "energy_error":
+        if attribute == "mean_balance_error":
             title, ylabel = energy, f"{energy} error [J]"
         lowest = []
         for index, study in enumerate(studies):
@@ -67,7 +68,7 @@ def plot_order(studies: OrderStudy | tuple[OrderStudy, ...] | list[OrderStudy],
         axes.set_ylabel(f"average {ylabel}")
         axes.grid(True, which="both", alpha=0.3)
         axes.legend(fontsize=8, loc="best")
-    figure.suptitle(f"{first.scene}: {scheme_label(first)}, t_end {first.t_end:g} s "
-                    "(dashed: the fitted ranges)")
+    label = scheme_label(first.method, first.quadrature)
+    figure.suptitle(f"{first.scene}: {label}, t_end {first.t_end:g} s (dashed: the fitted ranges)")
     figure.tight_layout()
     return save_png(figure, path)

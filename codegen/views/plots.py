@@ -22,9 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PlotError
+from ..runtime import contract
 from ..runtime.files import check_output_file
+from ..runtime.results import sample_joints, sample_slice
 from ..runtime.trajectory import metadata_path, read_trajectory
 from ..scene import ORDERS
+from ..scene.labels import scheme_label
 from .figure import matplotlib_figure, save_png
 
 #: Figure size in inches and resolution: 1500 x 1200 pixels.
@@ -32,6 +35,8 @@ FIGURE_SIZE = (10.0, 8.0)
 DPI = 150
 #: Errors whose positive values span more decades than this are drawn on a log scale.
 LOG_DECADES = 2.0
+#: The joint angles' column of the sample row, which names them in the legends.
+ANGLE_COLUMN = contract.SAMPLE_COLUMNS[1].name
 
 
 @dataclass(frozen=True)
@@ -56,22 +61,25 @@ class TrajectoryRun:
 
     @property
     def t(self) -> np.ndarray:
-        return self.rows[:, 0]
+        return self.column("t")
 
     @property
     def phi(self) -> np.ndarray:
-        return self.rows[:, 1:1 + self.n]
+        return self.rows[:, sample_slice(self.columns, ANGLE_COLUMN)]
 
     @property
     def balanced(self) -> bool:
         """True when the file carries the energy flows of an actuated or damped scene."""
-        return "input_work" in self.columns and "dissipated" in self.columns
+        return all(name in self.columns for name in contract.FLOW_ENTRIES)
 
     @property
-    def energy_error(self) -> np.ndarray:
+    def abs_balance_error(self) -> np.ndarray:
+        """|e_B| = |H - H_0 - W + D| at every sample (model.md section 8); without energy
+        flows in the file, |e_E| = |H - H_0|."""
         error = self.column("energy") - self.column("energy")[0]
         if self.balanced:
-            error = error - self.column("input_work") + self.column("dissipated")
+            work, dissipated = contract.FLOW_ENTRIES
+            error = error - self.column(work) + self.column(dissipated)
         return np.abs(error)
 
     @property
@@ -88,11 +96,8 @@ class TrajectoryRun:
     @property
     def label(self) -> str:
         """'es K=3, dt = 0.01 s', as much of it as is known."""
-        parts = [self.method or self.path.stem]
-        if self.quadrature is not None:
-            parts[0] += f" K={self.quadrature}"
-        if self.order != 2:
-            parts[0] += f" order {self.order}"
+        parts = [self.path.stem if self.method is None
+                 else scheme_label(self.method, self.quadrature, self.order, style="short")]
         if self.dt is not None:
             parts.append(f"dt = {self.dt:g} s")
         parts += [f"{path} = {self.parameters[path]:g}" for path in self.named
@@ -118,12 +123,12 @@ def load_run(path) -> TrajectoryRun:
         columns, rows = read_trajectory(path)
     except (ValueError, UnicodeDecodeError) as error:
         raise PlotError(f"{path}: not a trajectory file (scene-format.md): {error}") from None
-    n = sum(1 for name in columns if name.startswith("phi") and name[3:].isdigit())
-    expected = (["t"] + [f"phi{i}" for i in range(1, n + 1)]
-                + [f"omega{i}" for i in range(1, n + 1)] + ["energy", "constraint_error"])
+    n = sample_joints(columns)
+    expected = list(contract.sample_column_names(n))
     if n == 0 or list(columns[:len(expected)]) != expected:
-        wanted = (", ".join(expected) if n
-                  else "t, phi1..phin, omega1..omegan, energy, constraint_error")
+        wanted = ", ".join(expected) if n else ", ".join(
+            column.name.format(i=1) + ".." + column.name.format(i="n") if column.per_joint
+            else column.name for column in contract.SAMPLE_COLUMNS if not column.flows)
         raise PlotError(f"{path}: the header must start with the columns {wanted} "
                         f"(scene-format.md), got {', '.join(columns)}")
     if rows.shape[0] < 2:
@@ -151,7 +156,7 @@ def load_run(path) -> TrajectoryRun:
 
 def run_from_result(result, source) -> TrajectoryRun:
     """A TrajectoryRun of a SimulationResult in memory (source: what to call it)."""
-    n = sum(1 for name in result.columns if name.startswith("phi"))
+    n = sample_joints(result.columns)
     return TrajectoryRun(path=Path(source), columns=tuple(result.columns),
                          rows=np.asarray(result.samples), n=n, scene=result.scene,
                          method=result.method, quadrature=result.quadrature,
@@ -304,7 +309,7 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
             angles.plot(run.t, broken_at_wraps(run.phi[:, joint]),
                         color=f"C{joint % 10}" if single else style["color"],
                         linestyle="-" if single else joint_line_style(joint), linewidth=1.0,
-                        label=f"phi{joint + 1}" if single else None)
+                        label=ANGLE_COLUMN.format(i=joint + 1) if single else None)
     if single:
         angles.legend(fontsize=8, loc="upper right", ncol=min(4, runs[0].n))
     else:
@@ -312,14 +317,14 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
         handles = [Line2D([], [], **style, label=run.label)
                    for run, style in zip(runs, _styles(len(runs)))]
         handles += [Line2D([], [], color="0.3", linestyle=joint_line_style(joint),
-                           label=f"phi{joint + 1}")
+                           label=ANGLE_COLUMN.format(i=joint + 1))
                     for joint in range(max(run.n for run in runs))]
         angles.legend(handles=handles, fontsize=7, loc="upper right", ncol=2)
     angles.set_ylabel("joint angle phi_i [rad]")
     angles.grid(True, alpha=0.3)
     energy_label = ("|H - H0 - W + D| [J]" if any(run.balanced for run in runs)
                     else "|H - H0| [J]")
-    _error_axis(energy, runs, [run.energy_error for run in runs], energy_label,
+    _error_axis(energy, runs, [run.abs_balance_error for run in runs], energy_label,
                 "energy error 0 at every sample")
     _error_axis(constraint, runs, [run.constraint_error for run in runs],
                 "constraint error", "no constraints (minimal coordinates): error 0")

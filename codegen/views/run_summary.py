@@ -10,13 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..scene.labels import scheme_label
+
 
 def run_summary(result, settings, out: Path | None) -> str:
-    label = f"method {result.method}"
-    if result.quadrature is not None:
-        label += f", quadrature {result.quadrature}"
-    if result.order != 2:
-        label += f", order {result.order}"
+    label = scheme_label(result.method, result.quadrature, result.order)
     per_step = result.wall_time / max(result.n_steps, 1)
     # Adaptive steps cover each interval dt with steps of their own (counted below).
     step = "interval" if result.adaptive else "step"
@@ -32,7 +30,7 @@ def run_summary(result, settings, out: Path | None) -> str:
         f"  t_realtime             {result.t_realtime:.3g}",
         f"  max |energy error|     {np.abs(result.energy_error).max():.3e} J{over}",
     ]
-    if "dissipated" in result.columns:
+    if result.has_flows:
         lines += [
             f"  input work, dissipated {result.input_work[-1]:.6g} J, "
             f"{result.dissipated[-1]:.6g} J",

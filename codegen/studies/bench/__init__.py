@@ -40,7 +40,6 @@ from . import knobs
 from .accuracy import reference_study
 from .config import HEADLINE_DT, HEADLINE_SCENE, BenchConfig, bench_config
 from .control import control_study, control_table
-from .figures import plot_scaling, plot_work_precision
 from .headlines import headlines
 from .report import headline_table, machine_description, markdown, reference_table, scaling_table
 from .scaling import scaling_study
@@ -83,18 +82,19 @@ class BenchReport:
     wall_seconds: float
 
 
-def run_bench(config: BenchConfig, *, progress=None, emit=print) -> BenchReport:
+def run_bench(config: BenchConfig, *, progress=None, emit=print, figures=None) -> BenchReport:
     """Run every part of `config`, then write the figures and the document (in that order, so
-    that a failure leaves the previous document in place)."""
+    that a failure leaves the previous document in place). figures: what draws them
+    (chaingen.views.bench_figures: plot_work_precision, plot_scaling); None: none drawn."""
     started = time.perf_counter()
     with Progress("bench", total=0) as bar:
         if progress is None:   # a status line on a terminal; silent in logs, in CI, --quiet
             def progress(message: str) -> None:
                 bar.stage(message)
-        return _run_bench(config, progress, emit, started)
+        return _run_bench(config, progress, emit, started, figures)
 
 
-def _run_bench(config: BenchConfig, progress, emit, started: float) -> BenchReport:
+def _run_bench(config: BenchConfig, progress, emit, started: float, drawing) -> BenchReport:
     machine = machine_description()
     def emit_scene(name: str, t_end: float, rows) -> None:
         emit(f"\n{name} (t_end = {t_end:g} s)\n\n{reference_table(rows)}")
@@ -112,10 +112,11 @@ def _run_bench(config: BenchConfig, progress, emit, started: float) -> BenchRepo
     found = headlines(reference, scaling, config, control)
     emit(f"\nheadline\n\n{headline_table(found)}")
     figures = {}
-    for name, rows in reference.items():
-        figures[name] = plot_work_precision(name, rows, config.figures / f"bench_{name}.png")
-    if scaling is not None:
-        figures["scaling"] = plot_scaling(scaling, config.figures / "bench_scaling.png")
+    for name, rows in (reference.items() if drawing is not None else ()):
+        figures[name] = drawing.plot_work_precision(name, rows,
+                                                    config.figures / f"bench_{name}.png")
+    if scaling is not None and drawing is not None:
+        figures["scaling"] = drawing.plot_scaling(scaling, config.figures / "bench_scaling.png")
     wall = time.perf_counter() - started
     document = write_text(config.out, markdown(config, found, reference, scaling,
                                                      figures, machine, wall, knobs,

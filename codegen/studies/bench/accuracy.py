@@ -17,7 +17,8 @@ import time
 from ...errors import NewtonError
 from ...generate.package import generate_package
 from ...runtime import Solver
-from ...scene import Scene, load_reference_scene
+from ...scene import Scene, load_reference_scene, quadrature_used
+from ...scene.labels import scheme_label
 from .config import (
     ADAPTIVE_SAMPLE,
     EARLY_T,
@@ -29,7 +30,6 @@ from .harness import Harness, HarnessError
 from .runs import (
     RunRow,
     compiled_rows,
-    method_label,
     mujoco_rows,
     reference_angles_at_end,
     run_errors,
@@ -40,8 +40,8 @@ from .runs import (
 
 def order_label(scene: Scene, method: str, quadrature: int, order: int) -> str:
     """The line of a configuration of ours: "es K=5 order 4"; order 2 as runs.method_label."""
-    label = method_label(scene, method, quadrature, order)
-    return label if order == 2 else f"{label} order {order}"
+    return scheme_label(method, quadrature_used(scene, method, quadrature, order), order,
+                        style="short")
 
 
 def higher_order_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,

@@ -174,13 +174,13 @@ def _parse_list(text: str, option: str, kind):
     return tuple(values)
 
 
-def _divides(dt: float, t_end: float) -> bool:
+def divides_evenly(dt: float, t_end: float) -> bool:
     steps = round(t_end / dt)
     return steps >= 1 and abs(steps * dt - t_end) <= 1e-9 * t_end
 
 
 def _check_divides(dt: float, t_end: float, option: str) -> None:
-    if not _divides(dt, t_end):
+    if not divides_evenly(dt, t_end):
         raise BenchError(f"{option}: dt = {dt!r} s does not divide the run's t_end = {t_end:g} s "
                          "(the trajectory error is taken at t_end)")
 

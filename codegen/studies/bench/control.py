@@ -103,7 +103,7 @@ def control_study(config: BenchConfig, progress) -> list[ControlRow]:
     import mujoco
 
     from ...simulation import build_solver
-    from .runs import _mujoco_model
+    from .runs import mujoco_model
 
     scene = control_scene()
     dt = HEADLINE_DT
@@ -118,7 +118,7 @@ def control_study(config: BenchConfig, progress) -> list[ControlRow]:
     def controller(t, phi, omega):
         return hold + kp * (reference - phi) - kd * omega
 
-    model, data = _mujoco_model(scene, dt, "RK4")
+    model, data = mujoco_model(scene, dt, "RK4")
 
     def mujoco_loop(closed: bool) -> float:
         mujoco.mj_resetData(model, data)

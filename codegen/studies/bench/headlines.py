@@ -5,6 +5,7 @@ import math
 from dataclasses import dataclass
 
 from ...scene import load_reference_scene
+from ...scene.labels import scheme_label
 from .config import (
     ADAPTIVE_K,
     ADAPTIVE_RTOL,
@@ -277,11 +278,9 @@ def adaptive_headlines(rows) -> list[Headline]:
     early time / that of fixed steps of the same es (order 2, same K, default options) at the
     same CPU (interpolated along their dts), and its energy error over the run."""
     early = min(EARLY_T, rows[0].t_end) if rows else EARLY_T
-    adaptive = next((row for row in rows if row.method.endswith(" adaptive")
-                     and row.method.split()[:2] == ["es", f"K={ADAPTIVE_K}"]
-                     and " order " not in row.method
+    fixed_label = scheme_label("es", ADAPTIVE_K, style="short")
+    adaptive = next((row for row in rows if row.method == f"{fixed_label} adaptive"
                      and row.setting.startswith(f"rtol = atol = {ADAPTIVE_RTOL:g},")), None)
-    fixed_label = f"es K={ADAPTIVE_K}"
     claim = (f"{fixed_label} adaptive, rtol = {ADAPTIVE_RTOL:g}: trajectory error at t = "
              f"{early:g} s / that of fixed steps of the same CPU, {ADAPTIVE_SCENE}")
     energy_claim = (f"{fixed_label} adaptive, rtol = {ADAPTIVE_RTOL:g}: max energy error, "

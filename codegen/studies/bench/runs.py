@@ -28,6 +28,7 @@ from ...errors import NewtonError, ScipyPeerError
 from ...generate.package import generate_package
 from ...runtime import Solver
 from ...scene import Scene, quadrature_used
+from ...scene.labels import scheme_label
 from .config import (
     ADAPTIVE_BRACKET_DTS,
     ADAPTIVE_SCENE,
@@ -39,7 +40,7 @@ from .config import (
     SCIPY_REPEAT_BELOW,
     VARIANTS,
     BenchConfig,
-    _divides,
+    divides_evenly,
     steps,
 )
 from .harness import Harness, HarnessError
@@ -83,8 +84,7 @@ class RunRow:
 
 
 def method_label(scene: Scene, method: str, quadrature: int, order: int = 2) -> str:
-    used = quadrature_used(scene, method, quadrature, order)
-    return method if used is None else f"{method} K={used}"
+    return scheme_label(method, quadrature_used(scene, method, quadrature, order), style="short")
 
 
 def angle_error(phi, reference) -> float:
@@ -105,7 +105,7 @@ def run_errors(result, method: str, t_end: float, dt: float, reference_angles) -
         trajectory_error=(angle_error(result.phi[-1], reference_angles[0])
                           if reference_angles[0] is not None else None),
         early_trajectory_error=(angle_error(result.phi[steps(early_t, dt)], reference_angles[1])
-                                if reference_angles[1] is not None and _divides(dt, early_t)
+                                if reference_angles[1] is not None and divides_evenly(dt, early_t)
                                 else None))
 
 
@@ -132,10 +132,10 @@ def scheme_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
         x0 = solver.initial_state(phi0, omega0)
         dts = config.dts
         if name == HEADLINE_SCENE and method == "es":
-            dts = tuple(dt for dt in BRACKET_DTS if _divides(dt, t_end)
+            dts = tuple(dt for dt in BRACKET_DTS if divides_evenly(dt, t_end)
                         and dt not in dts) + dts
         if name == ADAPTIVE_SCENE and method == "es" and not config.quick:
-            dts = dts + tuple(dt for dt in ADAPTIVE_BRACKET_DTS if _divides(dt, t_end)
+            dts = dts + tuple(dt for dt in ADAPTIVE_BRACKET_DTS if divides_evenly(dt, t_end)
                               and dt not in dts)
         with Harness(package, flags=HARNESS_FLAGS) as harness:
             for dt in dts:
@@ -167,9 +167,9 @@ def scheme_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
 
 
 
-def _mujoco_model(scene: Scene, dt: float, integrator: str):
-    from ...reference.mujoco_runs import _model_and_data
-    return _model_and_data(scene, dt, integrator)
+def mujoco_model(scene: Scene, dt: float, integrator: str):
+    from ...reference.mujoco_runs import mujoco_model_and_data
+    return mujoco_model_and_data(scene, dt, integrator)
 
 
 def mujoco_step_seconds(scene: Scene, integrator: str, dt: float, n_steps: int,
@@ -178,7 +178,7 @@ def mujoco_step_seconds(scene: Scene, integrator: str, dt: float, n_steps: int,
     from the scene's initial state; median of `repeats`."""
     import mujoco
 
-    model, data = _mujoco_model(scene, dt, integrator)
+    model, data = mujoco_model(scene, dt, integrator)
     timed = max(1, min(n_steps, MUJOCO_TIMED_STEPS))
     times = []
     for _ in range(repeats):
@@ -201,11 +201,11 @@ def mujoco_accuracy(scene: Scene, integrator: str, dt: float,
     state on a bad acceleration and carries on, so the warning is the only trace)."""
     import mujoco
 
-    from ...reference.mujoco_runs import _energy
+    from ...reference.mujoco_runs import mujoco_energy
 
-    model, data = _mujoco_model(scene, dt, integrator)
+    model, data = mujoco_model(scene, dt, integrator)
     energies = np.empty(n_steps + 1)
-    energies[0] = _energy(data)
+    energies[0] = mujoco_energy(data)
     early = None
     step, forward = mujoco.mj_step, mujoco.mj_forward
     for k in range(1, n_steps + 1):
@@ -233,7 +233,7 @@ def mujoco_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
             base = dict(scene=name, family="MuJoCo", method=f"MuJoCo {integrator}", variant="-",
                         setting=f"dt = {dt:g} s", t_end=t_end, dt=dt, n_steps=n_steps)
             early_t = min(EARLY_T, t_end)
-            early_step = steps(early_t, dt) if _divides(dt, early_t) else None
+            early_step = steps(early_t, dt) if divides_evenly(dt, early_t) else None
             energy, angles, failure, early = mujoco_accuracy(scene, integrator, dt, n_steps,
                                                              early_step)
             if failure:

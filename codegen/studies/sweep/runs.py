@@ -183,8 +183,9 @@ def _summary(simulated, rows: slice, n: int) -> dict:
     if simulated is None or not len(simulated.samples):
         return {"steps": 0, "max_energy_error": nan, "max_constraint_error": nan,
                 "newton_mean": nan, "newton_max": 0}
-    error = simulated.balance_error if "dissipated" in simulated.columns \
-        else simulated.energy_error
+    # max |e_B| (model.md 8): the balance error, which is H - H_0 without energy flows
+    # (docs/sweep-format.md names the column max_energy_error).
+    error = simulated.balance_error if simulated.has_flows else simulated.energy_error
     return {"steps": int(simulated.n_steps),
             "max_energy_error": float(np.abs(error[rows]).max()),
             "max_constraint_error": float(np.abs(simulated.constraint_error[rows]).max()),

@@ -5,8 +5,6 @@ A scheme may take some of the scene's numbers as run-time parameters: they enter
 as symbols (chaingen.scene.parameters.with_symbols), every other number as a constant."""
 from __future__ import annotations
 
-import dataclasses
-
 import sympy as sp
 from sympy import ImmutableMatrix
 
@@ -40,8 +38,8 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
     symbols = {number.path: sp.Dummy(f"parameter{index}", real=True)
                for index, number in enumerate(numbers)}
     scheme = builder(with_symbols(scene, symbols), quadrature, order)
-    return dataclasses.replace(
-        scheme, scene=scene, segment_tolerances=segment_tolerances(scene),
+    return scheme.replaced(
+        scene=scene, segment_tolerances=segment_tolerances(scene),
         parameters=ImmutableMatrix(list(symbols.values()))
         if symbols else ImmutableMatrix.zeros(0, 1),
         parameter_paths=tuple(number.path for number in numbers),

@@ -9,6 +9,7 @@ scheme are on it too).
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import sympy as sp
@@ -72,17 +73,55 @@ class FlowDescription:
 
 
 @dataclass(frozen=True)
-class DiscreteScheme:
+class SchemeMetadata:
+    """What a scheme is: its method, the quadrature it runs with, the order of its step and
+    the stages' step fractions (chaingen.symbolic.composition: order 2 is the scheme's own
+    step, a single stage), and one sentence for the package's documentation."""
+
     method: str
     quadrature: int | None             # Gauss-Legendre points, None where K plays no role
-    scene: Scene
     summary: str                       # one sentence: what the scheme is
+    # What the quadrature K integrates, for the package's label (None: the spring terms by K
+    # Gauss-Legendre points, es's COM step).
+    quadrature_rule: str | None = None
+    order: int = 2
+    composition: tuple[float, ...] = (1.0,)
+
+
+@dataclass(frozen=True)
+class StepSystem:
+    """One step as Newton's method solves it: unknowns z, a residual F(z; x_k, u, p, dt) = 0,
+    the next state x_{k+1}(z; x_k, dt), the first guess, and the package's Newton defaults."""
+
     dt: sp.Symbol
-    state: ImmutableMatrix             # symbols of x_k
     unknowns: ImmutableMatrix          # symbols of z
     residual: ImmutableMatrix          # F(z; x_k, dt), one entry per unknown
     next_state: ImmutableMatrix        # x_{k+1}(z; x_k, dt)
     predictor: ImmutableMatrix         # first Newton guess z(x_k, dt)
+    unknowns_layout: Layout
+    residual_description: str
+    # Intermediate quantities of the step, (symbol, expression) in order of definition: each
+    # expression uses the step's inputs (z, x_k, u, dt) and earlier symbols, and residual,
+    # next_state and the flows may use the symbols. They keep a large chain's expressions as
+    # a sequence of small ones (model.md's spring segments at each quadrature node), which code
+    # generation translates once and shares, instead of SymPy expanding them into every use.
+    definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+    # The Newton Jacobian reuse the package defaults to (a JACOBIAN_* mode of the contract).
+    jacobian_reuse: int = JACOBIAN_EVERY_ITERATE
+    # Other Newton defaults of the package that differ from the contract's, (name, value).
+    newton_overrides: tuple[tuple[str, float], ...] = ()
+    # The factors of the Newton matrix where the package solves it by them (es at large n),
+    # else None: dense LU of dF/dz.
+    arm_space: ArmSpace | None = None
+
+
+@dataclass(frozen=True)
+class StateMaps:
+    """The scheme's state x and its maps: to joint space and the diagnostics (outputs), from
+    joint space (initial_state), and the holding torques at a posture."""
+
+    state: ImmutableMatrix             # symbols of x_k
+    state_layout: Layout
     joint_angles: ImmutableMatrix      # phi(x), relative angles wrapped to (-pi, pi]
     joint_velocities: ImmutableMatrix  # omega(x), relative angular velocities
     energy: sp.Expr                    # H(x) = T + V
@@ -90,58 +129,17 @@ class DiscreteScheme:
     initial_angles: ImmutableMatrix    # symbols phi of initial_state
     initial_velocities: ImmutableMatrix  # symbols phidot of initial_state
     initial_state: ImmutableMatrix     # x(phi, phidot)
-    state_layout: Layout
-    unknowns_layout: Layout
-    residual_description: str
     output_solve: LinearSolve | None = None   # symbols the outputs use beside the state
-    # Inputs (model.md 7): torques u of the scene's actuated joints, constant over a step; the
-    # residual and next_state may depend on them. Empty for an unactuated scene.
-    inputs: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
-    # Energy flows of one step, functions of (z, x0, u, dt): the work of u and the energy
-    # dissipated by joint damping (>= 0). Zero for a scene with neither.
-    input_work: sp.Expr = sp.Integer(0)
-    dissipated: sp.Expr = sp.Integer(0)
-    # Every spring segment P_{j+1} - P_j of the state as (dx, dy) pairs, watched during a run
-    # (model.md 2): a segment must not shrink to zero length nor pass through it in a step.
-    segment_vectors: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
-    # Intermediate quantities of the step, (symbol, expression) in order of definition: each
-    # expression uses the step's inputs (z, x_k, u, dt) and earlier symbols, and residual,
-    # next_state and the flows may use the symbols. They keep a large chain's expressions as
-    # a sequence of small ones (model.md's spring segments at each quadrature node), which code
-    # generation translates once and shares, instead of SymPy expanding them into every use.
-    definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
-    # The same for the expressions of the state alone (joint_angles, joint_velocities, energy,
-    # constraint_residuals, segment_vectors, predictor, output_solve), in the state and p; and
-    # for initial_state, in initial_angles, initial_velocities and p. A joint-space chain's
-    # recursions (chaingen.symbolic.recursion) keep these O(n) too.
+    # The definitions (as StepSystem's) of the expressions of the state alone (joint_angles,
+    # joint_velocities, energy, constraint_residuals, segment vectors, predictor,
+    # output_solve), in the state and p; and of initial_state, in initial_angles,
+    # initial_velocities and p. A joint-space chain's recursions (chaingen.symbolic.recursion)
+    # keep these O(n) too.
     state_definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
     initial_definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
-    # How the flows above are measured (None for a scene without energy flows).
-    flow_description: FlowDescription | None = None
     # dV/dphi in the symbols initial_angles: the joint torques that hold the chain still at a
     # posture (gravity and springs), a controller's feed-forward. Actuated scenes only.
     holding_torques: ImmutableMatrix | None = None
-    # The length under which each segment of segment_vectors stops a run (m), and that length
-    # relative to the geometry's size (docs/model.md, section 12).
-    segment_tolerances: tuple[float, ...] = ()
-    segment_relative_tolerance: float = RUN_SEGMENT_RELATIVE_TOLERANCE
-    # The Newton Jacobian reuse the package defaults to (a JACOBIAN_* mode of the contract).
-    jacobian_reuse: int = JACOBIAN_EVERY_ITERATE
-    # Other Newton defaults of the package that differ from the contract's, (name, value).
-    newton_overrides: tuple[tuple[str, float], ...] = ()
-    # What the quadrature K integrates, for the package's label (None: the spring terms by K
-    # Gauss-Legendre points, es's COM step).
-    quadrature_rule: str | None = None
-    # Run-time parameters: scene numbers left as symbols p (every other number is a constant
-    # folded into the code), with their key paths, units and the scene's own values.
-    parameters: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
-    parameter_paths: tuple[str, ...] = ()
-    parameter_units: tuple[str, ...] = ()
-    parameter_values: tuple[float, ...] = ()
-    # The order of the step and its stages' step fractions (chaingen.symbolic.composition):
-    # order 2 is the scheme's own step, a single stage.
-    order: int = 2
-    composition: tuple[float, ...] = (1.0,)
     # Whether the joint-space state s = (phi, omega) determines the scheme's state x along a
     # run (x = initial_state(outputs(x))): then the step sensitivities of a composed step
     # are the chain rule of its stages' in joint space. es's x carries a normal velocity
@@ -150,45 +148,166 @@ class DiscreteScheme:
     # T(x), for the check of a converged step against the energy balance (docs/model.md,
     # section 13) of a scheme that does not keep it exactly (vi, midpoint); None: no check.
     kinetic_energy: sp.Expr | None = None
-    # The factors of the Newton matrix where the package solves it by them (es at large n),
-    # else None: dense LU of dF/dz.
-    arm_space: ArmSpace | None = None
+
+
+@dataclass(frozen=True)
+class EnergyFlows:
+    """Inputs (model.md 7): torques u of the scene's actuated joints, constant over a step (the
+    residual and next_state may depend on them; empty for an unactuated scene), and the energy
+    flows of one step, functions of (z, x0, u, dt): the work of u and the energy dissipated by
+    joint damping (>= 0); zero for a scene with neither."""
+
+    inputs: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
+    input_work: sp.Expr = sp.Integer(0)
+    dissipated: sp.Expr = sp.Integer(0)
+    description: FlowDescription | None = None   # None for a scene without energy flows
+
+
+@dataclass(frozen=True)
+class SpringSegments:
+    """Every spring segment P_{j+1} - P_j of the state as (dx, dy) pairs, watched during a run
+    (model.md 2): a segment must not shrink to zero length nor pass through it in a step; the
+    length under which each stops a run (m), and that length relative to the geometry's size
+    (docs/model.md, section 12)."""
+
+    vectors: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
+    tolerances: tuple[float, ...] = ()
+    relative_tolerance: float = RUN_SEGMENT_RELATIVE_TOLERANCE
+
+
+@dataclass(frozen=True)
+class RunParameters:
+    """Run-time parameters: scene numbers left as symbols p (every other number is a constant
+    folded into the code), with their key paths, units and the scene's own values."""
+
+    symbols: ImmutableMatrix = ImmutableMatrix.zeros(0, 1)
+    paths: tuple[str, ...] = ()
+    units: tuple[str, ...] = ()
+    values: tuple[float, ...] = ()
+
+
+#: The records of a DiscreteScheme, by its field names.
+RECORDS = {"metadata": SchemeMetadata, "step": StepSystem, "maps": StateMaps,
+           "flows": EnergyFlows, "segments": SpringSegments, "run_parameters": RunParameters}
+#: The flat names a scheme builder passes (DiscreteScheme.of) that are not their record
+#: field's name: flat name -> (record, field).
+_RENAMED = {"flow_description": ("flows", "description"),
+            "segment_vectors": ("segments", "vectors"),
+            "segment_tolerances": ("segments", "tolerances"),
+            "segment_relative_tolerance": ("segments", "relative_tolerance"),
+            "parameters": ("run_parameters", "symbols"),
+            "parameter_paths": ("run_parameters", "paths"),
+            "parameter_units": ("run_parameters", "units"),
+            "parameter_values": ("run_parameters", "values")}
+#: Every flat name of a scheme's fields: flat name -> (record, field).
+FLAT_NAMES = {**{field.name: (record, field.name) for record, kind in RECORDS.items()
+                 for field in dataclasses.fields(kind)
+                 if (record, field.name) not in _RENAMED.values()}, **_RENAMED}
+
+
+@dataclass(frozen=True, init=False)
+class DiscreteScheme:
+    """A scheme for one scene: the records it is made of. Code generation reads them by
+    record (scheme.step.residual, scheme.maps.state_layout); a flat name (scheme.residual)
+    reads the same field, and dataclasses.replace(scheme, residual=...) replaces it, for code
+    written before the records (FLAT_NAMES)."""
+
+    scene: Scene
+    metadata: SchemeMetadata
+    step: StepSystem
+    maps: StateMaps
+    flows: EnergyFlows = EnergyFlows()
+    segments: SpringSegments = SpringSegments()
+    run_parameters: RunParameters = RunParameters()
+
+    def __init__(self, scene: Scene, metadata: SchemeMetadata, step: StepSystem,
+                 maps: StateMaps, flows: EnergyFlows = EnergyFlows(),
+                 segments: SpringSegments = SpringSegments(),
+                 run_parameters: RunParameters = RunParameters(), **flat):
+        records = {"metadata": metadata, "step": step, "maps": maps, "flows": flows,
+                   "segments": segments, "run_parameters": run_parameters}
+        changes: dict[str, dict] = {}
+        for name, value in flat.items():
+            if name not in FLAT_NAMES:
+                raise TypeError(f"DiscreteScheme has no field {name!r}")
+            record, field = FLAT_NAMES[name]
+            changes.setdefault(record, {})[field] = value
+        for record, values in changes.items():
+            records[record] = dataclasses.replace(records[record], **values)
+        object.__setattr__(self, "scene", scene)
+        for record, value in records.items():
+            object.__setattr__(self, record, value)
+
+    @classmethod
+    def of(cls, scene: Scene, **fields) -> DiscreteScheme:
+        """The scheme of `scene` from its fields by their flat names (FLAT_NAMES), each put
+        into its record."""
+        records: dict[str, dict] = {record: {} for record in RECORDS}
+        for name, value in fields.items():
+            if name not in FLAT_NAMES:
+                raise TypeError(f"DiscreteScheme.of: no field {name!r}")
+            record, field = FLAT_NAMES[name]
+            records[record][field] = value
+        return cls(scene=scene, **{record: RECORDS[record](**values)
+                                   for record, values in records.items()})
+
+    def replaced(self, **fields) -> DiscreteScheme:
+        """This scheme with fields, by their flat names, replaced in their records."""
+        changes: dict[str, dict] = {}
+        for name, value in fields.items():
+            if name == "scene":
+                continue
+            record, field = FLAT_NAMES[name]
+            changes.setdefault(record, {})[field] = value
+        return dataclasses.replace(
+            self, scene=fields.get("scene", self.scene),
+            **{record: dataclasses.replace(getattr(self, record), **values)
+               for record, values in changes.items()})
+
+    def __getattr__(self, name: str):
+        # Only names that normal lookup does not find (the flat names) get here.
+        if name in FLAT_NAMES and "step" in self.__dict__:
+            record, field = FLAT_NAMES[name]
+            return getattr(self.__dict__[record], field)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     @property
     def step_inputs(self) -> list[sp.Symbol]:
         """The inputs of the step's functions, in order: z, x_k, u, p, dt."""
-        return (list(self.unknowns) + list(self.state) + list(self.inputs)
-                + list(self.parameters) + [self.dt])
+        return (list(self.step.unknowns) + list(self.maps.state) + list(self.flows.inputs)
+                + list(self.run_parameters.symbols) + [self.step.dt])
 
     def step_function(self, expressions):
         """A numpy function of the step_inputs' values that evaluates `expressions`, which may
         use the definitions. The definitions are evaluated in order, as the generated C does,
         not substituted into one another (for a long chain that takes SymPy minutes)."""
-        return numpy_function(self.step_inputs, self.definitions, expressions)
+        return numpy_function(self.step_inputs, self.step.definitions, expressions)
 
     def state_function(self, expressions, extra=()):
         """A numpy function of (state, p, *extra) for state-only expressions, which may use
         the state_definitions."""
-        return numpy_function(list(self.state) + list(self.parameters) + list(extra),
-                              self.state_definitions, expressions)
+        return numpy_function(list(self.maps.state) + list(self.run_parameters.symbols)
+                              + list(extra), self.maps.state_definitions, expressions)
 
     def initial_function(self):
         """The numpy function (phi, phidot, p) -> initial_state."""
-        return numpy_function(list(self.initial_angles) + list(self.initial_velocities)
-                              + list(self.parameters), self.initial_definitions,
-                              self.initial_state)
+        maps = self.maps
+        return numpy_function(list(maps.initial_angles) + list(maps.initial_velocities)
+                              + list(self.run_parameters.symbols), maps.initial_definitions,
+                              maps.initial_state)
 
     @property
     def has_energy_flows(self) -> bool:
         """Whether energy can enter (inputs) or leave (damping, a constant or a parameter)."""
-        return bool(self.inputs.shape[0]) or self.dissipated != 0
+        return bool(self.flows.inputs.shape[0]) or self.flows.dissipated != 0
 
     def __post_init__(self) -> None:
-        if self.residual.shape[0] != self.unknowns.shape[0]:
-            raise ValueError(f"{self.method}: {self.residual.shape[0]} residual entries for "
-                             f"{self.unknowns.shape[0]} unknowns")
-        if self.next_state.shape[0] != self.state.shape[0]:
-            raise ValueError(f"{self.method}: next_state does not match the state")
+        method = self.metadata.method
+        if self.step.residual.shape[0] != self.step.unknowns.shape[0]:
+            raise ValueError(f"{method}: {self.step.residual.shape[0]} residual entries for "
+                             f"{self.step.unknowns.shape[0]} unknowns")
+        if self.step.next_state.shape[0] != self.maps.state.shape[0]:
+            raise ValueError(f"{method}: next_state does not match the state")
 
 
 def numpy_function(inputs, definitions, expressions):

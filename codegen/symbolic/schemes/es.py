@@ -150,7 +150,7 @@ def build(scene: Scene, quadrature: int, order: int = 2,
     initial_state = ImmutableMatrix(joint_space_start(scene, phi, phidot, at_start))
 
     names = [f"x_{i}" for i in range(1, n + 1)] + [f"y_{i}" for i in range(1, n + 1)]
-    return DiscreteScheme(
+    return DiscreteScheme.of(
         method="es", quadrature=quadrature_used(scene, "es", quadrature), scene=scene,
         summary=SUMMARY, dt=dt,
         state=ImmutableMatrix.vstack(q0, v0),

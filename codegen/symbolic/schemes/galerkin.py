@@ -134,7 +134,7 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
 
     names = [f"{kind}_{i}" for kind in ("dphim", "dphi1", "dpm", "dp1") for i in range(1, n + 1)]
     names += [f"dw{g}_{i}" for g in range(1, len(nodes)) for i in range(1, n + 1)]
-    return DiscreteScheme(
+    return DiscreteScheme.of(
         method="es", quadrature=quadrature, scene=scene, summary=SUMMARY, dt=dt,
         unknowns=unknowns,
         residual=residual,

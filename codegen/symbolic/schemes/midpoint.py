@@ -70,7 +70,7 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     kinetic = recursion.kinetic_energy(scene, rates0, velocities)
     energy = kinetic + recursion.gravity_potential(scene, frames0, at_state) + spring_energy
 
-    return DiscreteScheme(
+    return DiscreteScheme.of(
         method="midpoint", quadrature=None, scene=scene, summary=SUMMARY, dt=dt, unknowns=dw,
         residual=ImmutableMatrix(residual),
         next_state=ImmutableMatrix([phi + dt * w for phi, w in zip(phi0, wm)] + list(w0 + dw)),

@@ -101,7 +101,7 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     frames_start = recursion.link_frames(scene, recursion.angle_directions(at_start, phi))
     start_momenta, _ = recursion.momenta(scene, frames_start,
                                          recursion.absolute_rates(at_start, phidot), at_start)
-    return DiscreteScheme(
+    return DiscreteScheme.of(
         method="vi", quadrature=None, scene=scene, summary=SUMMARY, dt=dt,
         state=state, unknowns=theta,
         residual=ImmutableMatrix([m - i - p for m, i, p in zip(momentum, impulse, p0)]),

@@ -1,12 +1,21 @@
-"""The benchmark's figures: work-precision per reference scene, and the scaling series."""
+"""The benchmark's figures: work-precision per reference scene, and the scaling series.
+
+`chaingen bench` hands this module to chaingen.studies.bench.run_bench (its `figures`), so
+that the study depends on no view."""
 from __future__ import annotations
 
 from pathlib import Path
 
-from ...views.figure import matplotlib_figure, save_png
-from .config import EARLY_T, HEADLINE_N, TARGET_BUILD_SECONDS, TARGET_EQUAL_ERROR, VARIANTS
-from .runs import COMPILED_FAMILY, RunRow
-from .scaling import ScalingRow
+from ..studies.bench.config import (
+    EARLY_T,
+    HEADLINE_N,
+    TARGET_BUILD_SECONDS,
+    TARGET_EQUAL_ERROR,
+    VARIANTS,
+)
+from ..studies.bench.runs import COMPILED_FAMILY, RunRow
+from ..studies.bench.scaling import ScalingRow
+from .figure import matplotlib_figure, save_png
 
 MARKERS = "osD^vP*Xhp<>"
 #: Colours of the compiled peers, apart from the ten of ours and the other peers (C0..C9).
