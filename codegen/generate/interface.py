@@ -23,8 +23,6 @@ WIDTH = 100
 #: A comment beside a long name (a long scene name makes long macros) is wrapped at this width at
 #: least, overrunning WIDTH rather than leaving no room.
 MIN_COMMENT_WIDTH = 40
-#: The runtime's contract header, rendered by contract_header() (runtime/c/).
-CONTRACT_HEADER = "chaingen_contract.h"
 #: The model table's name in a package's source.
 MODEL = "MODEL"
 #: Exported functions that call a runtime function of another name, with the arguments the

@@ -154,8 +154,8 @@ def _c_array(c_type: str, name: str, values) -> str:
     return f"static const {c_type} {name}[{len(values)}] = {{\n    {c_list(values)}\n}};\n"
 
 
-def model_table(scheme: DiscreteScheme, functions, sizes: dict, defaults: dict,
-                features: Features) -> tuple[str, str]:
+def model_table(scheme: DiscreteScheme, functions, sizes: dict,
+                defaults: dict) -> tuple[str, str]:
     """The package's model table (chaingen_runtime.h's chaingen_model) as C: the static arrays
     it points at, and its field initialisers."""
     tables = []
@@ -285,7 +285,6 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     nu = len(scene.actuated_joints)
     n_p = len(scheme.parameter_paths)
     columns = contract.sample_columns(n, features.flows)
-    flows = scheme.flow_description
     chain_state = chains_state(scheme)
     nstage = len(scheme.composition) if len(scheme.composition) > 1 else 0
     sizes = {
@@ -302,7 +301,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "sensitivities": int(sensitivities), "chain_state": int(chain_state),
         "arm_nh": len(functions.arm_pattern[0]) if functions.arm_pattern else 0,
     }
-    tables, model_fields = model_table(scheme, functions, sizes, defaults, features)
+    tables, model_fields = model_table(scheme, functions, sizes, defaults)
     parameters_listed = list(zip(scheme.parameter_paths, scheme.parameter_units,
                                  map(c_literal, scheme.parameter_values),
                                  [rule for _, _, rule in parameter_bounds(scheme.parameter_paths)]))
@@ -311,28 +310,17 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "prefix": prefix, "PREFIX": prefix.upper(),
         "scene_name": scene.name, "method": scheme.method,
         "scheme_label": scheme_label(scheme), "method_summary": scheme.summary,
-        **{key: sizes[key] for key in ("nu", "np", "nq", "order", "nstage", "arm_nh")},
+        "nu": nu, "np": n_p, "nstage": nstage,
         # The rest of chaingen_workspace.h's formula: NQ, NSTAGE, ARM_NH, SENSITIVITIES,
         # CHAIN_STATE, NSEGMENT, NCONSTRAINT.
         "workspace_sizes": ", ".join(str(sizes[key]) for key in (
             "nq", "nstage", "arm_nh", "sensitivities", "chain_state", "nsegment",
             "nconstraint")),
         "n": n, "nx": sizes["nx"], "nz": sizes["nz"], "nsample": sizes["nsample"],
-        "sensitivities": int(sensitivities), "chain_state": int(chain_state),
         "flows": int(features.flows),
         "p_arguments": f"parameters, {prefix.upper()}_NP" if n_p else "NULL, 0",
         "actuated_joints": scene.actuated_joints,
-        "flows_work": flows.input_work if flows else "",
-        "flows_dissipated": flows.dissipated if flows else "",
-        "flows_balance": flows.balance if flows else "",
         **example_context(scene),
-        "state_entries": scheme.state_layout.entries,
-        "state_description": scheme.state_layout.description,
-        "unknowns_entries": scheme.unknowns_layout.entries,
-        "unknowns_description": scheme.unknowns_layout.description,
-        "residual_description": scheme.residual_description,
-        "sample_columns": columns,
-        "stages": [c_literal(fraction) for fraction in scheme.composition] if nstage else [],
         "parameters": parameters_listed,
         "work": work,
         "defaults": {name: c_literal(value) for name, value in defaults.items()},
