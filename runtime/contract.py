@@ -4,10 +4,10 @@ Every fact a generated package shares with the code around it is written here an
 status codes and their messages, the Newton option fields with their defaults, the
 Jacobian-reuse modes, the depth of the warm-start history, the counters of a run, the columns of
 a sample row, and the parameter list of every exported C entry point. The generator renders the
-header's macros, structs and prototypes from these tables, records the entry points in the
-package's manifest, and the Python loader declares its ctypes signatures from that manifest.
-
-An entry, a parameter or a status code may exist only in packages with a feature:
+runtime's contract header and each package's macros and prototypes from these tables, and the
+Python loader declares its ctypes signatures from the same table. Every package has every entry
+point with the same signature; one that needs a feature the package lacks returns UNAVAILABLE.
+The features a package may have:
 
 - ``inputs``: the scene has actuated joints (torques u);
 - ``flows``: energy can enter or leave the chain (actuation or joint damping);
@@ -68,7 +68,6 @@ class Status:
     code: int
     comment: str
     message: str
-    when: str | None = None
 
 
 #: Adaptive steps: the shortest step tried, as a fraction of the sample interval dt; a step
