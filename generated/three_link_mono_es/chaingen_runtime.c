@@ -111,119 +111,78 @@ typedef struct {
     double *phi, *omega, *held, *column;
 } cg_solver;
 
+/* The next `size` entries of a carved array, or NULL (and none taken) when the model does not use
+ * them. */
+static double *cg_take(double **d, long size, int used)
+{
+    double *const taken = used ? *d : NULL;
+    if (used) {
+        *d += size;
+    }
+    return taken;
+}
+
 /* The workspace's arrays, carved from workspace->doubles and workspace->ints in the order and
- * sizes of CHAINGEN_WORKSPACE_DOUBLES and CHAINGEN_WORKSPACE_INTS (chaingen_workspace.h). */
+ * sizes of CHAINGEN_WORKSPACE_DOUBLES and CHAINGEN_WORKSPACE_INTS (chaingen_workspace.h). Every
+ * field is assigned once, NULL when unused: every entry point carves, and zeroing the struct
+ * first (a memset of its ~60 pointers) cost a 3-link step 5-9% (issue 31's performance check). */
 static void cg_carve(const chaingen_model *table, const chaingen_workspace *workspace, cg_solver *c)
 {
     const chaingen_model *const model = CG_MODEL(table);
     const int n = model->n_joints, nx = model->nx, nz = model->nz;
     const int nchain = CHAINGEN_NCHAIN(n, nx, model->chain_state);
     const int nsens = CHAINGEN_NCHAIN_SENS(n, nx, model->nu, model->np, model->chain_state);
-    const int staged = model->nstage > 0;
+    const int staged = model->nstage > 0, arm = model->arm_nh > 0;
+    const int sensitivities = model->sensitivities;
+    const int chained = staged && sensitivities && model->chain_state;
     double *d = workspace->doubles;
     int *k = workspace->ints;
-    memset(c, 0, sizeof *c);
     c->s = workspace->scalars;
     c->arg = workspace->arg;
     c->res = workspace->res;
     c->iw = workspace->iw;
     c->w = workspace->w;
-    c->z = d;
-    d += nz;
-    c->dz = d;
-    d += nz;
-    c->residual = d;
-    d += nz;
-    c->residual_scale = d;
-    d += nz;
-    if (model->arm_nh > 0) {
-        c->arm_factors = d;
-        d += model->arm_nh + 9 * n;
-        c->arm_derived = d;
-        d += 15 * n;
-        c->jacobian = d;
-        d += n * n;
-        c->arm_scratch = d;
-        d += 6 * n;
-    } else {
-        c->jacobian = d;
-        d += nz * nz;
-    }
-    c->state[0] = d;
-    d += nx;
-    c->state[1] = d;
-    d += nx;
-    c->candidate = d;
-    d += nx;
-    c->previous_x1 = d;
-    d += nx;
-    c->energy_x = d;
-    d += nx;
-    c->previous_z = d;
-    d += CG_HISTORY * nz;
-    c->q = d;
-    d += model->nq > 0 ? model->nq : 1;
-    c->q_of = d;
-    d += model->np;
-    c->split_state = d;
-    d += CHAINGEN_MAX_SPLIT * nx;
-    c->adaptive_state = d;
-    d += 4 * nx;
-    if (model->sensitivities) {
-        c->sensitivity_rhs = d;
-        d += nz * nsens;
-        c->s1_z = d;
-        d += nchain * nz;
-    }
-    if (staged) {
-        c->stage_state = d;
-        d += 2 * nx;
-        c->composed_x1 = d;
-        d += nx;
-        c->stage_z = d;
-        d += model->nstage * CG_HISTORY * nz;
-    }
-    if (staged && model->sensitivities) {
-        c->stage_sensitivities = d;
-        d += nchain * nsens;
-        c->composed_sensitivities = d;
-        d += nchain * nsens;
-    }
-    if (staged && model->sensitivities && model->chain_state) {
-        c->x0_s0 = d;
-        d += nx * 2 * n;
-        c->s1_x1 = d;
-        d += 2 * n * nx;
-        c->chain_column = d;
-        d += nx;
-        c->x0_p = d;
-        d += nx * model->np;
-        c->s1_p = d;
-        d += 2 * n * model->np;
-    }
-    c->margins = d;
-    d += 2 * model->nsegment;
-    c->constraint = d;
-    d += model->nconstraint + 1;
-    c->posture = d;
-    d += nx;
-    c->rest = d;
-    d += n;
-    c->joint_start = d;
-    d += 2 * n;
-    c->joint_whole = d;
-    d += 2 * n;
-    c->joint_ends = d;
-    d += 2 * n;
-    c->phi = d;
-    d += n;
-    c->omega = d;
-    d += n;
-    c->held = d;
-    d += model->nu;
-    if (staged && model->sensitivities) {
-        c->column = d;
-    }
+    c->z = cg_take(&d, nz, 1);
+    c->dz = cg_take(&d, nz, 1);
+    c->residual = cg_take(&d, nz, 1);
+    c->residual_scale = cg_take(&d, nz, 1);
+    c->arm_factors = cg_take(&d, model->arm_nh + 9 * n, arm);
+    c->arm_derived = cg_take(&d, 15 * n, arm);
+    c->jacobian = cg_take(&d, arm ? n * n : nz * nz, 1);
+    c->arm_scratch = cg_take(&d, 6 * n, arm);
+    c->state[0] = cg_take(&d, nx, 1);
+    c->state[1] = cg_take(&d, nx, 1);
+    c->candidate = cg_take(&d, nx, 1);
+    c->previous_x1 = cg_take(&d, nx, 1);
+    c->energy_x = cg_take(&d, nx, 1);
+    c->previous_z = cg_take(&d, CG_HISTORY * nz, 1);
+    c->q = cg_take(&d, model->nq > 0 ? model->nq : 1, 1);
+    c->q_of = cg_take(&d, model->np, 1);
+    c->split_state = cg_take(&d, CHAINGEN_MAX_SPLIT * nx, 1);
+    c->adaptive_state = cg_take(&d, 4 * nx, 1);
+    c->sensitivity_rhs = cg_take(&d, nz * nsens, sensitivities);
+    c->s1_z = cg_take(&d, nchain * nz, sensitivities);
+    c->stage_state = cg_take(&d, 2 * nx, staged);
+    c->composed_x1 = cg_take(&d, nx, staged);
+    c->stage_z = cg_take(&d, model->nstage * CG_HISTORY * nz, staged);
+    c->stage_sensitivities = cg_take(&d, nchain * nsens, staged && sensitivities);
+    c->composed_sensitivities = cg_take(&d, nchain * nsens, staged && sensitivities);
+    c->x0_s0 = cg_take(&d, nx * 2 * n, chained);
+    c->s1_x1 = cg_take(&d, 2 * n * nx, chained);
+    c->chain_column = cg_take(&d, nx, chained);
+    c->x0_p = cg_take(&d, nx * model->np, chained);
+    c->s1_p = cg_take(&d, 2 * n * model->np, chained);
+    c->margins = cg_take(&d, 2 * model->nsegment, 1);
+    c->constraint = cg_take(&d, model->nconstraint + 1, 1);
+    c->posture = cg_take(&d, nx, 1);
+    c->rest = cg_take(&d, n, 1);
+    c->joint_start = cg_take(&d, 2 * n, 1);
+    c->joint_whole = cg_take(&d, 2 * n, 1);
+    c->joint_ends = cg_take(&d, 2 * n, 1);
+    c->phi = cg_take(&d, n, 1);
+    c->omega = cg_take(&d, n, 1);
+    c->held = cg_take(&d, model->nu, 1);
+    c->column = cg_take(&d, nchain, staged && sensitivities);
     c->pivot = k;
     k += nz;
     c->stage_history = k;
@@ -760,7 +719,7 @@ static int cg_predict(const chaingen_model *table, const cg_solver *c, const dou
 
 /* Entry i of the extrapolation of the last `points` solutions in previous_z (polynomial of
  * degree points - 1 through them, at the next step). */
-static double cg_extrapolate(const chaingen_model *table, const cg_solver *c, int points, int i)
+static inline double cg_extrapolate(const chaingen_model *table, const cg_solver *c, int points, int i)
 {
     const chaingen_model *const model = CG_MODEL(table);
     const double *previous = c->previous_z;
