@@ -16,6 +16,12 @@ no-op, so the work's output (tables, files) is the same whether or not anyone wa
 
 During a phase the bar shows the phase and its running time, redrawn by a thread of its own,
 and no time left (the phase's end says nothing about the rest of the work).
+
+A parameter called `progress` means one thing throughout chaingen: a callable told how far the
+work is, progress(done) or progress(done, note), `done` an absolute count of the work's units
+(steps, stages). A Progress is such a callable (calling it is `update`); so is any function of
+one argument where the work reports only counts (Solver.simulate). A status line that takes a
+message alone (the bench, the extremes study) is a parameter called `note`.
 """
 from __future__ import annotations
 
@@ -104,6 +110,10 @@ class Progress:
             now = time.monotonic()
             if now - self._drawn_at >= REDRAW_SECONDS or self.done >= self.total:
                 self._draw(now)
+
+    def __call__(self, done: int, note: str | None = None) -> None:
+        """The `progress` callable: the same as update."""
+        self.update(done, note)
 
     def advance(self, count: int = 1, note: str | None = None) -> None:
         self.update(self.done + count, note)

@@ -170,4 +170,4 @@ def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None
         return solver.simulate(scene.initial_angles, scene.initial_velocities, dt=settings.dt,
                                n_steps=settings.n_steps, every=settings.every, options=options,
                                scene=scene.name,
-                               progress=progress.update if progress.enabled else None)
+                               progress=progress if progress.enabled else None)

@@ -253,18 +253,18 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
 
     sensitivities=False leaves out the generated functions of step_sensitivities (a package
     only run forward, as `chaingen simulate` does, builds faster without them; its
-    step_sensitivities returns UNAVAILABLE). progress: a chaingen.progress.Progress told of each
-    stage.
+    step_sensitivities returns UNAVAILABLE). progress: told of each stage,
+    progress(stage, note) (chaingen.progress: a Progress is one).
     """
     scene = scheme.scene
     prefix = package_prefix(scene, scheme.method)
     digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities,
                         scheme.parameter_paths, scheme.order)
     if progress is not None:
-        progress.update(1, "CasADi functions and derivatives")
+        progress(1, "CasADi functions and derivatives")
     functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
     if progress is not None:
-        progress.update(2, "C code of the model")
+        progress(2, "C code of the model")
     model_source, model_header = casadi_c_source(functions.all(), prefix)
     work = {key: max(1, value) for key, value in dataclasses.asdict(
         work_sizes(functions.all())).items()}
@@ -400,11 +400,11 @@ def generate_package(scene: Scene | SolverSpec, method: str | None = None,
         sensitivities=sensitivities)
     package_prefix(spec.scene, spec.method)   # a name too long for C fails before SymPy
     if progress is not None:
-        progress.update(0, "deriving the model and the scheme (SymPy)")
+        progress(0, "deriving the model and the scheme (SymPy)")
     package = render_package(build_scheme(spec), sensitivities=spec.sensitivities,
                              progress=progress)
     if progress is not None:
-        progress.update(GENERATE_STAGES)
+        progress(GENERATE_STAGES)
     return package
 
 

@@ -305,12 +305,12 @@ EDGES = (edge_large_steps, edge_stiff_springs, edge_adaptive_steps, edge_mass_ra
          edge_collapsing_spring, edge_newton_failure)
 
 
-def study(quick: bool = False, progress=print) -> list[Outcome]:
+def study(quick: bool = False, note=print) -> list[Outcome]:
     rows = []
     for edge in EDGES:
         started = time.perf_counter()
         found = edge(quick)
-        progress(f"{edge.__name__}: {len(found)} rows in {time.perf_counter() - started:.0f} s")
+        note(f"{edge.__name__}: {len(found)} rows in {time.perf_counter() - started:.0f} s")
         rows.extend(found)
     return rows
 

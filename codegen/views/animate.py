@@ -272,7 +272,7 @@ def _frames(drawing: ChainDrawing, run: TrajectoryRun, plan: FramePlan, progress
     for count, index in enumerate(plan.indices, start=1):
         drawing.draw(run.phi[index], float(run.t[index]))
         yield drawing.rgb()
-        progress.update(count)
+        progress(count)
 
 
 def _write_gif(frames, path: str, fps: float) -> None:

@@ -49,7 +49,7 @@ from .studies import study_part, study_tables
 __all__ = ["BenchConfig", "BenchReport", "bench_config", "run_bench", "scaling_scene"]
 
 
-def knob_study(config: BenchConfig, progress, emit) -> list:
+def knob_study(config: BenchConfig, note, emit) -> list:
     """The speed knobs (the knobs module): every scheme on the headline scene at the
     headline dt, and the compiler knobs of "es" on the largest chain of the scaling series up
     to n = 20."""
@@ -59,14 +59,14 @@ def knob_study(config: BenchConfig, progress, emit) -> list:
     for method in METHODS:
         rows += knobs.option_rows(scene, HEADLINE_SCENE, method, 3, HEADLINE_DT, t_end,
                                         n_steps=2000, repeats=config.repeats,
-                                        progress=progress)
+                                        note=note)
     if config.run_scaling:
         # The largest chain of the series up to 20 links: beyond, a step costs milliseconds and
         # each compiler knob a build of a minute.
         n = max([m for m in config.scaling_ns if m <= 20] or [min(config.scaling_ns)])
         rows += knobs.flag_rows_large(scaling_scene(n), f"scaling n = {n}",
                                             HEADLINE_DT, n_steps=config.scaling_steps // 2,
-                                            repeats=config.repeats, progress=progress)
+                                            repeats=config.repeats, note=note)
     emit(f"\nspeed knobs\n\n{knobs.knob_table(rows)}")
     return rows
 
@@ -82,32 +82,32 @@ class BenchReport:
     wall_seconds: float
 
 
-def run_bench(config: BenchConfig, *, progress=None, emit=print, figures=None) -> BenchReport:
+def run_bench(config: BenchConfig, *, note=None, emit=print, figures=None) -> BenchReport:
     """Run every part of `config`, then write the figures and the document (in that order, so
     that a failure leaves the previous document in place). figures: what draws them
     (chaingen.views.bench_figures: plot_work_precision, plot_scaling); None: none drawn."""
     started = time.perf_counter()
     with Progress("bench", total=0) as bar:
-        if progress is None:   # a status line on a terminal; silent in logs, in CI, --quiet
-            def progress(message: str) -> None:
+        if note is None:   # a status line on a terminal; silent in logs, in CI, --quiet
+            def note(message: str) -> None:
                 bar.stage(message)
-        return _run_bench(config, progress, emit, started, figures)
+        return _run_bench(config, note, emit, started, figures)
 
 
-def _run_bench(config: BenchConfig, progress, emit, started: float, drawing) -> BenchReport:
+def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> BenchReport:
     machine = machine_description()
     def emit_scene(name: str, t_end: float, rows) -> None:
         emit(f"\n{name} (t_end = {t_end:g} s)\n\n{reference_table(rows)}")
 
-    reference = reference_study(config, progress, emit_scene) if config.run_reference else {}
+    reference = reference_study(config, note, emit_scene) if config.run_reference else {}
     scaling = None
     if config.run_scaling:
-        scaling = scaling_study(config, progress)
+        scaling = scaling_study(config, note)
         emit(f"\nscaling series\n\n{scaling_table(scaling)}")
-    knobs = knob_study(config, progress, emit)
-    studies = study_part(config, progress)
+    knobs = knob_study(config, note, emit)
+    studies = study_part(config, note)
     emit(f"\nstudies\n\n{study_tables(studies)}")
-    control = control_study(config, progress)
+    control = control_study(config, note)
     emit(f"\ncontrol loops\n\n{control_table(control, config)}")
     found = headlines(reference, scaling, config, control)
     emit(f"\nheadline\n\n{headline_table(found)}")

@@ -45,7 +45,7 @@ def order_label(scene: Scene, method: str, quadrature: int, order: int) -> str:
 
 
 def higher_order_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
-                      reference_angles, progress) -> list[RunRow]:
+                      reference_angles, note) -> list[RunRow]:
     """Composed steps of order 4 and 6 (config.higher_orders), default Newton options."""
     rows = []
     phi0, omega0 = scene.initial_angles, scene.initial_velocities
@@ -66,7 +66,7 @@ def higher_order_rows(scene: Scene, name: str, config: BenchConfig, t_end: float
                     timings = harness.time(x0, dt, n_steps=n_steps, repeats=config.repeats)
                 except (NewtonError, HarnessError) as error:
                     rows.append(RunRow(**base, failure=str(error).splitlines()[0]))
-                    progress(f"{name} {label} dt={dt:g}: failed: {error}")
+                    note(f"{name} {label} dt={dt:g}: failed: {error}")
                     continue
                 step = timings.step_ns * 1e-9
                 row = RunRow(**base, step_seconds=step, run_seconds=step * n_steps,
@@ -74,13 +74,13 @@ def higher_order_rows(scene: Scene, name: str, config: BenchConfig, t_end: float
                              step_over_evaluation=timings.step_over_evaluation,
                              **run_errors(result, method, t_end, dt, reference_angles))
                 rows.append(row)
-                progress(f"{name} {label} dt={dt:g}: {step * 1e6:.2f} us/step, "
+                note(f"{name} {label} dt={dt:g}: {step * 1e6:.2f} us/step, "
                          f"energy {row.energy_error:.1e}")
     return rows
 
 
 def adaptive_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
-                  reference_angles, progress) -> list[RunRow]:
+                  reference_angles, note) -> list[RunRow]:
     """Adaptive steps (config.adaptive_runs: method, order, K, tolerances), rtol = atol,
     samples every ADAPTIVE_SAMPLE s."""
     rows = []
@@ -106,35 +106,35 @@ def adaptive_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
                     cpu.append(time.process_time() - started)
             except NewtonError as error:
                 rows.append(RunRow(**base, failure=str(error).splitlines()[0]))
-                progress(f"{name} {label} rtol={tolerance:g}: failed: {error}")
+                note(f"{name} {label} rtol={tolerance:g}: failed: {error}")
                 continue
             run = statistics.median(cpu)
             row = RunRow(**base, step_seconds=run / result.accepted_steps, run_seconds=run,
                          newton_iterations=result.newton_iterations / result.accepted_steps,
                          **run_errors(result, method, t_end, dt, reference_angles))
             rows.append(row)
-            progress(f"{name} {label} rtol={tolerance:g}: {run * 1e3:.1f} ms, "
+            note(f"{name} {label} rtol={tolerance:g}: {run * 1e3:.1f} ms, "
                      f"{result.accepted_steps} steps ({result.rejected_steps} refused, dt "
                      f"{result.smallest_dt:.2g} .. {result.largest_dt:.2g} s), energy "
                      f"{row.energy_error:.1e}")
     return rows
 
 
-def reference_study(config: BenchConfig, progress, emit) -> dict[str, list[RunRow]]:
+def reference_study(config: BenchConfig, note, emit) -> dict[str, list[RunRow]]:
     """Part 1: every scheme and peer on each reference scene; emit(name, t_end, rows) after
     each scene."""
     study = {}
     for name in config.scenes:
         scene = load_reference_scene(name)
         t_end = config.t_end or scene.simulation.t_end
-        reference = (reference_angles_at_end(scene, t_end, progress),
-                     reference_angles_at_end(scene, min(EARLY_T, t_end), progress))
-        rows = scheme_rows(scene, name, config, t_end, reference, progress)
-        rows += higher_order_rows(scene, name, config, t_end, reference, progress)
-        rows += adaptive_rows(scene, name, config, t_end, reference, progress)
-        rows += mujoco_rows(scene, name, config, t_end, reference, progress)
-        rows += scipy_rows(scene, name, config, t_end, reference, progress)
-        rows += compiled_rows(scene, name, config, t_end, reference, progress)
+        reference = (reference_angles_at_end(scene, t_end, note),
+                     reference_angles_at_end(scene, min(EARLY_T, t_end), note))
+        rows = scheme_rows(scene, name, config, t_end, reference, note)
+        rows += higher_order_rows(scene, name, config, t_end, reference, note)
+        rows += adaptive_rows(scene, name, config, t_end, reference, note)
+        rows += mujoco_rows(scene, name, config, t_end, reference, note)
+        rows += scipy_rows(scene, name, config, t_end, reference, note)
+        rows += compiled_rows(scene, name, config, t_end, reference, note)
         study[name] = rows
         emit(name, t_end, rows)
     return study

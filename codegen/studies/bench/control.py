@@ -98,7 +98,7 @@ def _c_controller(directory: Path):
     return ctypes.CDLL(str(library)).pd_control
 
 
-def control_study(config: BenchConfig, progress) -> list[ControlRow]:
+def control_study(config: BenchConfig, note) -> list[ControlRow]:
     """The rows of the module docstring, median of config.repeats rounds."""
     import mujoco
 
@@ -108,7 +108,7 @@ def control_study(config: BenchConfig, progress) -> list[ControlRow]:
     scene = control_scene()
     dt = HEADLINE_DT
     n_steps = 2000
-    progress("control loops: build")
+    note("control loops: build")
     solver = build_solver(scene, "es", 3, sensitivities=False)
     reference = np.array(scene.initial_angles, dtype=float)
     omega0 = np.array(scene.initial_velocities, dtype=float)
@@ -161,7 +161,7 @@ def control_study(config: BenchConfig, progress) -> list[ControlRow]:
     with tempfile.TemporaryDirectory(prefix="chaingen-control-") as directory:
         c_controller = _c_controller(Path(directory))
         for index in range(config.repeats):
-            progress(f"control loops: round {index + 1} of {config.repeats}")
+            note(f"control loops: round {index + 1} of {config.repeats}")
             rounds["step"].append(python_loop(closed=False))
             rounds["mujoco step"].append(mujoco_loop(closed=False))
             rounds["python"].append(python_loop(closed=True))

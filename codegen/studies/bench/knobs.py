@@ -68,7 +68,7 @@ def with_source_flags(package: GeneratedPackage, name: str, flags) -> GeneratedP
 
 
 def option_rows(scene: Scene, name: str, method: str, quadrature: int, dt: float,
-                t_end: float, *, n_steps: int, repeats: int, progress) -> list[KnobRow]:
+                t_end: float, *, n_steps: int, repeats: int, note) -> list[KnobRow]:
     """The option knobs and solver flags of one scheme on one scene."""
     package = generate_package(scene, method, quadrature, sensitivities=False)
     solver = Solver.from_files(package.files)
@@ -77,11 +77,11 @@ def option_rows(scene: Scene, name: str, method: str, quadrature: int, dt: float
     rows = []
     with Harness(package) as harness:
         for label, fields in OPTION_KNOBS:
-            progress(f"knobs: {name} {method} {label}")
+            note(f"knobs: {name} {method} {label}")
             rows.append(_row(name, method, label, harness, solver, x0, dt, fields, steps,
                              n_steps, repeats, scene))
     for label, flags in SOLVER_FLAG_KNOBS[1:]:
-        progress(f"knobs: {name} {method} {label}")
+        note(f"knobs: {name} {method} {label}")
         variant = with_source_flags(package, f"{package.prefix}.c", flags)
         with Harness(variant) as harness:
             rows.append(_row(name, method, label, harness, None, x0, dt, {}, steps, n_steps,
@@ -109,7 +109,7 @@ def _row(name, method, label, harness, solver, x0, dt, fields, steps, n_steps, r
 
 
 def flag_rows_large(scene: Scene, name: str, dt: float, *, n_steps: int, repeats: int,
-                    progress) -> list[KnobRow]:
+                    note) -> list[KnobRow]:
     """Compiler knobs of "es" K=3 on a large chain: solver and model optimisation, with the
     build time each costs."""
     package = generate_package(scene, "es", 3, sensitivities=False)
@@ -121,7 +121,7 @@ def flag_rows_large(scene: Scene, name: str, dt: float, *, n_steps: int, repeats
     if model in package.manifest.get("source_flags", {}):
         knobs += [(label, model, flags) for label, flags in MODEL_FLAG_KNOBS[1:]]
     for label, source, flags in knobs:
-        progress(f"knobs: {name} es {label}")
+        note(f"knobs: {name} es {label}")
         with Harness(with_source_flags(package, source, flags)) as harness:
             for fields, suffix in (({}, ""), ({"reuse_jacobian": JACOBIAN_ACROSS_STEPS},
                                               ", simplified Newton")):

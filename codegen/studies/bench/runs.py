@@ -122,7 +122,7 @@ def scheme_configurations(scene: Scene, config: BenchConfig) -> list[tuple[str, 
 
 
 def scheme_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
-                reference_angles, progress) -> list[RunRow]:
+                reference_angles, note) -> list[RunRow]:
     rows = []
     phi0, omega0 = scene.initial_angles, scene.initial_velocities
     for method, quadrature in scheme_configurations(scene, config):
@@ -152,7 +152,7 @@ def scheme_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
                                                options=variant.options)
                     except (NewtonError, HarnessError) as error:
                         rows.append(RunRow(**base, failure=str(error).splitlines()[0]))
-                        progress(f"{name} {label} dt={dt:g} ({variant.label}): failed: {error}")
+                        note(f"{name} {label} dt={dt:g} ({variant.label}): failed: {error}")
                         continue
                     step = timings.step_ns * 1e-9
                     row = RunRow(
@@ -161,7 +161,7 @@ def scheme_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
                         step_over_evaluation=timings.step_over_evaluation,
                         **run_errors(result, method, t_end, dt, reference_angles))
                     rows.append(row)
-                    progress(f"{name} {label} dt={dt:g} ({variant.label}): "
+                    note(f"{name} {label} dt={dt:g} ({variant.label}): "
                              f"{step * 1e6:.2f} us/step, energy {row.energy_error:.1e}")
     return rows
 
@@ -225,7 +225,7 @@ def mujoco_accuracy(scene: Scene, integrator: str, dt: float,
 
 
 def mujoco_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
-                reference_angles, progress) -> list[RunRow]:
+                reference_angles, note) -> list[RunRow]:
     rows = []
     for integrator in config.mujoco_integrators:
         for dt in config.mujoco_dts:
@@ -238,7 +238,7 @@ def mujoco_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
                                                              early_step)
             if failure:
                 rows.append(RunRow(**base, failure=failure))
-                progress(f"{name} MuJoCo {integrator} dt={dt:g}: {failure}")
+                note(f"{name} MuJoCo {integrator} dt={dt:g}: {failure}")
                 continue
             step = mujoco_step_seconds(scene, integrator, dt, n_steps, config.repeats)
             rows.append(RunRow(
@@ -248,13 +248,13 @@ def mujoco_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
                 early_trajectory_error=(angle_error(early, reference_angles[1])
                                         if reference_angles[1] is not None
                                         and early is not None else None)))
-            progress(f"{name} MuJoCo {integrator} dt={dt:g}: {step * 1e6:.2f} us/step, "
+            note(f"{name} MuJoCo {integrator} dt={dt:g}: {step * 1e6:.2f} us/step, "
                      f"energy {energy:.1e}")
     return rows
 
 
 
-def _tolerance_rows(scene: Scene, name: str, t_end: float, reference_angles, progress, *,
+def _tolerance_rows(scene: Scene, name: str, t_end: float, reference_angles, note, *,
                     simulate, family: str, label: str, method: str, tolerances,
                     repeats: int) -> list[RunRow]:
     """Rows of one peer that integrates to a tolerance (simulate_scipy's signature and record):
@@ -272,7 +272,7 @@ def _tolerance_rows(scene: Scene, name: str, t_end: float, reference_angles, pro
                 cpu.append(simulate(scene, method, tolerance, tolerance, t_end).cpu_time)
         except ScipyPeerError as error:
             rows.append(RunRow(**base, failure=str(error)))
-            progress(f"{name} {label} tol={tolerance:.0e}: failed: {error}")
+            note(f"{name} {label} tol={tolerance:.0e}: failed: {error}")
             continue
         run_seconds = float(np.median(cpu))
         early = None
@@ -291,18 +291,18 @@ def _tolerance_rows(scene: Scene, name: str, t_end: float, reference_angles, pro
             trajectory_error=(angle_error(run.final_angles, reference_angles[0])
                               if reference_angles[0] is not None else None),
             early_trajectory_error=early))
-        progress(f"{name} {label} tol={tolerance:.0e}: {run_seconds * 1e3:.1f} ms, "
+        note(f"{name} {label} tol={tolerance:.0e}: {run_seconds * 1e3:.1f} ms, "
                  f"{run.n_steps or 'uncounted'} steps, energy {run.max_energy_error:.1e}")
     return rows
 
 
 def scipy_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
-               reference_angles, progress) -> list[RunRow]:
+               reference_angles, note) -> list[RunRow]:
     from ...reference.scipy_peer import simulate_scipy
 
     rows = []
     for method, tolerances in config.scipy_tolerances:
-        rows += _tolerance_rows(scene, name, t_end, reference_angles, progress,
+        rows += _tolerance_rows(scene, name, t_end, reference_angles, note,
                                 simulate=simulate_scipy, family="SciPy",
                                 label=f"SciPy {method}", method=method, tolerances=tolerances,
                                 repeats=config.scipy_repeats)
@@ -310,7 +310,7 @@ def scipy_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
 
 
 def compiled_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
-                  reference_angles, progress) -> list[RunRow]:
+                  reference_angles, note) -> list[RunRow]:
     """The compiled peers (chaingen.reference.compiled_peers), family COMPILED_FAMILY, each
     run repeated like ours (config.repeats) since they take milliseconds. Without numbalsoda
     its methods get one row each that says so instead of runs."""
@@ -324,24 +324,24 @@ def compiled_rows(scene: Scene, name: str, config: BenchConfig, t_end: float,
     rows = []
     for method, tolerances in config.compiled_tolerances:
         if method in NUMBALSODA_METHODS and not numbalsoda_available():
-            note = f"not run: numbalsoda is not installed (pip install -e '.[{PEERS_EXTRA}]')"
+            missing = f"not run: numbalsoda is not installed (pip install -e '.[{PEERS_EXTRA}]')"
             rows.append(RunRow(scene=name, family=COMPILED_FAMILY, method=method, variant="-",
-                               setting="-", t_end=t_end, failure=note))
-            progress(f"{name} {method}: {note}")
+                               setting="-", t_end=t_end, failure=missing))
+            note(f"{name} {method}: {missing}")
             continue
-        rows += _tolerance_rows(scene, name, t_end, reference_angles, progress,
+        rows += _tolerance_rows(scene, name, t_end, reference_angles, note,
                                 simulate=simulate_compiled, family=COMPILED_FAMILY,
                                 label=method, method=method, tolerances=tolerances,
                                 repeats=config.repeats)
     return rows
 
 
-def reference_angles_at_end(scene: Scene, t_end: float, progress):
+def reference_angles_at_end(scene: Scene, t_end: float, note):
     """phi(t_end) by the SciPy peer's reference_solution, or None if it cannot be had."""
     from ...reference.scipy_peer import reference_solution
     try:
         angles, _ = reference_solution(scene, t_end)
     except ScipyPeerError as error:
-        progress(f"{scene.name}: no trajectory reference: {error}")
+        note(f"{scene.name}: no trajectory reference: {error}")
         return None
     return angles

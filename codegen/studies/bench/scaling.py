@@ -223,7 +223,7 @@ def _predicted_over_limit(n: int, seconds: float, config: BenchConfig) -> str | 
             f"{config.timeout:g} s limit")
 
 
-def scaling_study(config: BenchConfig, progress) -> list[ScalingRow]:
+def scaling_study(config: BenchConfig, note) -> list[ScalingRow]:
     """Part 2: each scheme at each n, with MuJoCo RK4 at the same n and dt. A scheme that runs
     over the time limit at some n is not run at larger n."""
     rows = []
@@ -234,7 +234,7 @@ def scaling_study(config: BenchConfig, progress) -> list[ScalingRow]:
             if skip_reason is not None:
                 rows += [ScalingRow(label, n, variant.label, failure=skip_reason)
                          for variant in VARIANTS]
-                progress(f"scaling {label} n={n}: {skip_reason}")
+                note(f"scaling {label} n={n}: {skip_reason}")
                 continue
             started = time.perf_counter()
             point = run_scaling_point(method, quadrature, n, config)
@@ -246,7 +246,7 @@ def scaling_study(config: BenchConfig, progress) -> list[ScalingRow]:
                     skip_reason = f"not run: over the limit at n = {n}"
                 rows += [ScalingRow(label, n, variant.label, failure=point["failure"])
                          for variant in VARIANTS]
-                progress(f"scaling {label} n={n}: {point['failure']}")
+                note(f"scaling {label} n={n}: {point['failure']}")
                 continue
             for variant in VARIANTS:
                 timing = point["timings"][variant.label]
@@ -260,14 +260,14 @@ def scaling_study(config: BenchConfig, progress) -> list[ScalingRow]:
                     rows.append(ScalingRow(label, n, variant.label, **common,
                                            failure="; ".join(timing["failures"])))
                     continue
-                note = ("; ".join(timing["failures"]) or None)
+                failures = ("; ".join(timing["failures"]) or None)
                 rows.append(ScalingRow(
                     label, n, variant.label, **common, dt=timing["dt"],
                     step_seconds=timing["step_ns"] * 1e-9,
                     newton_iterations=timing["iterations"],
-                    mujoco_step_seconds=timing["mujoco_step_seconds"], failure=note))
-            progress(f"scaling {label} n={n}: generate {point['generate_seconds']:.1f} s, "
-                     f"build {point['build_seconds']:.1f} s "
-                     f"({time.perf_counter() - started:.0f} s in all)")
+                    mujoco_step_seconds=timing["mujoco_step_seconds"], failure=failures))
+            note(f"scaling {label} n={n}: generate {point['generate_seconds']:.1f} s, "
+                 f"build {point['build_seconds']:.1f} s "
+                 f"({time.perf_counter() - started:.0f} s in all)")
     return rows
 

@@ -107,7 +107,7 @@ class StudyResults:
 PARAMETER_SETS = (("every non-zero number", False), ("every number, zeros too", True))
 
 
-def parameter_rows(config: BenchConfig, progress) -> list[ParameterRow]:
+def parameter_rows(config: BenchConfig, note) -> list[ParameterRow]:
     """Per-step time with the scene's numbers as parameters against them compiled in, both
     packages in one timing program, block by block in alternating order (harness.time_pair);
     the ratio is the median of the rounds' ratios: a slow spell of the machine falls on both
@@ -124,7 +124,7 @@ def parameter_rows(config: BenchConfig, progress) -> list[ParameterRow]:
         x0 = Solver.from_files(baked.files).initial_state(scene.initial_angles,
                                                           scene.initial_velocities)
         for label, zeros in PARAMETER_SETS:
-            progress(f"studies: {method} with {label} a parameter")
+            note(f"studies: {method} with {label} a parameter")
             paths = tuple(path for path in compiled_paths(scene)
                           if zeros or number_path(scene, path).value(scene) != 0)
             varied = generate_package(renamed, method, 3, sensitivities=False, parameters=paths)
@@ -148,7 +148,7 @@ def sweep_spec_text(scene_path: Path, runs: int, t_end: float = SWEEP_T_END) -> 
             f'"links[1].mass" = {{ from = 0.5, to = 2.0, num = {masses} }}\n')
 
 
-def sweep_rows(config: BenchConfig, progress) -> tuple[list[SweepRow], LoopEstimate]:
+def sweep_rows(config: BenchConfig, note) -> tuple[list[SweepRow], LoopEstimate]:
     """The benchmark's sweep by `chaingen sweep`, each a process of its own as a user runs it:
     cold build cache, then cached, then on Dask; and the same with runs ten times as long."""
     import pandas as pd
@@ -173,7 +173,7 @@ def sweep_rows(config: BenchConfig, progress) -> tuple[list[SweepRow], LoopEstim
                                   ("dask", f"Dask LocalCluster of {cores}, build cached")):
                 if t_end != SWEEP_T_END and label.endswith("cold build cache"):
                     continue
-                progress(f"studies: sweep of {runs} runs of {t_end:g} s, {label}")
+                note(f"studies: sweep of {runs} runs of {t_end:g} s, {label}")
                 out = scratch / f"out-{len(rows)}"
                 command = [sys.executable, "-m", "chaingen", "sweep", str(spec_path), "-o",
                            str(out)] + (["--dask-local", str(cores)] if engine == "dask" else [])
@@ -199,17 +199,17 @@ def sweep_rows(config: BenchConfig, progress) -> tuple[list[SweepRow], LoopEstim
         from ..sweep import load_spec
 
         loop = _loop_estimate(load_spec(scratch / f"spec-{SWEEP_T_END:g}.toml"), scratch,
-                              progress, 2 if config.quick else LOOP_SUBSET)
+                              note, 2 if config.quick else LOOP_SUBSET)
     return rows, loop
 
 
-def _loop_estimate(spec, scratch: Path, progress, subset: int) -> LoopEstimate:
+def _loop_estimate(spec, scratch: Path, note, subset: int) -> LoopEstimate:
     """`chaingen simulate` on the scene files of `subset` of the sweep's runs, spread over the
     sweep, each a fresh process and a fresh build: the mean wall time of one."""
     picks = np.linspace(0, len(spec.runs) - 1, subset).round().astype(int)
     seconds = []
     for count, index in enumerate(picks):
-        progress(f"studies: chaingen simulate, scene file {count + 1} of {len(picks)}")
+        note(f"studies: chaingen simulate, scene file {count + 1} of {len(picks)}")
         values = {path: value for path, value in spec.runs[index].items()}
         scene = with_values(spec.scene, values)
         path = scratch / f"run-{index}.toml"
@@ -228,9 +228,9 @@ def _loop_estimate(spec, scratch: Path, progress, subset: int) -> LoopEstimate:
     return LoopEstimate(len(picks), statistics.mean(seconds), len(spec.runs))
 
 
-def study_part(config: BenchConfig, progress) -> StudyResults:
-    parameters = parameter_rows(config, progress)
-    sweeps, loop = sweep_rows(config, progress) if config.run_sweep else ([], None)
+def study_part(config: BenchConfig, note) -> StudyResults:
+    parameters = parameter_rows(config, note)
+    sweeps, loop = sweep_rows(config, note) if config.run_sweep else ([], None)
     return StudyResults(parameters, sweeps, loop)
 
 
