@@ -10,6 +10,7 @@ from .runtime import contract
 from .scene.solver_rules import (
     GALERKIN_MIN_QUADRATURE,
     GALERKIN_ORDER,
+    GRADIENTS,
     METHODS,
     ORDERS,
     request_refusal,
@@ -63,6 +64,10 @@ def add_scheme_options(parser: argparse.ArgumentParser,
     parser.add_argument("--quadrature", type=integer, metavar="K",
                         help="Gauss-Legendre points for the spring terms of 'es' "
                              "(default: the scene's)")
+    parser.add_argument("--gradient", choices=GRADIENTS,
+                        help="es's discrete gradient of the springs: exact (the energy balance "
+                             "holds identically) or quadrature (the K-point average alone, the "
+                             "thesis's) (default: the scene's)")
     parser.add_argument("--order", type=int, choices=ORDERS,
                         help="order of the step: 2 (the scheme's), 4 or 6 (a symmetric "
                              f"composition of its steps; {ORDERS_TAKEN}) (default: "

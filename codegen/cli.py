@@ -181,7 +181,8 @@ def command_generate(args) -> int:
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                            order=args.order, source=str(args.scene))
+                            order=args.order, gradient=args.gradient,
+                            source=str(args.scene))
     # The generation stage (SymPy, CasADi) is imported once the input is known to be good.
     from .generate.package import (
         check_package_target,
@@ -233,7 +234,8 @@ def command_check(args) -> int:
 
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature, dt=args.dt,
-                            order=args.order, source=str(args.scene))
+                            order=args.order, gradient=args.gradient,
+                            source=str(args.scene))
     scheme = build_scheme(settings.solver_spec(scene, parameters=args.parameters))
     solver = Solver.from_files(render_package(scheme, sensitivities=True).files)
     report = check_solver(scheme, solver, samples=args.samples, seed=args.seed, dt=settings.dt)
@@ -249,7 +251,8 @@ def command_order(args) -> int:
     scene = load_scene(args.scene)
     # Without --order every order the method takes runs, whatever the scene's simulation.order.
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                            t_end=args.t_end, order=args.order or 2, source=str(args.scene))
+                            t_end=args.t_end, order=args.order or 2, gradient=args.gradient,
+                            source=str(args.scene))
     if args.plot is not None:   # before the study: the plot needs matplotlib
         from .views.figure import require_matplotlib
         require_matplotlib("order --plot")
@@ -260,7 +263,8 @@ def command_order(args) -> int:
                             "leave out the adaptive tolerances")
     orders = (args.order,) if args.order is not None else allowed_orders(settings.method)
     studies = order_studies(scene, settings.method, settings.quadrature, orders=orders,
-                            t_end=settings.t_end, overrides=overrides)
+                            t_end=settings.t_end, overrides=overrides,
+                            gradient=settings.gradient)
     print("\n\n".join(format_table(study) for study in studies))
     if len(studies) > 1:
         print()
@@ -292,7 +296,8 @@ def command_simulate(args) -> int:
     scene = load_scene(args.scene)
     settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                             dt=args.dt, t_end=args.t_end, every=args.every, order=args.order,
-                            rtol=args.rtol, atol=args.atol, source=str(args.scene))
+                            gradient=args.gradient, rtol=args.rtol, atol=args.atol,
+                            source=str(args.scene))
     figure = None
     if args.plot is not None:   # before anything is written: the figure needs matplotlib
         from .views.figure import require_matplotlib
@@ -391,7 +396,7 @@ def command_animate(args) -> int:
         check_output(args.output)
         settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
                                 dt=args.dt, t_end=args.t_end, order=args.order,
-                                source=str(args.scene))
+                                gradient=args.gradient, source=str(args.scene))
         try:
             result = simulate_scene(scene, settings, options=newton_overrides(args))
         except NewtonError as error:

@@ -32,6 +32,7 @@ class RunSettings:
     order: int = 2
     rtol: float = 0.0    # adaptive steps (either > 0): local error tolerances
     atol: float = 0.0
+    gradient: str = "exact"   # es's discrete gradient of the springs
 
     @property
     def adaptive(self) -> bool:
@@ -45,11 +46,12 @@ class RunSettings:
                     parameters=()) -> SolverSpec:
         """The request for the solver these settings run with."""
         return SolverSpec(scene, self.method, self.quadrature, order=self.order,
-                          parameters=parameters, sensitivities=sensitivities)
+                          parameters=parameters, sensitivities=sensitivities,
+                          gradient=self.gradient)
 
 
 def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=None,
-                 every=None, order=None, rtol=None, atol=None,
+                 every=None, order=None, rtol=None, atol=None, gradient=None,
                  source: str = "") -> RunSettings:
     """Merge command-line overrides into the scene's defaults, validating each override.
 
@@ -64,10 +66,11 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
         t_end=t_end if t_end is not None else defaults.t_end,
         every=every if every is not None else 1,
         order=order if order is not None else defaults.order,
+        gradient=gradient if gradient is not None else defaults.gradient,
         rtol=rtol if rtol is not None else defaults.rtol,
         atol=atol if atol is not None else defaults.atol)
-    given = {"method": method, "quadrature": quadrature, "order": order, "rtol": rtol,
-             "atol": atol}
+    given = {"method": method, "quadrature": quadrature, "order": order, "gradient": gradient,
+             "rtol": rtol, "atol": atol}
     refused = request_refusal({key: getattr(settings, key) for key in REQUEST_KEYS})
     if refused:
         # A value from the command line is named by its option, one from the scene by its key.
@@ -96,21 +99,23 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
 
 def build_solver(scene: Scene | SolverSpec, method: str | None = None,
                  quadrature: int | None = None, *, sensitivities: bool = True, parameters=(),
-                 order: int | None = None) -> Solver:
+                 order: int | None = None, gradient: str | None = None) -> Solver:
     """Generate and build (or load from the cache) the solver of a SolverSpec, or of `scene`
     with the keywords a SolverSpec is made of; on a terminal a progress bar names the stage
     (SymPy, CasADi, C, compiling), which for large n takes a while.
     method, quadrature and order: the scene's own ([simulation]) by default.
     parameters: key paths of the scene's numbers the solver takes at run time (every call
     then takes their values, the scene's own by default). order: of the step, 2 (the
-    scheme's own), 4 or 6 (a symmetric composition of its steps). A request the rules refuse
+    scheme's own), 4 or 6 (a symmetric composition of its steps). gradient: es's discrete
+    gradient of the springs, "exact" or "quadrature" (docs/model.md, section 4; the scene's
+    own by default). A request the rules refuse
     raises SolverSpecError (a SettingsError) before anything is generated.
 
     A solver built before from the same inputs (scene, method, options, chaingen's code, the
     tool versions, the compiler: codegen/generate/key.py) loads from the build cache's index
     without running SymPy or CasADi."""
     spec = solver_spec(scene, method, quadrature, sensitivities=sensitivities,
-                       parameters=parameters, order=order)
+                       parameters=parameters, order=order, gradient=gradient)
     from .generate.key import solver_key
     from .runtime.build import (
         DEFAULT_OPTIMISATION,
@@ -132,7 +137,8 @@ def build_solver(scene: Scene | SolverSpec, method: str | None = None,
         # The spec's fields as keywords: generate_package makes the same SolverSpec of them.
         package = generate_package(spec.scene, spec.method, spec.quadrature,
                                    sensitivities=spec.sensitivities, parameters=spec.parameters,
-                                   order=spec.order, progress=progress)
+                                   order=spec.order, gradient=spec.gradient,
+                                   progress=progress)
         progress.update(GENERATE_STAGES)
         with progress.phase("compiling (or loading the cached build)"):
             solver = Solver.from_files(package.files)
@@ -143,16 +149,18 @@ def build_solver(scene: Scene | SolverSpec, method: str | None = None,
 
 def solver_spec(scene: Scene | SolverSpec, method: str | None = None,
                 quadrature: int | None = None, *, sensitivities: bool = True, parameters=(),
-                order: int | None = None) -> SolverSpec:
+                order: int | None = None, gradient: str | None = None) -> SolverSpec:
     """The SolverSpec build_solver builds from its arguments: a given SolverSpec as it is
-    (TypeError if method, quadrature or order are given beside it), else SolverSpec.create."""
+    (TypeError if method, quadrature, order or gradient are given beside it), else
+    SolverSpec.create."""
     if isinstance(scene, SolverSpec):
-        if method is not None or quadrature is not None or order is not None:
-            raise TypeError("build_solver: a SolverSpec carries its method, quadrature and "
-                            "order; give them to the SolverSpec")
+        if method is not None or quadrature is not None or order is not None \
+                or gradient is not None:
+            raise TypeError("build_solver: a SolverSpec carries its method, quadrature, order "
+                            "and gradient; give them to the SolverSpec")
         return scene
     return SolverSpec.create(scene, method, quadrature, order=order, parameters=parameters,
-                             sensitivities=sensitivities)
+                             sensitivities=sensitivities, gradient=gradient)
 
 
 def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None = None,

@@ -37,16 +37,18 @@ _solvers: dict = {}
 
 
 def solver_for(name: str, method: str = "es", quadrature: int = 3, *,
-               sensitivities: bool = False):
+               sensitivities: bool = False, gradient: str = "exact"):
     """The built solver of a scene, generated and compiled once per session.
 
     Without step sensitivities unless asked: they are the largest generated functions, and
-    most tests only step forward.
+    most tests only step forward. gradient: es's discrete gradient of the springs ("quadrature":
+    the thesis's K-point average alone).
     """
-    key = (name, method, quadrature, sensitivities)
+    key = (name, method, quadrature, sensitivities, gradient)
     if key not in _solvers:
         from chaingen.simulation import build_solver
-        _solvers[key] = build_solver(load(name), method, quadrature, sensitivities=sensitivities)
+        _solvers[key] = build_solver(load(name), method, quadrature, sensitivities=sensitivities,
+                                     gradient=gradient)
     return _solvers[key]
 
 

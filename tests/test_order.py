@@ -33,10 +33,12 @@ ES_QUADRATURE = 7
 
 
 @cache
-def study(name: str, method: str, quadrature: int, **kwargs):
-    """The default study (dt 0.001 ... 0.2 s, t_end 10 s, dt_ref 1e-4 s), run once."""
-    return order_study(load(name), method, quadrature,
-                       solver=solver_for(name, method, quadrature), **kwargs)
+def study(name: str, method: str, quadrature: int, gradient: str = "exact", **kwargs):
+    """The default study (dt 0.001 ... 0.2 s, t_end 10 s, dt_ref 1e-4 s), run once.
+    gradient: es's discrete gradient of the springs ("quadrature": the thesis's scheme, whose
+    energy error has an order)."""
+    return order_study(load(name), method, quadrature, gradient=gradient,
+                       solver=solver_for(name, method, quadrature, gradient=gradient), **kwargs)
 
 
 @cache
@@ -60,15 +62,27 @@ def every_order(name: str, method: str):
 @pytest.mark.parametrize("method, quadrature, order", [
     ("es", 1, 2), ("es", 3, 6), ("vi", 3, 2), ("midpoint", 3, 2)])
 def test_energy_order(method, quadrature, order):
-    result = study(MONO, method, quadrature)
+    """The energy error's order: es's with its springs' gradient by the quadrature alone
+    (the thesis's; the exact gradient has none, test_the_exact_gradient_has_no_energy_order)."""
+    result = study(MONO, method, quadrature, "quadrature" if method == "es" else "exact")
     assert result.failed_dts == ()
     tolerance = 0.5 if order == 6 else 0.3
     assert result.energy_order == pytest.approx(order, abs=tolerance), format_table(result)
     assert len(result.energy_fit_dts) >= 3
 
 
+def test_the_exact_gradient_has_no_energy_order():
+    """es's default gradient holds the energy to round-off at every dt of the study, K = 1 and
+    K = 3 alike: there is no order to fit."""
+    for quadrature in (1, 3):
+        result = study(MONO, "es", quadrature)
+        assert result.gradient == "exact" and result.failed_dts == ()
+        assert all(row.mean_balance_error < 1e-12 * result.energy_scale for row in result.rows)
+        assert result.energy_order is None
+
+
 def test_gauss3_energy_error_is_sixth_order_until_round_off():
-    result = study(MONO, "es", 3)
+    result = study(MONO, "es", 3, "quadrature")
     energy = {row.dt: row.mean_balance_error for row in result.rows}
     # the largest steps are in the asymptotic regime: halving dt divides the error by ~2^6
     assert 2 ** 5.5 < energy[0.2] / energy[0.1] < 2 ** 6.5
@@ -147,7 +161,7 @@ def test_a_solver_of_another_scheme_is_refused():
 
 
 def test_table_lists_every_dt_and_the_fits():
-    result = study(MONO, "es", 3)
+    result = study(MONO, "es", 3, "quadrature")
     table = format_table(result)
     lines = table.splitlines()
     assert len(lines) == 3 + len(DEFAULT_DTS) + 3
@@ -156,7 +170,8 @@ def test_table_lists_every_dt_and_the_fits():
     assert f"energy order      {result.energy_order:.2f}" in table
     assert (f"fit over dt = {min(result.energy_fit_dts):g} ... "
             f"{max(result.energy_fit_dts):g} s") in table
-    assert "trajectory order" in table and "method es, quadrature 3, order 2" in table
+    assert "trajectory order" in table
+    assert "method es, quadrature 3 (gradient by the quadrature alone), order 2" in table
     assert f"rate order        {result.rate_order:.2f}" in table
     assert "rate error [rad/s]" in lines[2] and "Newton: the package's defaults" in lines[1]
     assert "0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2 s" in lines[1]

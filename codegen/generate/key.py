@@ -23,6 +23,7 @@ import json
 from pathlib import Path
 
 from ..scene import Scene, SolverSpec, quadrature_used
+from ..scene.solver_rules import gradient_used
 from ..version import VERSION
 
 #: The files of the installed package whose text decides the generated code and its build.
@@ -31,17 +32,20 @@ CODE_SUFFIXES = (".py", ".j2", ".h")
 
 def input_hash(spec: SolverSpec | Scene, method: str | None = None,
                quadrature: int | None = None, sensitivities: bool = True, parameters=(),
-               order: int = 2) -> str:
+               order: int = 2, gradient: str | None = "exact") -> str:
     """sha256 of everything the generated code of a SolverSpec depends on, and nothing else.
 
     The initial state and the simulation defaults do not enter the code; the tool versions and
     the paths of the run-time parameters do. Also of the fields of a built scheme (scene,
-    method, quadrature, sensitivities, parameter paths, order), which the scheme has from its
-    checked SolverSpec: its quadrature may be the one in use (None where K plays no role).
+    method, quadrature, sensitivities, parameter paths, order, gradient), which the scheme has
+    from its checked SolverSpec: its quadrature and gradient may be the ones in use (None where
+    they play no role). The gradient enters only where it plays a role, so the hash of every
+    other package is what it was before es had the choice.
     """
     if isinstance(spec, SolverSpec):
         scene, method, quadrature = spec.scene, spec.method, spec.quadrature
         sensitivities, parameters, order = spec.sensitivities, spec.parameters, spec.order
+        gradient = spec.gradient
     else:
         scene = spec
     code_relevant = dataclasses.asdict(scene)
@@ -54,6 +58,9 @@ def input_hash(spec: SolverSpec | Scene, method: str | None = None,
         "chaingen": VERSION, "sympy": importlib.metadata.version("sympy"),
         "casadi": importlib.metadata.version("casadi"),
     }
+    used = gradient_used(scene, method, gradient, order) if gradient is not None else None
+    if used is not None:
+        payload["gradient"] = used
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -81,12 +88,12 @@ def folders_digest(folders) -> str:
 
 def solver_key(spec: SolverSpec | Scene, method: str | None = None,
                quadrature: int | None = None, *, sensitivities: bool = True, parameters=(),
-               order: int = 2, build: tuple[str, ...] = ()) -> str:
+               order: int = 2, gradient: str = "exact", build: tuple[str, ...] = ()) -> str:
     """The build cache index's key of the solver build_solver makes of a SolverSpec (or of
     the keywords it is made of): input_hash, chaingen's code (code_digest) and `build` (the
     compiler and flags)."""
     if not isinstance(spec, SolverSpec):
         spec = SolverSpec(spec, method, quadrature, order=order, parameters=parameters,
-                          sensitivities=sensitivities)
+                          sensitivities=sensitivities, gradient=gradient)
     payload = [input_hash(spec), code_digest(), list(build)]
     return hashlib.sha256(json.dumps(payload).encode()).hexdigest()[:32]

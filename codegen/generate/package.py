@@ -126,7 +126,8 @@ def scheme_label(scheme: DiscreteScheme) -> str:
     """The scheme as a package's banner and header name it (chaingen.scene.labels)."""
     return labels.scheme_label(scheme.method, scheme.quadrature, scheme.order, style="header",
                                quadrature_rule=scheme.quadrature_rule,
-                               composition_steps=len(scheme.composition))
+                               composition_steps=len(scheme.composition),
+                               gradient=getattr(scheme, "gradient", None))
 
 
 def package_features(scheme: DiscreteScheme, sensitivities: bool) -> Features:
@@ -259,7 +260,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     scene = scheme.scene
     prefix = package_prefix(scene, scheme.method)
     digest = input_hash(scene, scheme.method, scheme.quadrature, sensitivities,
-                        scheme.parameter_paths, scheme.order)
+                        scheme.parameter_paths, scheme.order, scheme.gradient)
     if progress is not None:
         progress(1, "CasADi functions and derivatives")
     functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
@@ -363,7 +364,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     manifest = {
         "chaingen_version": VERSION, "input_hash": digest, "prefix": prefix,
         "scene": scene.name, "method": scheme.method, "quadrature": scheme.quadrature,
-        "order": scheme.order, "composition": list(scheme.composition),
+        "gradient": scheme.gradient, "order": scheme.order, "composition": list(scheme.composition),
         "n_joints": n, "nx": context["nx"], "nz": context["nz"], "nsample": context["nsample"],
         "actuated_joints": list(scene.actuated_joints), "nu": nu,
         "parameters": [{"path": path, "unit": unit, "value": value,
@@ -391,13 +392,15 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
 
 def generate_package(scene: Scene | SolverSpec, method: str | None = None,
                      quadrature: int | None = None, *, sensitivities: bool = True,
-                     parameters=(), order: int = 2, progress=None) -> GeneratedPackage:
+                     parameters=(), order: int = 2, gradient: str = "exact",
+                     progress=None) -> GeneratedPackage:
     """SolverSpec -> scheme -> C package, all in memory; or of `scene` with the keywords a
     SolverSpec is made of. parameters: key paths of the scene's numbers the solver takes at
-    run time; order: 2 (the scheme's step), 4 or 6 (composed). progress: see render_package."""
+    run time; order: 2 (the scheme's step), 4 or 6 (composed); gradient: es's discrete
+    gradient of the springs ("exact" or "quadrature"). progress: see render_package."""
     spec = scene if isinstance(scene, SolverSpec) else SolverSpec(
         scene, method, quadrature, order=order, parameters=parameters,
-        sensitivities=sensitivities)
+        sensitivities=sensitivities, gradient=gradient)
     package_prefix(spec.scene, spec.method)   # a name too long for C fails before SymPy
     if progress is not None:
         progress(0, "deriving the model and the scheme (SymPy)")

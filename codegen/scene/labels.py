@@ -23,27 +23,36 @@ LABEL_STYLES = ("header", "summary", "study", "short")
 
 def scheme_label(method: str, quadrature: int | None = None, order: int = 2, *,
                  style: str = "summary", quadrature_rule: str | None = None,
-                 composition_steps: int | None = None) -> str:
+                 composition_steps: int | None = None, gradient: str | None = None) -> str:
     """The name of the scheme `method` with K = `quadrature` (None: none) at `order`, in
     `style` (LABEL_STYLES). The header style also takes what K integrates (`quadrature_rule`,
-    None: the spring terms by K Gauss-Legendre points) and the stages of a composed step
-    (`composition_steps`)."""
+    None: the spring terms by K Gauss-Legendre points), es's discrete gradient of the springs
+    (`gradient`, None: none) and the stages of a composed step (`composition_steps`). The
+    other styles name the gradient only where it is not the default "exact"."""
     composed = order != 2
     if style == "header":
         label = f'method "{method}"'
         if quadrature is not None:
             label += ", " + (quadrature_rule or f"{quadrature}-point Gauss-Legendre "
                                                 "quadrature of the spring terms")
+        if gradient == "exact":
+            label += ", corrected to the exact discrete gradient"
+        elif gradient == "quadrature":
+            label += " (the quadrature alone: energy to quadrature accuracy)"
         if composed:
             label += (f", order {order} by a symmetric composition of "
                       f"{composition_steps} steps")
         return label
     if style == "short":
         label = method if quadrature is None else f"{method} K={quadrature}"
+        if gradient == "quadrature":
+            label += " quadrature"
         return f"{label} order {order}" if composed else label
     if style in ("summary", "study"):
         label = f"method {method}"
         if quadrature is not None:
             label += f", quadrature {quadrature}"
+        if gradient == "quadrature":
+            label += " (gradient by the quadrature alone)"
         return f"{label}, order {order}" if composed or style == "study" else label
     raise ValueError(f"scheme_label: style {style!r} is none of {', '.join(LABEL_STYLES)}")

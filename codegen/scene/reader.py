@@ -35,7 +35,7 @@ _BASE_KEYS = ("fastening",)
 _SPRING_KEYS = ("joints", "stiffness", "rest_length", "offsets")
 _SPRING_REQUIRED = ("joints", "stiffness", "rest_length")
 _INITIAL_KEYS = ("angles", "velocities")
-_SIMULATION_KEYS = ("method", "quadrature", "order", "dt", "t_end", "rtol", "atol")
+_SIMULATION_KEYS = ("method", "quadrature", "order", "gradient", "dt", "t_end", "rtol", "atol")
 
 _MISSING = object()
 

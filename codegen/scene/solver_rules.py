@@ -29,8 +29,13 @@ GALERKIN_ORDER = 6
 #: The fewest Gauss points K es takes at GALERKIN_ORDER: its Galerkin step's Gauss-Lobatto rule
 #: has K + 1 >= 3 nodes, exact to degree 3, which its equations of order 4 need.
 GALERKIN_MIN_QUADRATURE = 2
+#: es's discrete gradient of the spring energy (simulation.gradient, --gradient): "exact", the
+#: K-point average corrected so that the energy balance holds identically (docs/model.md,
+#: section 4), or "quadrature", the K-point average alone (the thesis's scheme: its energy
+#: error scales like dt^(2K)).
+GRADIENTS = ("exact", "quadrature")
 #: The fields of a request that have a rule of their own, in the order they are checked.
-REQUEST_KEYS = ("method", "quadrature", "order", *ADAPTIVE_TOLERANCES)
+REQUEST_KEYS = ("method", "quadrature", "order", "gradient", *ADAPTIVE_TOLERANCES)
 
 _NO_VALUE = object()
 
@@ -98,6 +103,11 @@ def order_rule() -> str:
     return "must be one of " + ", ".join(map(str, ORDERS)) + " (the order of the step)"
 
 
+def gradient_rule() -> str:
+    return ("must be one of " + ", ".join(f'"{gradient}"' for gradient in GRADIENTS)
+            + " (es's discrete gradient of the springs)")
+
+
 def tolerance_rule() -> str:
     return f"must be {ADAPTIVE_TOLERANCE_RULE} (the local error tolerance of adaptive steps)"
 
@@ -119,6 +129,9 @@ def _field_refusal(key: str, value: Any) -> Refusal | None:
     elif key == "order":
         good = is_integer(value) and value in ORDERS
         rule = order_rule()
+    elif key == "gradient":
+        good = isinstance(value, str) and value in GRADIENTS
+        rule = gradient_rule()
     elif key in ADAPTIVE_TOLERANCES:
         good = _is_number(value) and is_adaptive_tolerance(float(value))
         rule = tolerance_rule()
@@ -170,3 +183,12 @@ def quadrature_used(scene, method: str, quadrature: int, order: int = 2) -> int 
     if method != "es":
         return None
     return quadrature if scene.springs or order >= GALERKIN_ORDER else None
+
+
+def gradient_used(scene, method: str, gradient: str, order: int = 2) -> str | None:
+    """The discrete gradient a scheme of `scene` runs with, None where the choice plays no
+    role: only es's own step (up to order 4, composed) has one, and only for springs (gravity's
+    gradient is constant: every average of it is exact)."""
+    if method != "es" or order >= GALERKIN_ORDER or not scene.springs:
+        return None
+    return gradient

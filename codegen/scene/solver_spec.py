@@ -15,6 +15,7 @@ from .solver_rules import (
     GALERKIN_ORDER,
     Refusal,
     SolverSpecError,
+    gradient_used,
     quadrature_used,
     request_refusal,
 )
@@ -29,8 +30,9 @@ class SolverSpec:
     parameters: key paths of the scene's numbers the solver takes at run time, in that order
     (chaingen.scene.parameters); "all" (or ("all",)) is every number a solver can take
     (compiled_paths), stored expanded. order: of the step, 2 (the scheme's own), 4 or 6 (a
-    symmetric composition of its steps). A SolverSpec is hashable: two equal requests are one
-    solver.
+    symmetric composition of its steps). gradient: es's discrete gradient of the springs,
+    "exact" or "quadrature" (solver_rules.GRADIENTS). A SolverSpec is hashable: two equal
+    requests are one solver.
     """
 
     scene: Scene
@@ -39,13 +41,14 @@ class SolverSpec:
     order: int = 2
     parameters: tuple[str, ...] = ()
     sensitivities: bool = True
+    gradient: str = "exact"
 
     def __post_init__(self):
         if not isinstance(self.scene, Scene):
             raise TypeError(f"SolverSpec.scene: a Scene (chaingen.load_scene), not "
                             f"{type(self.scene).__name__}")
         refused = request_refusal({"method": self.method, "quadrature": self.quadrature,
-                                   "order": self.order})
+                                   "order": self.order, "gradient": self.gradient})
         if refused:
             raise SolverSpecError(refused)
         paths = ((self.parameters,) if isinstance(self.parameters, str)
@@ -63,17 +66,19 @@ class SolverSpec:
 
     @classmethod
     def create(cls, scene: Scene, method: str | None = None, quadrature: int | None = None, *,
-               order: int | None = None, parameters=(), sensitivities: bool = True
-               ) -> SolverSpec:
-        """A spec with the scene's own method, quadrature and order ([simulation]) where
-        they are None."""
+               order: int | None = None, parameters=(), sensitivities: bool = True,
+               gradient: str | None = None) -> SolverSpec:
+        """A spec with the scene's own method, quadrature, order and gradient ([simulation])
+        where they are None."""
         defaults = scene.simulation if isinstance(scene, Scene) else None
         return cls(scene=scene,
                    method=defaults.method if method is None and defaults else method,
                    quadrature=(defaults.quadrature if quadrature is None and defaults
                                else quadrature),
                    order=defaults.order if order is None and defaults else order,
-                   parameters=parameters, sensitivities=sensitivities)
+                   parameters=parameters, sensitivities=sensitivities,
+                   gradient=(defaults.gradient if gradient is None and defaults
+                             else gradient if gradient is not None else "exact"))
 
     @property
     def parameter_numbers(self) -> tuple[NumberPath, ...]:
@@ -84,6 +89,11 @@ class SolverSpec:
     def galerkin_step(self) -> bool:
         """Whether the step is es's k = 1 Galerkin step (es from GALERKIN_ORDER on)."""
         return self.method == "es" and self.order >= GALERKIN_ORDER
+
+    @property
+    def gradient_used(self) -> str | None:
+        """es's discrete gradient, None where it plays no role (solver_rules.gradient_used)."""
+        return gradient_used(self.scene, self.method, self.gradient, self.order)
 
     @property
     def quadrature_used(self) -> int | None:

@@ -97,6 +97,7 @@ class Simulation:
     order: int = ORDERS[0]
     rtol: float = 0.0     # adaptive steps' local error tolerances; both 0: fixed steps of dt
     atol: float = 0.0
+    gradient: str = "exact"   # es's discrete gradient of the springs (solver_rules.GRADIENTS)
 
 
 @dataclass(frozen=True)

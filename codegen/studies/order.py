@@ -135,6 +135,8 @@ class OrderStudy:
     energy_flows: bool = False    # damping or torques: the energy error is the balance error
     #: The Newton settings of the runs that differ from the package's defaults (empty: none).
     newton_settings: tuple[tuple[str, float], ...] = ()
+    #: es's discrete gradient of the springs, None where it plays no role.
+    gradient: str | None = None
 
     @property
     def dts(self) -> tuple[float, ...]:
@@ -198,10 +200,12 @@ def study_newton_options(order: int, overrides=None) -> dict:
     return {**ORDER_NEWTON_OPTIONS[order], **(overrides or {})}
 
 
-def study_solver_spec(scene: Scene, method: str, quadrature: int, order: int) -> SolverSpec:
+def study_solver_spec(scene: Scene, method: str, quadrature: int, order: int,
+                      gradient: str = "exact") -> SolverSpec:
     """A study's solver request (no step sensitivities), or OrderStudyError: order 3: ..."""
     try:
-        return SolverSpec(scene, method, quadrature, order=order, sensitivities=False)
+        return SolverSpec(scene, method, quadrature, order=order, sensitivities=False,
+                          gradient=gradient)
     except SolverSpecError as error:
         raise OrderStudyError(error.refusal.stated) from None
 
@@ -238,7 +242,8 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
                 solver: Solver | None = None, sample_interval: float = SAMPLE_INTERVAL,
                 energy_floor: float = ENERGY_FLOOR, trajectory_floor: float = TRAJECTORY_FLOOR,
                 rate_floor: float = RATE_FLOOR, slope_tolerance: float = SLOPE_TOLERANCE,
-                options: NewtonOptions | dict | None = None, order: int = 2) -> OrderStudy:
+                options: NewtonOptions | dict | None = None, order: int = 2,
+                gradient: str = "exact") -> OrderStudy:
     """Run the time-step study of `scene` (a Scene or a scene file) with one scheme and order.
 
     The solver is built once (without step sensitivities) unless given; a given solver must be
@@ -247,13 +252,14 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
     scale of the reference run; trajectory_floor is in rad, rate_floor in rad/s. options:
     Newton settings of every run, the reference's too (a dict is taken over the package's
     defaults); default ORDER_NEWTON_OPTIONS[order]. order: of the step (2, or 4 and 6
-    composed), of the built solver and of a given one.
+    composed), of the built solver and of a given one. gradient: es's discrete gradient of the
+    springs ("exact" or "quadrature"), of the built solver and of a given one.
     Raises OrderStudyError for step sizes that do not fit the sample grid and when the
     reference run fails; a failing dt is recorded in its row.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
-    spec = study_solver_spec(scene, method, quadrature, order)
+    spec = study_solver_spec(scene, method, quadrature, order, gradient)
     quadrature_in_use = spec.quadrature_used
     if dts is None:
         dts = order_dts(method, order)
@@ -289,6 +295,9 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
             raise OrderStudyError(
                 f"the given solver is method {manifest.get('method')!r}, quadrature "
                 f"{manifest.get('quadrature')}, not {method!r}, quadrature {quadrature_in_use}")
+        if manifest.get("gradient") != spec.gradient_used:
+            raise OrderStudyError(f"the given solver's gradient is {manifest.get('gradient')!r}, "
+                                  f"not {spec.gradient_used!r}")
         if manifest.get("scene") != scene.name:
             raise OrderStudyError(f"the given solver is for scene {manifest.get('scene')!r}, "
                                   f"not {scene.name!r}")
@@ -371,13 +380,14 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
         energy_fit=energy_fit, trajectory_fit=trajectory_fit, energy_scale=scale,
         energy_floor=energy_floor * scale, trajectory_floor=trajectory_floor,
         reference_wall_time=reference.wall_time, order=order, rate_fit=rate_fit,
+        gradient=spec.gradient_used,
         rate_floor=rate_floor, energy_flows=solver.energy_flows,
         newton_settings=newton_settings)
 
 
 def order_studies(scene: Scene | str | os.PathLike, method: str, quadrature: int, *,
                   orders=None, t_end: float = 10.0, solvers=None, overrides=None,
-                  **settings) -> tuple[OrderStudy, ...]:
+                  gradient: str = "exact", **settings) -> tuple[OrderStudy, ...]:
     """The study of every order option `method` takes (allowed_orders), ascending, each with
     its own step sizes and Newton settings (ORDER_DTS, study_newton_options(order, overrides)).
 
@@ -390,10 +400,10 @@ def order_studies(scene: Scene | str | os.PathLike, method: str, quadrature: int
     available = allowed_orders(method) if method in METHODS else ORDERS
     orders = available if orders is None else tuple(sorted(set(orders)))
     for order in orders:
-        study_solver_spec(scene, method, quadrature, order)
+        study_solver_spec(scene, method, quadrature, order, gradient)
     solvers = dict(solvers or {})
     return tuple(order_study(scene, method, quadrature, t_end=t_end, order=order,
-                             solver=solvers.get(order),
+                             solver=solvers.get(order), gradient=gradient,
                              options=study_newton_options(order, overrides), **settings)
                  for order in orders)
 
@@ -424,7 +434,8 @@ def format_table(study: OrderStudy) -> str:
 
     With energy flows the energy column and its order are the balance error's."""
     energy = study.energy_name
-    label = scheme_label(study.method, study.quadrature, study.order, style="study")
+    label = scheme_label(study.method, study.quadrature, study.order, style="study",
+                         gradient=study.gradient)
     lines = [
         f"{study.scene}: {label}; t_end {study.t_end:g} s; reference: same method "
         f"and order, dt_ref {study.dt_ref:g} s ({study.reference_wall_time:.3g} s); errors "
@@ -475,7 +486,7 @@ def format_summary(studies) -> str:
               f"{f'{energy} order':>13}")
     if conserving:    # es's constraints c_i(q) are in m^2 (model.md section 8)
         header += f"  {f'max {energy} error [J]':>21}  {'max constraint error [m^2]':>26}"
-    label = scheme_label(first.method, first.quadrature)
+    label = scheme_label(first.method, first.quadrature, gradient=first.gradient)
     lines = [f"{first.scene}: {label}; t_end {first.t_end:g} s; fitted orders "
              "(slope of log error against log dt; --: no linear range above the floor)", header]
     for study in studies:

@@ -121,7 +121,7 @@ class EsStep(NamedTuple):
 
 
 def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
-            defs: Definitions) -> EsStep:
+            defs: Definitions, gradient: str = "exact") -> EsStep:
     """The es residual (model.md 4.4) by recursions.
 
     Everything but the COM masses and gravity acts on the arms d_k = x_k - X_k = (B q)_k and is
@@ -188,34 +188,21 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
                 c2 = number(link.com ** 2 + link.com_normal ** 2)
                 forces[k] = add(forces[k], scale(-dt * weight / c2, perp(arms[k])))
 
-    if scene.springs:
-        nodes, weights = gauss_legendre_nodes(quadrature)
-        for i, spring in enumerate(scene.springs):
-            offsets = scene.spring_fastenings(spring)
-            js = list(range(spring.first, spring.last + 1))
-            starts = [defs.vector(f"spring{i}_d{j}", chain.segment(j, r0, r1, arms0, False))
-                      for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
-            changes = [defs.vector(f"spring{i}_dd{j}", chain.segment(j, r0, r1, arm_steps, True))
-                       for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
-            totals = [ZERO for _ in js]
-            for g, (tau, weight) in enumerate(zip(nodes, weights)):
-                lengths, node_vectors = [], []
-                for j, start, change in zip(js, starts, changes):
-                    point = defs.vector(f"spring{i}_d{j}_node{g}",
-                                        add(start, scale(sp.Float(tau), change)))
-                    lengths.append(defs.define(f"spring{i}_s{j}_node{g}",
-                                               sp.sqrt(point[0] ** 2 + point[1] ** 2)))
-                    node_vectors.append(point)
-                stretch = sp.Add(*lengths) - number(spring.rest_length)
-                force = defs.define(f"spring{i}_force{g}", sp.Float(weight)
-                                    * number(spring.stiffness) * stretch)
-                for s, (length, point) in enumerate(zip(lengths, node_vectors)):
-                    share = defs.define(f"spring{i}_scale{js[s]}_node{g}", force / length)
-                    totals[s] = add(totals[s], scale(share, point))
-            for j, total, r0, r1 in zip(js, totals, offsets[:-1], offsets[1:]):
-                total = defs.vector(f"spring{i}_f{j}", scale(dt, total))
-                for k, pulled in chain.segment_transpose(j, r0, r1, total):
-                    forces[k - 1] = add(forces[k - 1], pulled)
+    for i, spring in enumerate(scene.springs):
+        offsets = scene.spring_fastenings(spring)
+        js = list(range(spring.first, spring.last + 1))
+        starts = [defs.vector(f"spring{i}_d{j}", chain.segment(j, r0, r1, arms0, False))
+                  for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
+        changes = [defs.vector(f"spring{i}_dd{j}", chain.segment(j, r0, r1, arm_steps, True))
+                   for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
+        if gradient == "exact":
+            totals = exact_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
+        else:
+            totals = averaged_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
+        for j, total, r0, r1 in zip(js, totals, offsets[:-1], offsets[1:]):
+            total = defs.vector(f"spring{i}_f{j}", scale(dt, total))
+            for k, pulled in chain.segment_transpose(j, r0, r1, total):
+                forces[k - 1] = add(forces[k - 1], pulled)
 
     direct = []
     for k, link in enumerate(scene.links):
@@ -227,6 +214,65 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
     gradient = chain.sweep(direct, forces, "sweep_")
     momentum = [g[0] for g in gradient] + [g[1] for g in gradient]
     return EsStep(momentum, constraint_increments, rates, w, forces)
+
+
+def exact_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
+                          defs: Definitions) -> list:
+    """An exact discrete gradient of one spring's energy V = k/2 (sum_j s_j - S_0)^2 in its
+    segment vectors d_j (model.md 4, the exact discrete gradient): the K-point average G_j of
+    averaged_spring_gradient, corrected along the step (Gonzalez's construction, in the
+    Euclidean metric of the segment vectors):
+
+        G_j + r / (sum_j |dd_j|^2) dd_j,     r = V(1) - V(0) - sum_j G_j . dd_j,
+
+    so that sum_j G_j . dd_j = V(1) - V(0) holds identically. r is the quadrature's error,
+    O(|dd|^(2K+1)): the correction is of its size and the trajectory that of the K-point rule.
+    V(1) - V(0) is taken without cancellation, k/2 (L_0 + L_1 - 2 S_0) (L_1 - L_0) with
+    s_j(1) - s_j(0) = (2 d_j(0) + dd_j) . dd_j / (s_j(0) + s_j(1)): its round-off is then
+    eps |G| |dd| (not eps V), and the correction's eps |G|, at any step size. A step that does
+    not move the spring (dd = 0) has r = 0 and no correction (the denominator's 1e-300 keeps
+    0 / 0 away). One (x, y) per segment."""
+    totals = averaged_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
+    sums, increments, projected, squared = [], [], [], []
+    for j, start, change, total in zip(js, starts, changes, totals):
+        end = add(start, change)
+        s0 = defs.define(f"spring{i}_s{j}_start", sp.sqrt(start[0] ** 2 + start[1] ** 2))
+        s1 = defs.define(f"spring{i}_s{j}_end", sp.sqrt(end[0] ** 2 + end[1] ** 2))
+        sums.append(s0 + s1)
+        increments.append(((2 * start[0] + change[0]) * change[0]
+                           + (2 * start[1] + change[1]) * change[1]) / (s0 + s1))
+        projected.append(total[0] * change[0] + total[1] * change[1])
+        squared.append(change[0] ** 2 + change[1] ** 2)
+    energy_change = defs.define(
+        f"spring{i}_dV", number(spring.stiffness) / 2
+        * (sp.Add(*sums) - 2 * number(spring.rest_length)) * sp.Add(*increments))
+    ratio = defs.define(f"spring{i}_correction", (energy_change - sp.Add(*projected))
+                        / (sp.Add(*squared) + sp.Float(1e-300)))
+    return [add(total, scale(ratio, change)) for total, change in zip(totals, changes)]
+
+
+def averaged_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
+                             defs: Definitions) -> list:
+    """The average of one spring's gradient in its segment vectors on the step's segment
+    d_j(tau) = d_j(0) + tau dd_j, by the K-point Gauss-Legendre rule (model.md 4, the thesis's
+    quadrature): its energy error scales like dt^(2K). One list of (x, y) per segment."""
+    nodes, weights = gauss_legendre_nodes(quadrature)
+    totals = [ZERO for _ in js]
+    for g, (tau, weight) in enumerate(zip(nodes, weights)):
+        lengths, node_vectors = [], []
+        for j, start, change in zip(js, starts, changes):
+            point = defs.vector(f"spring{i}_d{j}_node{g}",
+                                add(start, scale(sp.Float(tau), change)))
+            lengths.append(defs.define(f"spring{i}_s{j}_node{g}",
+                                       sp.sqrt(point[0] ** 2 + point[1] ** 2)))
+            node_vectors.append(point)
+        stretch = sp.Add(*lengths) - number(spring.rest_length)
+        force = defs.define(f"spring{i}_force{g}", sp.Float(weight)
+                            * number(spring.stiffness) * stretch)
+        for s, (length, point) in enumerate(zip(lengths, node_vectors)):
+            share = defs.define(f"spring{i}_scale{js[s]}_node{g}", force / length)
+            totals[s] = add(totals[s], scale(share, point))
+    return totals
 
 
 def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:

@@ -163,9 +163,11 @@ class SweepSpec:
     @property
     def solver(self) -> SolverSpec:
         """The request of the sweep's one solver: the spec's scheme, its varied numbers as
-        run-time parameters, no step sensitivities."""
+        run-time parameters, no step sensitivities, es's discrete gradient the base scene's
+        (simulation.gradient)."""
         return SolverSpec(self.scene, self.method, self.quadrature, order=self.order,
-                          parameters=self.parameters, sensitivities=False)
+                          parameters=self.parameters, sensitivities=False,
+                          gradient=self.scene.simulation.gradient)
 
     @functools.cached_property
     def digest(self) -> str:

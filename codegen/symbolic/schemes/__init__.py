@@ -20,15 +20,17 @@ if tuple(BUILDERS) != METHODS:
 
 
 def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
-                 quadrature: int | None = None, parameters=(), order: int = 2) -> DiscreteScheme:
+                 quadrature: int | None = None, parameters=(), order: int = 2,
+                 gradient: str = "exact") -> DiscreteScheme:
     """The discrete scheme of a SolverSpec, or of `scene` with `method`, `quadrature` (Gauss
     points for spring terms), the numbers at the key paths `parameters` as run-time parameters
     p, in that order ("all": every number of the scene a solver can take, chaingen.scene.
     parameters.compiled_paths), its step composed to `order` (chaingen.symbolic.composition;
-    es at order 6 composes its k = 1 Galerkin step, chaingen.symbolic.schemes.galerkin).
+    es at order 6 composes its k = 1 Galerkin step, chaingen.symbolic.schemes.galerkin), es's
+    springs by the discrete `gradient` ("exact" or "quadrature", docs/model.md section 4).
     SolverSpecError (a SettingsError) for a request the rules refuse."""
     spec = scene if isinstance(scene, SolverSpec) else SolverSpec(
-        scene, method, quadrature, order=order, parameters=parameters)
+        scene, method, quadrature, order=order, parameters=parameters, gradient=gradient)
     scene, quadrature, order = spec.scene, spec.quadrature, spec.order
     stages = FROM_ORDER_4 if spec.galerkin_step else composition(order)
     builder = galerkin.build if spec.galerkin_step else BUILDERS[spec.method]
@@ -37,7 +39,11 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
     # momenta p1, p2, ...).
     symbols = {number.path: sp.Dummy(f"parameter{index}", real=True)
                for index, number in enumerate(numbers)}
-    scheme = builder(with_symbols(scene, symbols), quadrature, order)
+    scene_with_symbols = with_symbols(scene, symbols)
+    if spec.method == "es" and not spec.galerkin_step:
+        scheme = builder(scene_with_symbols, quadrature, order, gradient=spec.gradient)
+    else:
+        scheme = builder(scene_with_symbols, quadrature, order)
     return scheme.replaced(
         scene=scene, segment_tolerances=segment_tolerances(scene),
         parameters=ImmutableMatrix(list(symbols.values()))

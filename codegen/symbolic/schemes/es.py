@@ -19,7 +19,7 @@ from sympy import ImmutableMatrix
 
 from ...runtime.contract import JACOBIAN_PER_STEP
 from ...scene import Scene, quadrature_used
-from ...scene.solver_rules import require
+from ...scene.solver_rules import gradient_used, require
 from ..com_model import com_frame_map, com_model, coordinates, number
 from ..com_recursion import es_step, joint_space_start, state_quantities
 from ..recursion import Definitions
@@ -77,12 +77,14 @@ def tangent_velocity_solve(model) -> tuple[LinearSolve, ImmutableMatrix]:
 
 
 def build(scene: Scene, quadrature: int, order: int = 2,
-          arm_solve: bool | None = None) -> DiscreteScheme:
+          arm_solve: bool | None = None, gradient: str = "exact") -> DiscreteScheme:
     """The es step; for order > 2 (a composition of steps) the joint rates come from the
     velocity projected onto C(q) v = 0 (tangent_velocity_solve). arm_solve: whether the
     package solves the Newton systems by the factors of the Jacobian (ArmSpace) instead of
-    dense LU; None: from ARM_SOLVE_MIN_LINKS links on."""
-    require(method="es", quadrature=quadrature, order=order)
+    dense LU; None: from ARM_SOLVE_MIN_LINKS links on. gradient: the springs' discrete
+    gradient, "exact" (the energy balance holds identically) or "quadrature" (the K-point
+    average alone; docs/model.md, section 4)."""
+    require(method="es", quadrature=quadrature, order=order, gradient=gradient)
     if order > 4:
         raise ValueError("es composes its own step to order 4 at most: order 6 is "
                          "chaingen.symbolic.schemes.galerkin's")
@@ -113,7 +115,7 @@ def build(scene: Scene, quadrature: int, order: int = 2,
 
     step = Definitions("step_")
     parts = es_step(scene, q0, v0, dv, mu, dt, quadrature if scene.springs else 1, torques_of,
-                    step)
+                    step, gradient=gradient)
     rates_mid = parts.rates
     definitions = tuple(step.items)
     input_work = dt * sp.Add(*(u * rate for u, rate in zip(applied, rates_mid)))
@@ -152,6 +154,7 @@ def build(scene: Scene, quadrature: int, order: int = 2,
     names = [f"x_{i}" for i in range(1, n + 1)] + [f"y_{i}" for i in range(1, n + 1)]
     return DiscreteScheme.of(
         method="es", quadrature=quadrature_used(scene, "es", quadrature), scene=scene,
+        gradient=gradient_used(scene, "es", gradient, order),
         summary=SUMMARY, dt=dt,
         state=ImmutableMatrix.vstack(q0, v0),
         unknowns=ImmutableMatrix.vstack(dv, mu),
