@@ -1,0 +1,114 @@
+"""No compiler: es's exact discrete gradient of a spring (docs/model.md, section 4) against the
+energy change computed in 50-digit arithmetic, for segments and steps that hypothesis draws
+(one to three segments, steps from 1e-12 to 10 times the segment's size).
+
+The gradient G of chaingen.symbolic.com_recursion.exact_spring_gradient must satisfy
+sum_j G_j . dd_j = V(1) - V(0) to round-off of the terms, at any step; the K-point average
+alone (the "quadrature" gradient) must not, on large steps: the check can tell them apart."""
+from __future__ import annotations
+
+import mpmath
+import numpy as np
+import pytest
+import sympy as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from chaingen.scene.values import Spring
+from chaingen.symbolic.com_recursion import averaged_spring_gradient, exact_spring_gradient
+from chaingen.symbolic.recursion import Definitions
+
+mpmath.mp.dps = 50
+
+
+def gradient_function(segments: int, quadrature: int, gradient: str):
+    """numpy function (starts, changes, stiffness, rest) -> G (segments x 2) of one spring."""
+    starts = [tuple(sp.symbols(f"d{j}_x d{j}_y", real=True)) for j in range(segments)]
+    changes = [tuple(sp.symbols(f"dd{j}_x dd{j}_y", real=True)) for j in range(segments)]
+    stiffness, rest = sp.symbols("k S0", positive=True)
+    spring = Spring(1, segments, stiffness, rest, None)
+    defs = Definitions("t_")
+    js = list(range(1, segments + 1))
+    if gradient == "exact":
+        totals = exact_spring_gradient(spring, 0, js, starts, changes, quadrature, defs)
+    else:
+        totals = averaged_spring_gradient(spring, 0, js, starts, changes, quadrature, defs)
+    expressions = [entry for total in totals for entry in total]
+    for symbol, value in reversed(defs.items):
+        expressions = [sp.sympify(e).xreplace({symbol: value}) for e in expressions]
+    arguments = [c for v in starts for c in v] + [c for v in changes for c in v] + [stiffness,
+                                                                                  rest]
+    function = sp.lambdify(arguments, expressions, "numpy")
+    return lambda d, dd, k, s0: np.array(function(*d.ravel(), *dd.ravel(), k, s0),
+                                         dtype=float).reshape(segments, 2)
+
+
+FUNCTIONS = {(segments, quadrature, gradient): gradient_function(segments, quadrature, gradient)
+             for segments in (1, 2, 3) for quadrature in (1, 3)
+             for gradient in ("exact", "quadrature")}
+
+
+def energy_change(d, dd, k, s0):
+    """V(1) - V(0) of k/2 (sum_j |d_j| - S0)^2 in 50 digits."""
+    def energy(vectors):
+        total = sum(mpmath.sqrt(mpmath.mpf(x) ** 2 + mpmath.mpf(y) ** 2) for x, y in vectors)
+        return mpmath.mpf(k) / 2 * (total - mpmath.mpf(s0)) ** 2
+    ends = [(mpmath.mpf(a) + mpmath.mpf(b), mpmath.mpf(c) + mpmath.mpf(e))
+            for (a, c), (b, e) in zip(d, dd)]
+    return energy(ends) - energy(d)
+
+
+def mismatch(d, dd, k, s0, segments, quadrature, gradient):
+    """|sum_j G_j . dd_j - dV| relative to the round-off scale of its terms,
+    k (L + S0 + |dd|) sum_j |dd_j|: a force k (L - S0) is a difference of terms of size k L
+    and k S0, whose round-off no gradient can avoid (a spring near its rest length)."""
+    G = FUNCTIONS[segments, quadrature, gradient](d, dd, k, s0)
+    work = sum(mpmath.mpf(float(g)) * mpmath.mpf(float(c)) for g, c in zip(G.ravel(),
+                                                                            dd.ravel()))
+    steps = np.linalg.norm(dd, axis=1)
+    size = float(k * (np.linalg.norm(d, axis=1).sum() + s0 + steps.sum()) * steps.sum())
+    error = float(abs(work - energy_change(d, dd, k, s0)))
+    return error / size if size > 0 else error
+
+
+vectors = st.tuples(st.floats(0.05, 2.0), st.floats(0.0, 2 * np.pi))
+
+
+@st.composite
+def spring_steps(draw):
+    segments = draw(st.integers(1, 3))
+    d = np.array([[r * np.cos(a), r * np.sin(a)] for r, a in
+                  (draw(vectors) for _ in range(segments))])
+    scale = 10.0 ** draw(st.floats(-12, 1))
+    dd = np.array([[np.cos(a), np.sin(a)] for a in
+                   (draw(st.floats(0.0, 2 * np.pi)) for _ in range(segments))])
+    dd *= scale * np.array([draw(st.floats(0.1, 1.0)) for _ in range(segments)])[:, None]
+    k = 10.0 ** draw(st.floats(0, 6))
+    rest = draw(st.floats(0.0, 3.0))
+    return d, dd, k, rest, segments
+
+
+@given(spring_steps(), st.sampled_from([1, 3]))
+@settings(max_examples=300, deadline=None)
+def test_the_exact_gradient_is_exact_at_any_step(step, quadrature):
+    d, dd, k, rest, segments = step
+    assert mismatch(d, dd, k, rest, segments, quadrature, "exact") <= 1e-13
+
+
+def test_a_step_that_does_not_move_the_spring_has_the_averaged_gradient():
+    d = np.array([[0.3, 0.1], [0.2, -0.4]])
+    dd = np.zeros_like(d)
+    exact = FUNCTIONS[2, 3, "exact"](d, dd, 100.0, 0.5)
+    averaged = FUNCTIONS[2, 3, "quadrature"](d, dd, 100.0, 0.5)
+    assert np.all(np.isfinite(exact))
+    np.testing.assert_array_equal(exact, averaged)
+
+
+@pytest.mark.parametrize("quadrature", [1, 3])
+def test_the_quadrature_alone_is_not_exact_on_large_steps(quadrature):
+    """The check discriminates: the K-point average misses the energy change on a step of the
+    segment's size by far more than round-off."""
+    d = np.array([[0.3, 0.1], [0.2, -0.4]])
+    dd = np.array([[0.25, 0.3], [-0.3, 0.2]])
+    assert mismatch(d, dd, 1e3, 0.5, 2, quadrature, "quadrature") > 1e-6
+    assert mismatch(d, dd, 1e3, 0.5, 2, quadrature, "exact") <= 1e-13
