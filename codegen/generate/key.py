@@ -27,7 +27,7 @@ from ..scene.solver_rules import gradient_used
 from ..version import VERSION
 
 #: The files of the installed package whose text decides the generated code and its build.
-CODE_SUFFIXES = (".py", ".j2", ".h")
+CODE_SUFFIXES = (".py", ".j2", ".h", ".c")
 
 
 def input_hash(spec: SolverSpec | Scene, method: str | None = None,
@@ -67,7 +67,7 @@ def input_hash(spec: SolverSpec | Scene, method: str | None = None,
 
 @functools.lru_cache(maxsize=1)
 def code_digest() -> str:
-    """sha256 over the installed chaingen package's code, templates and C headers (paths and
+    """sha256 over the installed chaingen package's code, templates and C sources and headers (paths and
     contents), computed once a process (a few milliseconds)."""
     # The three folders may live in different places (an editable install maps them).
     return folders_digest([Path(str(importlib.resources.files(package)))
