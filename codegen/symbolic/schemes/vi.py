@@ -26,7 +26,7 @@ from __future__ import annotations
 import sympy as sp
 from sympy import ImmutableMatrix
 
-from ...runtime.contract import JACOBIAN_ACROSS_STEPS
+from ...runtime.contract import JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP
 from ...scene import Scene
 from .. import recursion
 from ..com_model import number
@@ -133,8 +133,13 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         dissipated=sp.Add(*(number(link.damping) * t ** 2 for link, t in zip(scene.links, theta)
                             if link.damping)) / dt,
         flow_description=FLOWS if has_energy_flows(scene) else None,
-        # Simplified Newton: the Jacobian costs six residuals, and the scheme's energy error
-        # (O(dt^2)) hides the linear convergence (docs/benchmarks.md, speed knobs).
-        jacobian_reuse=JACOBIAN_ACROSS_STEPS, kinetic_energy=kinetic,
+        # Order 2, simplified Newton: the Jacobian costs six residuals, and the scheme's energy
+        # error (O(dt^2)) hides the linear convergence (docs/benchmarks.md, speed knobs). A
+        # composed step, Newton-chord as es and midpoint: simplified Newton stops within a tenth
+        # of the tolerance, an error that its stages accumulate above the error of order 4 or 6
+        # (docs/model.md, section 14), and the chord stops within a thousandth for no more
+        # iterations.
+        jacobian_reuse=JACOBIAN_ACROSS_STEPS if order == 2 else JACOBIAN_PER_STEP,
+        kinetic_energy=kinetic,
         **common_fields(scene, phi),
     )
