@@ -144,3 +144,18 @@ def test_method_quadrature_and_order_default_to_the_scenes_own():
     assert five.library_path != build_solver(scene, "es", 3, sensitivities=False).library_path
     fourth = build_solver(own(method="midpoint", order=4), sensitivities=False)
     assert (fourth.manifest["method"], fourth.manifest["order"]) == ("midpoint", 4)
+
+def test_the_code_digest_follows_the_runtime_library(tmp_path):
+    """An edited chaingen_runtime.c (the runtime library every package compiles) changes the
+    digest: the index once served libraries built before such an edit (a .c was not hashed)."""
+    import shutil
+
+    import chaingen.runtime
+    from chaingen.generate.key import folders_digest
+
+    copy = tmp_path / "runtime"
+    shutil.copytree(Path(chaingen.runtime.__file__).parent, copy)
+    before = folders_digest([copy])
+    source = copy / "c" / "chaingen_runtime.c"
+    source.write_text(source.read_text() + "\n")
+    assert folders_digest([copy]) != before

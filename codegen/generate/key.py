@@ -67,8 +67,8 @@ def input_hash(spec: SolverSpec | Scene, method: str | None = None,
 
 @functools.lru_cache(maxsize=1)
 def code_digest() -> str:
-    """sha256 over the installed chaingen package's code, templates and C sources and headers (paths and
-    contents), computed once a process (a few milliseconds)."""
+    """sha256 over the installed chaingen package's code, templates and C sources and headers
+    (paths and contents), computed once a process (a few milliseconds)."""
     # The three folders may live in different places (an editable install maps them).
     return folders_digest([Path(str(importlib.resources.files(package)))
                            for package in ("chaingen", "chaingen.runtime", "chaingen.templates")])
