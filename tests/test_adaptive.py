@@ -171,3 +171,23 @@ def test_the_command_line_and_the_scene_run_adaptive_steps(tmp_path):
                                  "--atol", "0", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "adaptive steps" not in result.stdout
+
+
+@pytest.mark.compile
+def test_adaptive_es_completes_a_stiff_chain_at_rtol_1e_12():
+    """The stiff chain of docs/extremes.md (k = 1e6 N/m) at rtol 1e-12 with atol 0: a joint
+    angle passes near zero at t = 0.026 s, where rtol |phi| fell below the round-off of the two
+    results' difference (1e-16 rad: the angles come from coordinates). Every step was refused
+    down to 1e-12 dt and the run stopped at t = 0.04 s. With the estimate's floor at the
+    round-off of its block (docs/model.md section 15) it completes, with es's energy."""
+    from chaingen.simulation import build_solver
+    from chaingen.studies.extremes import chain
+
+    scene = chain(3, stiffness=1e6)
+    stiff = build_solver(scene, "es", 3, sensitivities=False)
+    result = stiff.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01, n_steps=10,
+                            options={"rtol": 1e-12, "atol": 0.0})
+    assert result.n_steps == 10
+    assert result.smallest_dt > 1e-9 and result.rejected_steps < 20
+    assert np.abs(result.energy_error).max() <= 1e-12 * abs(result.energy[0])
+    assert result.constraint_error.max() <= 1e-12

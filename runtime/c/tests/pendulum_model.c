@@ -281,7 +281,7 @@ static int f_next_state(const double **arg, double **res, long long int *iw, dou
         return 1;
     }
     if (res[0]) {
-        res[0][0] = x0[0] + dt * omega_m;
+        res[0][0] = x0[0] + dt * omega_m + pendulum_knob.angle_kick;
         res[0][1] = x0[1] + z[1] + pendulum_knob.state_kick;
     }
     if (config.variant.flows && res[1]) {

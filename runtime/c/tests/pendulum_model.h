@@ -104,6 +104,8 @@ typedef struct {
     double energy_jump;      /* energy_terms reports H + energy_jump phi */
     double state_kick;       /* next_state adds this to omega1 (an error no step length
                               * removes) */
+    double angle_kick;       /* next_state adds this to phi1: the round-off of an angle taken
+                              * from coordinates, absolute, whatever the step length */
     double predictor_bias;   /* added to the predictor's domega: a poor first guess */
     double cubic;            /* F1 becomes F1 + cubic F1^3 (same root): Newton from a poor
                               * guess takes many iterations, from a good one few */

@@ -1647,6 +1647,28 @@ static void test_adaptive(void)
         STATUS(simulate(x0, 0.0, dt, INTERVALS, 1, NULL, &options, samples, x, &stats),
                CHAINGEN_OK);
     }
+    {
+        /* An angle through zero with atol = 0, and an absolute round-off of two machine
+         * epsilons in every angle (es takes its angles from coordinates by atan2): the two
+         * results differ by that round-off however short the step, rtol |phi| falls below it
+         * near phi = 0, and without the error estimate's floor every step was refused down to
+         * MIN_STEP_FRACTION dt (STEP_TOO_SMALL in the first interval). */
+        const double through_zero[2] = {0.0, 0.5};
+        pendulum_variant v = full_variant();
+        v.error_entries = 1;   /* the angles alone, as es at order 2 */
+        use(v);
+        pendulum_knob.angle_kick = 2.0 * DBL_EPSILON;
+        options = tight();
+        options.rtol = 1e-12;
+        options.atol = 0.0;
+        STATUS(simulate(through_zero, 0.0, dt, INTERVALS, 1, NULL, &options, samples, x, &stats),
+               CHAINGEN_OK);
+        printf("# adaptive rtol 1e-12, atol 0, an angle through zero: %ld accepted, %ld "
+               "rejected, dt %.3e..%.3e\n", stats.accepted_steps, stats.rejected_steps,
+               stats.smallest_dt, stats.largest_dt);
+        EXPECT(stats.steps == INTERVALS && stats.smallest_dt > 1e-9,
+               "through zero: %ld steps, smallest dt %g", stats.steps, stats.smallest_dt);
+    }
     end();
 }
 
