@@ -68,6 +68,11 @@
 #define CG_MIN_FACTOR 0.2
 #define CG_MAX_FACTOR 5.0
 #define CG_NEWTON_FACTOR 0.25
+/* No entry's tolerance is below the round-off of its block (angles, rates): this many machine
+ * epsilons of the block's largest magnitude, for the angles at least 1 rad (see
+ * adaptive_interval). 32 eps = 7.1e-15 is below CHAINGEN_MIN_TOLERANCE, so an entry as large as
+ * its block's largest is tested as before at any allowed rtol. */
+#define CG_ESTIMATE_FLOOR (32.0 * DBL_EPSILON)
 #define CG_TWO_PI 6.283185307179586
 
 /* One entry point's view of the model and the workspace: the workspace's flat arrays carved into
@@ -1537,8 +1542,13 @@ static int cg_joint_state(const chaingen_model *table, const cg_solver *c, const
  * the exponents of Hairer and Wanner's DOPRI codes):
  *     h_new = h SAFETY err^-(0.7 / (ORDER + 1)) err_previous^(0.4 / (ORDER + 1)).
  * rtol and atol are 0 or at least CHAINGEN_MIN_TOLERANCE (below it the error estimate is
- * round-off). From x0 over the interval dt to x1; the controller's proposal carries over from
- * interval to interval in the workspace. */
+ * round-off). An entry's scale is at least ESTIMATE_FLOOR times the largest magnitude of its
+ * block (the angles, at least 1 rad; the rates): the two results differ by round-off of that
+ * size even as h -> 0 (an angle comes from coordinates of the chain's size, a relative rate
+ * from the links' rates), so an entry near zero with atol = 0 (or atol below that round-off)
+ * would refuse every step down to the floor of MIN_STEP_FRACTION dt. From x0 over the interval
+ * dt to x1; the controller's proposal carries over from interval to interval in the
+ * workspace. */
 static int cg_adaptive_interval(const chaingen_model *table, const cg_solver *c, const double *x0,
                                 const double *u, const double *p, double dt, double *x1,
                                 double *flows, const chaingen_options *options, int *iterations,
@@ -1592,6 +1602,11 @@ static int cg_adaptive_interval(const chaingen_model *table, const cg_solver *c,
             status = cg_joint_state(model, c, two, p, ends);
         }
         if (status == CHAINGEN_OK) {
+            double block[2] = {1.0, 0.0};   /* the angles' and the rates' largest magnitudes */
+            for (i = 0; i < model->error_entries; ++i) {
+                double size = fmax(fabs(start[i]), fabs(ends[i]));
+                block[i >= n] = fmax(block[i >= n], size);
+            }
             for (i = 0; i < model->error_entries; ++i) {
                 double difference = ends[i] - whole[i];
                 double scale = options->atol + options->rtol * fmax(fabs(start[i]), fabs(ends[i]));
@@ -1599,7 +1614,10 @@ static int cg_adaptive_interval(const chaingen_model *table, const cg_solver *c,
                 if (i < n) {
                     difference = remainder(difference, CG_TWO_PI);   /* angles are wrapped */
                 }
-                ratio = fabs(difference) / ((double)((1 << order) - 1) * scale);
+                scale = fmax(scale, CG_ESTIMATE_FLOOR * block[i >= n]);
+                /* 0 / 0 (an entry and its block at rest, atol = 0) is no error. */
+                ratio = difference == 0.0
+                    ? 0.0 : fabs(difference) / ((double)((1 << order) - 1) * scale);
                 if (!(ratio <= error)) {
                     error = ratio;   /* NaN propagates */
                 }
