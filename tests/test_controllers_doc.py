@@ -31,22 +31,26 @@ def test_the_python_loop_example_holds_its_target(capsys):
 
 def test_the_balance_errors_against_k_are_what_the_runs_give():
     """The table: 10 s of four_link_actuated's free fall (no torques, the scene's dt) with es
-    and K = 1, 3, 5, 7. K = 1 and 3 are quadrature errors (to the doc's two digits); from
-    K = 5 on the error is the round-off of the sums, which moves from one version of the code
-    to the next: the doc's figures are within ten times the run's, and below 1e-13 of H."""
+    and K = 1, 3, 5, 7, with the default exact gradient and with the quadrature alone. K = 1
+    and 3 of the quadrature alone are quadrature errors (to the doc's two digits); every other
+    figure is the round-off of the sums, which moves from one version of the code to the next:
+    the doc's figures are within ten times the run's, and below 1e-13 of H."""
     import chaingen
 
-    row = re.search(r"^  \| balance error \(J\) \|(.*)\|$", DOC.read_text(), re.M)
-    quoted = dict(zip((1, 3, 5, 7), (float(cell) for cell in row.group(1).split("|"))))
+    text = DOC.read_text()
     scene = chaingen.load_reference_scene("four_link_actuated")
     dt = scene.simulation.dt
-    for quadrature, figure in quoted.items():
-        solver = chaingen.build_solver(scene, "es", quadrature, sensitivities=False)
-        result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
-                                 n_steps=round(10.0 / dt))
-        error = float(np.abs(result.balance_error).max())
-        if quadrature <= 3:
-            assert f"{figure:.1e}" == f"{error:.1e}", (quadrature, error)
-        else:
-            assert error / 10 <= figure <= error * 10, (quadrature, error)
-            assert error < 1e-13 * abs(result.energy[0]), (quadrature, error)
+    for label, gradient in (("balance error (J)", "exact"), ("quadrature alone (J)", "quadrature")):
+        row = re.search(rf"^  \| {re.escape(label)} \|(.*)\|$", text, re.M)
+        quoted = dict(zip((1, 3, 5, 7), (float(cell) for cell in row.group(1).split("|"))))
+        for quadrature, figure in quoted.items():
+            solver = chaingen.build_solver(scene, "es", quadrature, sensitivities=False,
+                                           gradient=gradient)
+            result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
+                                     n_steps=round(10.0 / dt))
+            error = float(np.abs(result.balance_error).max())
+            if gradient == "quadrature" and quadrature <= 3:
+                assert f"{figure:.1e}" == f"{error:.1e}", (quadrature, error)
+            else:
+                assert error / 10 <= figure <= error * 10, (gradient, quadrature, error)
+                assert error <= 1e-13 * np.abs(result.energy).max(), (gradient, quadrature)

@@ -15,7 +15,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from chaingen.scene.values import Spring
-from chaingen.symbolic.com_recursion import averaged_spring_gradient, exact_spring_gradient
+from chaingen.symbolic.com_recursion import (
+    averaged_spring_gradient,
+    exact_gradient_scale,
+    exact_spring_gradient,
+)
 from chaingen.symbolic.recursion import Definitions
 
 mpmath.mp.dps = 50
@@ -60,13 +64,17 @@ def energy_change(d, dd, k, s0):
 
 def mismatch(d, dd, k, s0, segments, quadrature, gradient):
     """|sum_j G_j . dd_j - dV| relative to the round-off scale of its terms,
-    k (L + S0 + |dd|) sum_j |dd_j|: a force k (L - S0) is a difference of terms of size k L
-    and k S0, whose round-off no gradient can avoid (a spring near its rest length)."""
+    k (L + S0 + |dd|) max(sum_j |dd_j|, c_K L): a force k (L - S0) is a difference of terms of
+    size k L and k S0, whose round-off no gradient can avoid (a spring near its rest length);
+    and below steps of c_K L (exact_gradient_scale) the correction fades out, leaving the
+    quadrature's error, which is there below the round-off of the energy itself."""
     G = FUNCTIONS[segments, quadrature, gradient](d, dd, k, s0)
     work = sum(mpmath.mpf(float(g)) * mpmath.mpf(float(c)) for g, c in zip(G.ravel(),
                                                                             dd.ravel()))
     steps = np.linalg.norm(dd, axis=1)
-    size = float(k * (np.linalg.norm(d, axis=1).sum() + s0 + steps.sum()) * steps.sum())
+    length = np.linalg.norm(d, axis=1).sum()
+    size = float(k * (length + s0 + steps.sum())
+                 * max(steps.sum(), exact_gradient_scale(quadrature) * length))
     error = float(abs(work - energy_change(d, dd, k, s0)))
     return error / size if size > 0 else error
 
@@ -93,6 +101,26 @@ def spring_steps(draw):
 def test_the_exact_gradient_is_exact_at_any_step(step, quadrature):
     d, dd, k, rest, segments = step
     assert mismatch(d, dd, k, rest, segments, quadrature, "exact") <= 1e-13
+
+
+def test_the_correction_is_smooth_at_rest():
+    """At a step that hardly moves the spring the correction fades out smoothly: the gradient's
+    derivative in dd (what the Newton matrix and a controller's step Jacobians take) is that of
+    the K-point average to round-off, not round-off divided by |dd|^2."""
+    d = np.array([[0.3, 0.1], [0.2, -0.4]])
+    for size in (1e-14, 1e-10, 1e-6):
+        for column in range(4):
+            seed = np.zeros(4)
+            seed[column] = 1e-7
+            slopes = {}
+            for gradient in ("exact", "quadrature"):
+                g = FUNCTIONS[2, 3, gradient]
+                base = np.full((2, 2), size)
+                up = g(d, base + seed.reshape(2, 2), 1e4, 0.5)
+                down = g(d, base - seed.reshape(2, 2), 1e4, 0.5)
+                slopes[gradient] = (up - down) / 2e-7
+            scale = np.abs(slopes["quadrature"]).max()
+            assert np.abs(slopes["exact"] - slopes["quadrature"]).max() <= 1e-6 * scale
 
 
 def test_a_step_that_does_not_move_the_spring_has_the_averaged_gradient():

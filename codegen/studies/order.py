@@ -135,8 +135,7 @@ class OrderStudy:
     energy_flows: bool = False    # damping or torques: the energy error is the balance error
     #: The Newton settings of the runs that differ from the package's defaults (empty: none).
     newton_settings: tuple[tuple[str, float], ...] = ()
-    #: es's discrete gradient of the springs, None where it plays no role.
-    gradient: str | None = None
+    gradient: str | None = None   # es's discrete gradient of the springs (None: plays no role)
 
     @property
     def dts(self) -> tuple[float, ...]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numpy as np
 import sympy as sp
 
 from ..scene import Scene
@@ -219,19 +220,21 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
 def exact_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
                           defs: Definitions) -> list:
     """An exact discrete gradient of one spring's energy V = k/2 (sum_j s_j - S_0)^2 in its
-    segment vectors d_j (model.md 4, the exact discrete gradient): the K-point average G_j of
+    segment vectors d_j (model.md 4.3, the exact discrete gradient): the K-point average G_j of
     averaged_spring_gradient, corrected along the step (Gonzalez's construction, in the
     Euclidean metric of the segment vectors):
 
-        G_j + r / (sum_j |dd_j|^2) dd_j,     r = V(1) - V(0) - sum_j G_j . dd_j,
+        G_j + r / max(sum_j |dd_j|^2, delta^2) dd_j,     r = V(1) - V(0) - sum_j G_j . dd_j,
 
-    so that sum_j G_j . dd_j = V(1) - V(0) holds identically. r is the quadrature's error,
-    O(|dd|^(2K+1)): the correction is of its size and the trajectory that of the K-point rule.
-    V(1) - V(0) is taken without cancellation, k/2 (L_0 + L_1 - 2 S_0) (L_1 - L_0) with
-    s_j(1) - s_j(0) = (2 d_j(0) + dd_j) . dd_j / (s_j(0) + s_j(1)): its round-off is then
-    eps |G| |dd| (not eps V), and the correction's eps |G|, at any step size. A step that does
-    not move the spring (dd = 0) has r = 0 and no correction (the denominator's 1e-300 keeps
-    0 / 0 away). One (x, y) per segment."""
+    so that sum_j G_j . dd_j = V(1) - V(0) holds identically for every step larger than delta.
+    r is the quadrature's error, O(k L^2 (|dd| / L)^(2K+1)): the correction is of its size and
+    the trajectory that of the K-point rule. delta = c_K (L_0 + L_1) / 2 with
+    c_K = eps^(1/(2K+1)) is the step below which the quadrature is exact to round-off of the
+    energy anyway; there the correction fades out as |dd|, smoothly, with derivatives of the
+    K-point average's size (at rest, the Jacobians a controller takes of the step would
+    otherwise be round-off divided by |dd|^2). V(1) - V(0) is taken without cancellation,
+    k/2 (L_0 + L_1 - 2 S_0) (L_1 - L_0) with s_j(1) - s_j(0) = (2 d_j(0) + dd_j) . dd_j /
+    (s_j(0) + s_j(1)): its round-off is eps |G| |dd|, not eps V. One (x, y) per segment."""
     totals = averaged_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
     sums, increments, projected, squared = [], [], [], []
     for j, start, change, total in zip(js, starts, changes, totals):
@@ -243,12 +246,20 @@ def exact_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
                            + (2 * start[1] + change[1]) * change[1]) / (s0 + s1))
         projected.append(total[0] * change[0] + total[1] * change[1])
         squared.append(change[0] ** 2 + change[1] ** 2)
+    length_sum = defs.define(f"spring{i}_lengths", sp.Add(*sums))
     energy_change = defs.define(
         f"spring{i}_dV", number(spring.stiffness) / 2
-        * (sp.Add(*sums) - 2 * number(spring.rest_length)) * sp.Add(*increments))
+        * (length_sum - 2 * number(spring.rest_length)) * sp.Add(*increments))
+    smallest = sp.Float(exact_gradient_scale(quadrature) ** 2 / 4)
     ratio = defs.define(f"spring{i}_correction", (energy_change - sp.Add(*projected))
-                        / (sp.Add(*squared) + sp.Float(1e-300)))
+                        / sp.Max(sp.Add(*squared), smallest * length_sum ** 2))
     return [add(total, scale(ratio, change)) for total, change in zip(totals, changes)]
+
+
+def exact_gradient_scale(quadrature: int) -> float:
+    """c_K = eps^(1/(2K+1)): a step of the spring's segments below c_K times their length has a
+    K-point quadrature error below the round-off of its energy (exact_spring_gradient)."""
+    return float(np.finfo(float).eps) ** (1.0 / (2 * quadrature + 1))
 
 
 def averaged_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
