@@ -326,3 +326,23 @@ def test_two_solvers_run_side_by_side():
         alone_b = second.step(alone_b, dt=0.01).x1
     np.testing.assert_array_equal(xa, alone_a)
     np.testing.assert_array_equal(xb, alone_b)
+
+
+def test_the_exact_gradient_keeps_the_step_jacobians_at_rest():
+    """A controller linearises the step at a held posture (zero rates): there the exact
+    gradient's correction has faded out, and the step's Jacobians are the quadrature's. (Its
+    first version divided round-off by |dd|^2 there: ds/ds was off by 16 and an LQR designed
+    on it diverged.)"""
+    from chaingen.simulation import build_solver
+
+    scene = load("four_link_actuated")
+    target = np.array([np.pi / 2, 0.0, 0.0, 0.0])
+    maps = {}
+    for gradient in ("exact", "quadrature"):
+        solver = build_solver(scene, "es", 3, gradient=gradient)
+        hold = solver.holding_torques(target)
+        maps[gradient] = solver.step_sensitivities(
+            solver.initial_state(target, np.zeros(4)), hold, 0.001)
+    for name in ("ds_ds", "ds_du"):
+        exact, averaged = getattr(maps["exact"], name), getattr(maps["quadrature"], name)
+        assert np.abs(exact - averaged).max() <= 1e-9 * np.abs(averaged).max(), name
