@@ -124,6 +124,18 @@ def _stiff_figure(stiff: StiffStudy, config: BenchConfig, drawing) -> Path | Non
     return drawing.plot_stiff_work_precision(stiff, config.figures / f"bench_{STIFF_FIGURE}.png")
 
 
+def _versions() -> str:
+    import importlib.metadata
+
+    found = []
+    for package in ("mujoco", "numbalsoda", "numba", "casadi", "scipy"):
+        try:
+            found.append(f"{package} {importlib.metadata.version(package)}")
+        except importlib.metadata.PackageNotFoundError:
+            found.append(f"{package} not installed")
+    return ", ".join(found)
+
+
 def _run_stiff_only(config: BenchConfig, note, emit, started: float, drawing) -> BenchReport:
     """The stiff chain's part alone: its section replaces the one of an existing report at
     config.out (or is added to it), the rest kept; without a report there, a document of the
@@ -134,10 +146,10 @@ def _run_stiff_only(config: BenchConfig, note, emit, started: float, drawing) ->
     figure = _stiff_figure(stiff, config, drawing)
     wall = time.perf_counter() - started
     measured = (f"Written by `{config.command}` in {wall / 60:.1f} min of wall time on "
-                f"{time.strftime('%Y-%m-%d')}, apart from the rest of this report, on "
-                f"{machine['CPU']} ({machine['cores']}); the other versions as in Machine "
-                "above." + (" Quick mode: a smoke test, not the benchmark." if config.quick
-                            else ""))
+                f"{time.strftime('%Y-%m-%d')}, apart from the rest of this report (its Machine "
+                f"section is not this run's). CPU: {machine['CPU']}; cores: {machine['cores']}; "
+                f"{_versions()}." + (" Quick mode: a smoke test, not the benchmark."
+                                     if config.quick else ""))
     section = stiff_section(stiff, config, figure, measured)
     existing = config.out.read_text(encoding="utf-8") if config.out.is_file() else ""
     if existing.startswith(REPORT_TITLE):
