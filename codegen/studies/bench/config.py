@@ -162,9 +162,8 @@ STIFF_ENERGY_SAMPLE = 2.5e-4
 #: The summary's levels (trajectory error [rad], energy error relative to the energy), None
 #: where a level does not ask for that error: the cheapest measured run of ours and of each
 #: peer family holding both.
-STIFF_LEVELS = ((1e-3, None), (1e-5, None), (1e-7, None), (1e-9, None), (None, 1e-6),
-                (None, 1e-9),
-                (None, 1e-12), (1e-5, 1e-12))
+STIFF_LEVELS = ((1e-3, None), (1e-5, None), (1e-7, None), (1e-9, None),
+                (None, 1e-6), (None, 1e-9), (None, 1e-12), (1e-5, 1e-12))
 
 
 @dataclass(frozen=True)
