@@ -448,7 +448,9 @@ def test_stiff_part_quick_writes_its_section_in_place(tmp_path):
     from chaingen.views import bench_figures
 
     out = tmp_path / "benchmarks.md"
-    out.write_text(f"# Benchmarks: speed against accuracy\n\n## Headline\n\nkept\n\n"
+    # a quick run's report: --quick refuses to write into a full one
+    out.write_text(f"# Benchmarks: speed against accuracy\n\n**Quick mode**\n\n"
+                   f"## Headline\n\nkept\n\n"
                    f"{STIFF_HEADING}\n\nold numbers\n\n## Scaling\n\nkept too\n")
     config = bench_config(quick=True, stiff_only=True, out=out)
     report = run_bench(config, note=lambda message: None, emit=lambda message: None,
