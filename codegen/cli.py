@@ -171,6 +171,11 @@ def parser() -> argparse.ArgumentParser:
                        help="leave out the reference scenes")
     bench.add_argument("--skip-sweep", action="store_true",
                        help="leave out the sweeps of the studies part (no sweep extra needed)")
+    bench.add_argument("--skip-stiff", action="store_true",
+                       help="leave out the stiff chain's work-precision")
+    bench.add_argument("--stiff-only", action="store_true",
+                       help="run the stiff chain's work-precision alone and write its section "
+                            "into --out in place (the rest of the report kept)")
     bench.add_argument("--timeout", type=number, default=300.0, metavar="SECONDS",
                        help="limit of generate + build per scheme and n (default 300)")
     return main
@@ -281,6 +286,7 @@ def command_bench(args) -> int:
     config = bench_config(quick=args.quick, dts=args.dts, scaling_n=args.scaling_n,
                           timeout=args.timeout, skip_scaling=args.skip_scaling,
                           skip_reference=args.skip_reference, skip_sweep=args.skip_sweep,
+                          skip_stiff=args.skip_stiff, stiff_only=args.stiff_only,
                           out=args.out,
                           figures=args.figures)
     run_bench(config, figures=bench_figures)

@@ -30,10 +30,16 @@ from chaingen.studies.bench.headlines import (
     headlines,
     interpolate_cost,
 )
-from chaingen.studies.bench.report import machine_description, markdown
+from chaingen.studies.bench.report import (
+    STIFF_HEADING,
+    machine_description,
+    markdown,
+    replace_stiff_section,
+)
 from chaingen.studies.bench.runs import RunRow
 from chaingen.studies.bench.scaling import ScalingRow
 from chaingen.studies.bench.scenes import scaling_scene
+from chaingen.studies.bench.stiff import StiffRow, cheapest, stiff_scene
 
 from helpers import ROOT, load
 
@@ -52,6 +58,8 @@ BAD_OPTIONS = [
     ("scaling-n not an integer", ["--scaling-n", "2,2.5"], ["--scaling-n", "'2.5'"]),
     ("timeout zero", ["--timeout", "0"], ["--timeout"]),
     ("timeout negative", ["--timeout", "-5"], ["--timeout"]),
+    ("stiff-only and skip-stiff", ["--stiff-only", "--skip-stiff"],
+     ["--stiff-only", "--skip-stiff"]),
 ]
 
 
@@ -334,7 +342,9 @@ def test_quick_benchmark_writes_document_and_figures(tmp_path):
     assert result.returncode == 0, result.stderr
     check_document(out)
     assert {path.name for path in figures.iterdir()} == {"bench_three_link_mono.png",
-                                                         "bench_scaling.png"}
+                                                         "bench_scaling.png",
+                                                         "bench_stiff_chain.png"}
+    assert STIFF_HEADING in out.read_text() and "| held errors |" in out.read_text()
     assert "| method | variant | setting |" in result.stdout      # tables printed as it goes
     assert "## Headline" in out.read_text() and "Quick mode" in out.read_text()
     assert not [p for p in tmp_path.rglob(".*")]                 # no temporary files left
@@ -373,3 +383,111 @@ def test_control_study_measures_every_loop_and_headline_j(tmp_path):
     assert [h.key for h in found] == ["j", "j"]
     assert all(h.passed in (True, False) for h in found)
     assert all(h.passed is None for h in control_headlines(None))
+
+
+# -- the stiff chain's work-precision --------------------------------------------------------
+
+def test_stiff_scene_is_the_scaling_chain_with_stiff_springs():
+    scene, chain = stiff_scene(10, 2e4), scaling_scene(10)
+    assert scene.name == "stiff-chain-10" and scene.n == 10
+    assert [spring.stiffness for spring in scene.springs] == [2e4] * len(chain.springs)
+    assert [dataclasses.replace(spring, stiffness=0.0) for spring in scene.springs] == \
+        [dataclasses.replace(spring, stiffness=0.0) for spring in chain.springs]
+    assert scene.links == chain.links and scene.initial_angles == chain.initial_angles
+
+
+def test_stiff_only_runs_that_part_alone(tmp_path):
+    config = bench_config(stiff_only=True, out=tmp_path / "b.md")
+    assert config.run_stiff and config.stiff_only
+    assert not (config.run_reference or config.run_scaling or config.run_sweep)
+    assert config.command == f"chaingen bench --stiff-only --out {tmp_path / 'b.md'}"
+    assert config.stiff.n == 10 and config.stiff.t_end == 0.2
+    assert config.stiff.reference_rtol == 1e-13
+    full = bench_config(out=tmp_path / "b.md")
+    assert full.run_stiff and not full.stiff_only
+    assert not bench_config(skip_stiff=True, out=tmp_path / "b.md").run_stiff
+    quick = bench_config(quick=True, out=tmp_path / "b.md")
+    assert quick.stiff.n < config.stiff.n
+
+
+def test_stiff_section_is_replaced_in_place():
+    section = f"{STIFF_HEADING}\n\nnew\n"
+    old = (f"# T\n\n## Headline\n\nh\n\n{STIFF_HEADING}\n\nold\n\n## Scaling\n\ns\n")
+    text = replace_stiff_section(old, section)
+    assert text == f"# T\n\n## Headline\n\nh\n\n{STIFF_HEADING}\n\nnew\n\n## Scaling\n\ns\n"
+    # without one: before the scaling section, or at the end
+    assert replace_stiff_section("# T\n\n## Headline\n\nh\n\n## Scaling\n\ns\n", section) \
+        == f"# T\n\n## Headline\n\nh\n\n{STIFF_HEADING}\n\nnew\n\n## Scaling\n\ns\n"
+    assert replace_stiff_section("# T\n\nh\n", section) == f"# T\n\nh\n\n{STIFF_HEADING}\n\nnew\n"
+    # the last section
+    assert replace_stiff_section(f"# T\n\n{STIFF_HEADING}\n\nold\n", section) == \
+        f"# T\n\n{STIFF_HEADING}\n\nnew\n"
+
+
+def test_cheapest_run_holds_both_errors():
+    rows = [StiffRow("chaingen", "es K=3", "a", run_seconds=1.0, trajectory_error=1e-3,
+                     relative_energy_error=1e-14),
+            StiffRow("chaingen", "es K=3", "b", run_seconds=3.0, trajectory_error=1e-6,
+                     relative_energy_error=1e-14),
+            StiffRow("compiled", "CVODES-BDF", "c", run_seconds=0.5, trajectory_error=1e-7,
+                     relative_energy_error=1e-8),
+            StiffRow("compiled", "CVODES-BDF", "d", failure="failed")]
+    assert cheapest(rows, ("chaingen",), 1e-2, None).setting == "a"
+    assert cheapest(rows, ("chaingen",), 1e-5, 1e-12).setting == "b"
+    assert cheapest(rows, ("compiled",), 1e-5, None).setting == "c"
+    assert cheapest(rows, ("compiled",), None, 1e-12) is None
+
+
+@pytest.mark.compile
+def test_stiff_part_quick_writes_its_section_in_place(tmp_path):
+    """The stiff chain's part in its quick form (three links), run alone into an existing
+    report: its table has a row for every run of ours and of the peers, with both errors, and
+    replaces the old section only."""
+    from chaingen.reference.compiled_peers import numbalsoda_available
+    from chaingen.studies.bench import run_bench
+    from chaingen.views import bench_figures
+
+    out = tmp_path / "benchmarks.md"
+    # a quick run's report: --quick refuses to write into a full one
+    out.write_text(f"# Benchmarks: speed against accuracy\n\n**Quick mode**\n\n"
+                   f"## Headline\n\nkept\n\n"
+                   f"{STIFF_HEADING}\n\nold numbers\n\n## Scaling\n\nkept too\n")
+    config = bench_config(quick=True, stiff_only=True, out=out)
+    report = run_bench(config, note=lambda message: None, emit=lambda message: None,
+                       figures=bench_figures)
+    text = out.read_text()
+    assert "old numbers" not in text and text.count(STIFF_HEADING) == 1
+    assert "kept\n" in text and "kept too" in text
+    assert text.index("## Headline") < text.index(STIFF_HEADING) < text.index("## Scaling")
+    assert "Written by `chaingen bench --quick --stiff-only" in text
+    assert (tmp_path / "figures" / "bench_stiff_chain.png").stat().st_size > 0
+    section = text.split(STIFF_HEADING, 1)[1].split("\n## ", 1)[0]
+    header = ("| method | setting | steps | per step | run CPU | trajectory error at t_end [rad] "
+              "| max energy error [J] | energy error / E_ref | Newton it. | note |")
+    assert header in section
+    table = section.split(header, 1)[1].strip().splitlines()[1:]
+    rows = {row.method: row for row in report.stiff.rows}
+    assert len(table) == len(report.stiff.rows)
+    assert all(line.count("|") == header.count("|") for line in table)
+    summary = section.split("| held errors |", 1)[1].split("\n\n", 1)[0].splitlines()[2:]
+    assert len(summary) == len(config.stiff.levels)
+    ours = ["es K=3", "es K=3 quadrature", "vi", "midpoint order 4", "es K=3 adaptive"]
+    peers = ["CVODES-BDF", "CVODES-Adams", "numbalsoda-LSODA", "numbalsoda-DOP853",
+             "MuJoCo RK4"]
+    assert set(rows) == set(ours + peers)
+    for method in ours + peers:
+        assert any(line.startswith(f"| {method} |") for line in table), method
+        measured = [row for row in report.stiff.rows if row.method == method]
+        if method.startswith("numbalsoda") and not numbalsoda_available():
+            assert "not run" in measured[0].failure
+            continue
+        for row in measured:
+            assert not row.failure, (method, row.failure)
+            assert row.run_seconds > 0 and 0 < row.trajectory_error < 1.0
+            assert row.relative_energy_error >= 0
+    # es conserves energy to round-off with the exact gradient, not with the quadrature alone
+    assert rows["es K=3"].relative_energy_error < 1e-12
+    assert rows["es K=3 adaptive"].relative_energy_error < 1e-12
+    exact = [row for row in report.stiff.rows if row.method == "es K=3" and row.dt == 1e-3]
+    assert rows["es K=3 quadrature"].relative_energy_error > 100 * \
+        exact[0].relative_energy_error

@@ -15,6 +15,7 @@ from ..studies.bench.config import (
 )
 from ..studies.bench.runs import COMPILED_FAMILY, RunRow
 from ..studies.bench.scaling import ScalingRow
+from ..studies.bench.stiff import StiffStudy
 from .figure import matplotlib_figure, save_png
 
 MARKERS = "osD^vP*Xhp<>"
@@ -73,6 +74,39 @@ def plot_work_precision(name: str, rows: list[RunRow], path: Path) -> Path:
     panels[1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
     figure.suptitle(f"{name}: work-precision, t_end = {rows[0].t_end:g} s (ours: solid, "
                     "MuJoCo: dashed, SciPy: dotted, compiled peers: dash-dot-dot)")
+    figure.tight_layout()
+    return _save(figure, path)
+
+
+def plot_stiff_work_precision(study: StiffStudy, path: Path) -> Path:
+    """The stiff chain: the trajectory error at t_end and the energy error relative to E_ref
+    against the CPU time of the run; one line per method (ours solid, MuJoCo dashed, the
+    compiled peers dash-dot-dotted)."""
+    rows = study.rows
+    figure = matplotlib_figure((13.0, 5.5), 100, "chaingen bench")
+    panels = figure.subplots(1, 2)
+    methods = list(dict.fromkeys(row.method for row in rows))
+    curves = list(dict.fromkeys((row.method, row.family) for row in rows))
+    for axes, attribute, ylabel in (
+            (panels[0], "trajectory_error",
+             f"max |phi - phi_ref| at t = {study.settings.t_end:g} s [rad]"),
+            (panels[1], "relative_energy_error", "max |H - H_0| / E_ref")):
+        for method, family in curves:
+            points = sorted((row.run_seconds, getattr(row, attribute)) for row in rows
+                            if row.method == method and not row.failure
+                            and row.run_seconds is not None
+                            and getattr(row, attribute) is not None
+                            and getattr(row, attribute) > 0)
+            if points:
+                axes.loglog(*zip(*points), label=method,
+                            **_line_style(family, methods.index(method), "-"))
+        axes.set_xlabel("CPU time of the run [s]")
+        axes.set_ylabel(ylabel)
+        axes.grid(True, which="major", alpha=0.3)
+    panels[1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
+    figure.suptitle(f"{study.scene_name} (springs {study.settings.stiffness:g} N/m): "
+                    f"work-precision, t_end = {study.settings.t_end:g} s (ours: solid, MuJoCo: "
+                    "dashed, compiled peers: dash-dot-dot)")
     figure.tight_layout()
     return _save(figure, path)
 

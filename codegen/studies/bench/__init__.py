@@ -2,7 +2,7 @@
 
     chaingen bench [--quick] [--out FILE.md] [--figures DIR] [--dts 0.04,0.02,...]
                    [--scaling-n 2,3,5,10,20] [--skip-scaling] [--skip-reference]
-                   [--skip-sweep] [--timeout SECONDS]
+                   [--skip-sweep] [--skip-stiff] [--stiff-only] [--timeout SECONDS]
 
 Four parts, all measured side by side on one machine in one process (the scaling series in
 child processes, so that a size that takes too long can be stopped):
@@ -23,6 +23,11 @@ child processes, so that a size that takes too long can be stopped):
 5. Control loops: a controller in a Python loop over `Solver.stepper` against MuJoCo's
    Python loop, and one in C closing simulate's loop against the open loop (the control
    module).
+6. The stiff chain's work-precision: a 10-link chain with springs of 2e4 N/m over 0.2 s, ours
+   (es with both gradients, adaptive es, vi, midpoint, orders 2 and 4) against the compiled
+   peers and MuJoCo, CPU against the trajectory error and against the energy error (the
+   stiff module). `--stiff-only` runs it alone and writes its section into an existing
+   report in place.
 
 The parts live in their own modules: config (what runs), runs (part 1), scaling (part 2),
 headlines (part 3), knobs (the speed knobs), harness (the C timing program), report and figures.
@@ -38,12 +43,30 @@ from ...runtime.files import write_text
 from ...scene import METHODS, load_reference_scene
 from . import knobs
 from .accuracy import reference_study
-from .config import HEADLINE_DT, HEADLINE_SCENE, BenchConfig, bench_config
+from .config import (
+    HEADLINE_DT,
+    HEADLINE_SCENE,
+    REPORT_TITLE,
+    STIFF_FIGURE,
+    BenchConfig,
+    bench_config,
+)
 from .control import control_study, control_table
 from .headlines import headlines
-from .report import headline_table, machine_description, markdown, reference_table, scaling_table
+from .report import (
+    headline_table,
+    machine_description,
+    markdown,
+    reference_table,
+    replace_stiff_section,
+    scaling_table,
+    stiff_section,
+    stiff_summary_table,
+    stiff_table,
+)
 from .scaling import scaling_study
 from .scenes import scaling_scene
+from .stiff import StiffStudy, stiff_study
 from .studies import study_part, study_tables
 
 __all__ = ["BenchConfig", "BenchReport", "bench_config", "run_bench", "scaling_scene"]
@@ -78,6 +101,7 @@ class BenchReport:
     reference: dict
     scaling: list | None
     document: Path
+    stiff: StiffStudy | None
     figures: dict
     wall_seconds: float
 
@@ -94,7 +118,53 @@ def run_bench(config: BenchConfig, *, note=None, emit=print, figures=None) -> Be
         return _run_bench(config, note, emit, started, figures)
 
 
+def _stiff_figure(stiff: StiffStudy, config: BenchConfig, drawing) -> Path | None:
+    if drawing is None:
+        return None
+    return drawing.plot_stiff_work_precision(stiff, config.figures / f"bench_{STIFF_FIGURE}.png")
+
+
+def _versions() -> str:
+    import importlib.metadata
+
+    found = []
+    for package in ("mujoco", "numbalsoda", "numba", "casadi", "scipy"):
+        try:
+            found.append(f"{package} {importlib.metadata.version(package)}")
+        except importlib.metadata.PackageNotFoundError:
+            found.append(f"{package} not installed")
+    return ", ".join(found)
+
+
+def _run_stiff_only(config: BenchConfig, note, emit, started: float, drawing) -> BenchReport:
+    """The stiff chain's part alone: its section replaces the one of an existing report at
+    config.out (or is added to it), the rest kept; without a report there, a document of the
+    title and the section."""
+    machine = dict(machine_description())
+    stiff = stiff_study(config, note)
+    emit(f"\nstiff chain\n\n{stiff_summary_table(stiff)}\n\n{stiff_table(stiff)}")
+    figure = _stiff_figure(stiff, config, drawing)
+    wall = time.perf_counter() - started
+    measured = (f"Written by `{config.command}` in {wall / 60:.1f} min of wall time on "
+                f"{time.strftime('%Y-%m-%d')}, apart from the rest of this report (its Machine "
+                f"section is not this run's). CPU: {machine['CPU']}; cores: {machine['cores']}; "
+                f"{_versions()}." + (" Quick mode: a smoke test, not the benchmark."
+                                     if config.quick else ""))
+    section = stiff_section(stiff, config, figure, measured)
+    existing = config.out.read_text(encoding="utf-8") if config.out.is_file() else ""
+    if existing.startswith(REPORT_TITLE):
+        text = replace_stiff_section(existing, section)
+    else:
+        text = f"{REPORT_TITLE}\n\n{section}"
+    document = write_text(config.out, text)
+    emit(f"\nwrote the stiff chain's section into {document} ({wall / 60:.1f} min)")
+    return BenchReport([], {}, None, document, stiff,
+                       {STIFF_FIGURE: figure} if figure else {}, wall)
+
+
 def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> BenchReport:
+    if config.stiff_only:
+        return _run_stiff_only(config, note, emit, started, drawing)
     machine = machine_description()
     def emit_scene(name: str, t_end: float, rows) -> None:
         emit(f"\n{name} (t_end = {t_end:g} s)\n\n{reference_table(rows)}")
@@ -104,6 +174,10 @@ def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> Benc
     if config.run_scaling:
         scaling = scaling_study(config, note)
         emit(f"\nscaling series\n\n{scaling_table(scaling)}")
+    stiff = None
+    if config.run_stiff:
+        stiff = stiff_study(config, note)
+        emit(f"\nstiff chain\n\n{stiff_summary_table(stiff)}\n\n{stiff_table(stiff)}")
     knobs = knob_study(config, note, emit)
     studies = study_part(config, note)
     emit(f"\nstudies\n\n{study_tables(studies)}")
@@ -117,10 +191,12 @@ def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> Benc
                                                     config.figures / f"bench_{name}.png")
     if scaling is not None and drawing is not None:
         figures["scaling"] = drawing.plot_scaling(scaling, config.figures / "bench_scaling.png")
+    if stiff is not None and drawing is not None:
+        figures[STIFF_FIGURE] = _stiff_figure(stiff, config, drawing)
     wall = time.perf_counter() - started
     document = write_text(config.out, markdown(config, found, reference, scaling,
                                                      figures, machine, wall, knobs,
-                                                     studies, control))
+                                                     studies, control, stiff))
     emit(f"\nwrote {document} and {len(figures)} figures in {config.figures} "
          f"({wall / 60:.1f} min)")
-    return BenchReport(found, reference, scaling, document, figures, wall)
+    return BenchReport(found, reference, scaling, document, stiff, figures, wall)

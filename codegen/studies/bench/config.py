@@ -128,6 +128,76 @@ EARLY_T = 3.0
 HEADLINE_N = 20
 
 
+#: The stiff chain's work-precision (issue 32 g, the stiff module): scaling_scene(n) with every
+#: spring at STIFF_STIFFNESS, STIFF_T_END s from its initial state, ours against the compiled
+#: peers and MuJoCo; the trajectory error at STIFF_T_END against SciPy DOP853 at
+#: rtol = atol = STIFF_REFERENCE_RTOL.
+STIFF_N = 10
+STIFF_STIFFNESS = 2e4          # N/m, mono- and multi-articular springs alike
+STIFF_T_END = 0.2
+STIFF_REFERENCE_RTOL = 1e-13
+#: Ours at fixed steps (method, order, K, gradient, dts): es with the exact discrete gradient
+#: (the default) and with the quadrature alone, vi and midpoint, at orders 2 and 4.
+STIFF_ORDER2_DTS = (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4)
+STIFF_ORDER4_DTS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
+STIFF_SCHEMES = (("es", 2, 3, "exact", STIFF_ORDER2_DTS),
+                 ("es", 2, 3, "quadrature", (2e-3, 1e-3, 5e-4)),
+                 ("vi", 2, 3, "exact", STIFF_ORDER2_DTS),
+                 ("midpoint", 2, 3, "exact", STIFF_ORDER2_DTS),
+                 ("es", 4, 5, "exact", STIFF_ORDER4_DTS),
+                 ("es", 4, 5, "quadrature", (5e-3, 2e-3, 1e-3)),
+                 ("vi", 4, 3, "exact", STIFF_ORDER4_DTS),
+                 ("midpoint", 4, 3, "exact", STIFF_ORDER4_DTS))
+#: Adaptive es (method, order, K, tolerances rtol = atol), samples every STIFF_ADAPTIVE_SAMPLE s.
+STIFF_ADAPTIVE = (("es", 2, 3, (1e-6, 1e-8, 1e-10, 1e-12)),)
+STIFF_ADAPTIVE_SAMPLE = 0.01
+#: The compiled peers at these tolerances (rtol = atol); below 1e-12 they would be measured
+#: against a reference that is no tighter than themselves.
+STIFF_PEER_TOLERANCES = tuple(10.0 ** -k for k in range(4, 13))
+STIFF_MUJOCO = (("RK4", (1e-3, 5e-4, 2.5e-4, 1e-4, 5e-5)),
+                ("implicitfast", (1e-3, 5e-4, 2.5e-4, 1e-4, 5e-5)))
+#: The compiled peers' energy error is taken over samples this far apart (s), from a second,
+#: untimed run (their timed run samples every 0.01 s, as on the reference scenes).
+STIFF_ENERGY_SAMPLE = 2.5e-4
+#: The summary's levels (trajectory error [rad], energy error relative to the energy), None
+#: where a level does not ask for that error: the cheapest measured run of ours and of each
+#: peer family holding both.
+STIFF_LEVELS = ((1e-3, None), (1e-5, None), (1e-7, None), (1e-9, None),
+                (None, 1e-6), (None, 1e-9), (None, 1e-12), (1e-5, 1e-12))
+
+
+@dataclass(frozen=True)
+class StiffSettings:
+    """What the stiff chain's part runs (the STIFF_* constants, or a smaller quick set)."""
+
+    n: int
+    stiffness: float
+    t_end: float
+    reference_rtol: float
+    schemes: tuple[tuple[str, int, int, str, tuple[float, ...]], ...]
+    adaptive: tuple[tuple[str, int, int, tuple[float, ...]], ...]
+    adaptive_sample: float
+    peer_tolerances: tuple[float, ...]
+    mujoco: tuple[tuple[str, tuple[float, ...]], ...]
+    energy_sample: float
+    levels: tuple[tuple[float | None, float | None], ...] = STIFF_LEVELS
+
+
+STIFF_SETTINGS = StiffSettings(
+    n=STIFF_N, stiffness=STIFF_STIFFNESS, t_end=STIFF_T_END,
+    reference_rtol=STIFF_REFERENCE_RTOL, schemes=STIFF_SCHEMES, adaptive=STIFF_ADAPTIVE,
+    adaptive_sample=STIFF_ADAPTIVE_SAMPLE, peer_tolerances=STIFF_PEER_TOLERANCES,
+    mujoco=STIFF_MUJOCO, energy_sample=STIFF_ENERGY_SAMPLE)
+#: The quick form: three links (the SciPy peer's ODE of ten links takes some 100 s to derive
+#: and build), one run of each kind.
+STIFF_QUICK_SETTINGS = StiffSettings(
+    n=3, stiffness=STIFF_STIFFNESS, t_end=STIFF_T_END, reference_rtol=STIFF_REFERENCE_RTOL,
+    schemes=(("es", 2, 3, "exact", (2e-3, 1e-3)), ("es", 2, 3, "quadrature", (1e-3,)),
+             ("vi", 2, 3, "exact", (1e-3,)), ("midpoint", 4, 3, "exact", (2e-3,))),
+    adaptive=(("es", 2, 3, (1e-6,)),), adaptive_sample=STIFF_ADAPTIVE_SAMPLE,
+    peer_tolerances=(1e-6, 1e-8), mujoco=(("RK4", (5e-4,)),), energy_sample=1e-3)
+
+
 
 @dataclass(frozen=True)
 class BenchConfig:
@@ -155,6 +225,9 @@ class BenchConfig:
     run_reference: bool
     run_scaling: bool
     run_sweep: bool                      # part 4's sweeps (the parameter timings always run)
+    run_stiff: bool                      # the stiff chain's work-precision
+    stiff_only: bool                     # that part alone, its section written in place
+    stiff: StiffSettings
     out: Path
     figures: Path
     command: str
@@ -185,6 +258,9 @@ def _check_divides(dt: float, t_end: float, option: str) -> None:
                          "(the trajectory error is taken at t_end)")
 
 
+#: The stiff chain's figure: bench_<this>.png.
+STIFF_FIGURE = "stiff_chain"
+
 #: The first line of every report, and the mark a quick run's report carries.
 REPORT_TITLE = "# Benchmarks: speed against accuracy"
 QUICK_MARK = "**Quick mode**"
@@ -204,8 +280,17 @@ def is_full_report(path: Path) -> bool:
 def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str | None = None,
                  timeout: float = 300.0, skip_scaling: bool = False,
                  skip_reference: bool = False, skip_sweep: bool = False,
+                 skip_stiff: bool = False, stiff_only: bool = False,
                  out: Path | None = None, figures: Path | None = None) -> BenchConfig:
-    """The run's settings from the command line's values; BenchError names a bad one."""
+    """The run's settings from the command line's values; BenchError names a bad one.
+    stiff_only: the stiff chain's part alone, its section written into `out` in place (the
+    rest of an existing report kept)."""
+    if stiff_only and skip_stiff:
+        raise BenchError("--stiff-only and --skip-stiff: the one runs only what the other "
+                         "leaves out; give one of them")
+    command_skips = (skip_scaling, skip_reference, skip_sweep)
+    if stiff_only:
+        skip_scaling = skip_reference = skip_sweep = True
     if not (math.isfinite(timeout) and timeout > 0):
         raise BenchError(f"--timeout: must be > 0 seconds and finite, got {timeout}")
     for module in ("mujoco", "scipy", "matplotlib") + (
@@ -249,16 +334,20 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
     if not figures.exists() and not figures.parent.is_dir():
         raise BenchError(f"--figures: directory {figures.parent} does not exist")
     if figures.is_dir():   # the figures it will write, checked as every output is
-        for name in (*scenes, "scaling"):
+        names = ((STIFF_FIGURE,) if stiff_only else
+                 (*scenes, "scaling") + (() if skip_stiff else (STIFF_FIGURE,)))
+        for name in names:
             check_output_file(figures / f"bench_{name}.png", "--figures", [out])
 
     command = ["chaingen", "bench"]
     command += ["--quick"] if quick else []
     command += ["--dts", dts] if dts is not None else []
     command += ["--scaling-n", scaling_n] if scaling_n is not None else []
-    command += ["--skip-scaling"] if skip_scaling else []
-    command += ["--skip-reference"] if skip_reference else []
-    command += ["--skip-sweep"] if skip_sweep else []
+    command += ["--stiff-only"] if stiff_only else []
+    command += ["--skip-scaling"] if command_skips[0] else []
+    command += ["--skip-reference"] if command_skips[1] else []
+    command += ["--skip-sweep"] if command_skips[2] else []
+    command += ["--skip-stiff"] if skip_stiff else []
     command += ["--timeout", f"{timeout:g}"] if timeout != 300.0 else []
     command += [] if out_default else ["--out", str(out)]
     command += [] if figures_default else ["--figures", str(figures)]
@@ -278,7 +367,8 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
         repeats=3 if quick else 7, scipy_repeats=1 if quick else 3,
         scaling_steps=200 if quick else 1000,
         run_reference=not skip_reference, run_scaling=not skip_scaling,
-        run_sweep=not skip_sweep,
+        run_sweep=not skip_sweep, run_stiff=not skip_stiff, stiff_only=stiff_only,
+        stiff=STIFF_QUICK_SETTINGS if quick else STIFF_SETTINGS,
         out=out, figures=figures, command=" ".join(command))
 
 

@@ -19,14 +19,16 @@ from .config import (
     MUJOCO_TIMED_STEPS,
     QUICK_MARK,
     REPORT_TITLE,
+    STIFF_FIGURE,
     VARIANTS,
     BenchConfig,
 )
 from .control import control_table
 from .headlines import Headline
 from .knobs import knob_table
-from .runs import RunRow
+from .runs import COMPILED_FAMILY, RunRow
 from .scaling import ScalingRow
+from .stiff import StiffStudy, cheapest
 from .studies import study_tables
 
 
@@ -204,7 +206,7 @@ HOW_MEASURED = """\
 
 def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
              figures: dict[str, Path], machine, wall_seconds: float, knobs=(),
-             studies=None, control=None) -> str:
+             studies=None, control=None, stiff=None) -> str:
     lines = [REPORT_TITLE, "",
              f"Written by `{config.command}` in {wall_seconds / 60:.1f} min of wall time on "
              f"{time.strftime('%Y-%m-%d')}. Every number and figure comes from that run; nothing "
@@ -230,6 +232,8 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
                       f"From the scene's initial state to t_end = {rows[0].t_end:g} s.", "",
                       f"![{name} work-precision]({_link(figures[name], config.out)})", "",
                       reference_table(rows), ""]
+    if stiff is not None:
+        lines += [stiff_section(stiff, config, figures.get(STIFF_FIGURE))]
     if scaling is not None:
         lines += ["## Scaling", "",
                   "`chaingen.studies.bench.scenes.scaling_scene(n)`: n identical links "
@@ -294,3 +298,114 @@ the local engine's, every column but cpu_seconds, bit for bit. Last, the way wit
 one scene file per run and `chaingen simulate` on each, a fresh process and a fresh build each
 time, timed on a subset of the files and scaled to all runs."""
 
+
+
+# --------------------------------------------------------------------------------------------
+# The stiff chain's work-precision
+# --------------------------------------------------------------------------------------------
+
+#: The heading of the stiff chain's section; `chaingen bench --stiff-only` replaces the section
+#: it starts (up to the next "## ") in an existing report.
+STIFF_HEADING = "## Stiff chain: work-precision"
+
+
+def stiff_table(study: StiffStudy) -> str:
+    lines = ["| method | setting | steps | per step | run CPU | trajectory error at t_end [rad] "
+             "| max energy error [J] | energy error / E_ref | Newton it. | note |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for row in study.rows:
+        lines.append(
+            f"| {row.method} | {row.setting} | {row.n_steps or '-'} | "
+            f"{_time(row.step_seconds)} | {_time(row.run_seconds)} | "
+            f"{_sci(row.trajectory_error)} | {_sci(row.energy_error)} | "
+            f"{_sci(row.relative_energy_error)} | {_fixed(row.newton_iterations)} | "
+            f"{_cell(row.failure) if row.failure else ''} |")
+    return "\n".join(lines)
+
+
+def _level(trajectory: float | None, energy: float | None) -> str:
+    parts = ([f"trajectory <= {trajectory:.0e} rad"] if trajectory is not None else []) + \
+            ([f"energy <= {energy:.0e} E_ref"] if energy is not None else [])
+    return " and ".join(parts)
+
+
+def _run(row) -> str:
+    return "none measured holds it" if row is None else \
+        f"{row.method}, {row.setting}: {_time(row.run_seconds)}"
+
+
+def stiff_summary_table(study: StiffStudy) -> str:
+    """Per level of study.settings.levels: the cheapest measured run (not interpolated) of
+    ours, of the compiled peers and of MuJoCo that holds it, and who is cheaper by how much."""
+    lines = ["| held errors | ours | compiled peers | MuJoCo | cheapest |",
+             "|---|---|---|---|---|"]
+    for trajectory, energy in study.settings.levels:
+        ours = cheapest(study.rows, ("chaingen",), trajectory, energy)
+        compiled = cheapest(study.rows, (COMPILED_FAMILY,), trajectory, energy)
+        mujoco = cheapest(study.rows, ("MuJoCo",), trajectory, energy)
+        peers = [row for row in (compiled, mujoco) if row is not None]
+        peer = min(peers, key=lambda row: row.run_seconds, default=None)
+        if ours is None and peer is None:
+            verdict = "no run holds it"
+        elif peer is None:
+            verdict = "ours (no peer run holds it)"
+        elif ours is None:
+            verdict = f"{peer.method} (no run of ours holds it)"
+        elif ours.run_seconds <= peer.run_seconds:
+            ratio = peer.run_seconds / ours.run_seconds
+            verdict = f"ours, {ratio:.1f}x less CPU than {peer.method}"
+        else:
+            ratio = ours.run_seconds / peer.run_seconds
+            verdict = f"{peer.method}, {ratio:.1f}x less CPU than ours"
+        lines.append(f"| {_level(trajectory, energy)} | {_cell(_run(ours))} | "
+                     f"{_cell(_run(compiled))} | {_cell(_run(mujoco))} | {_cell(verdict)} |")
+    return "\n".join(lines)
+
+
+def stiff_section(study: StiffStudy, config: BenchConfig, figure: Path | None,
+                  measured: str | None = None) -> str:
+    """The section of the report (STIFF_HEADING); `measured`: a line naming the run that wrote
+    it, where it was written apart from the rest of the report."""
+    s = study.settings
+    schemes = ", ".join(dict.fromkeys(row.method for row in study.rows
+                                      if row.family == "chaingen"))
+    spread = ("" if study.reference_spread is None else
+              f" (it differs from DOP853 at SciPy's tightest tolerance by "
+              f"{study.reference_spread:.1e} rad: trajectory errors near that say nothing)")
+    lines = [STIFF_HEADING, ""]
+    if measured:
+        lines += [measured, ""]
+    lines += [
+        f"`chaingen.studies.bench.stiff.stiff_scene({s.n}, {s.stiffness:g})` ({study.scene_name}): "
+        f"the scaling chain of {s.n} links with every spring, mono- and multi-articular, at "
+        f"{s.stiffness:g} N/m, {s.t_end:g} s from its initial state. Trajectory error: "
+        f"max_i |phi_i - phi_ref,i| at t = {s.t_end:g} s, wrapped to [-pi, pi), against SciPy "
+        f"DOP853 at rtol = atol = {s.reference_rtol:g}{spread}. Energy error: max |H - H_0| "
+        f"over the run over E_ref = {study.energy_scale:.4g} J, the largest |H| along the "
+        "reference (one scale for every row): ours and MuJoCo over every step, adaptive es over "
+        f"its samples every {s.adaptive_sample:g} s, the compiled peers over samples every "
+        f"{s.energy_sample:g} s of a second, untimed run with the same tolerance. CPU as on the "
+        "reference scenes (How it is measured; adaptive es: process time of Solver.simulate, "
+        f"median of {config.repeats}). Ours: {schemes}; \"quadrature\" is es with the "
+        "quadrature's average alone (docs/model.md 4.3), the others es with the exact discrete "
+        "gradient, its default. A failed or unstable run is a row with its note.", ""]
+    if figure is not None:
+        lines += [f"![stiff chain work-precision]({_link(figure, config.out)})", ""]
+    lines += ["The cheapest measured run (not interpolated) of each side that holds the "
+              "errors:", "", stiff_summary_table(study), "", stiff_table(study), ""]
+    return "\n".join(lines)
+
+
+def replace_stiff_section(document: str, section: str) -> str:
+    """`document` with its stiff chain section replaced by `section` (up to the next "## "
+    heading), or, without one, with `section` put before "## Scaling" or at the end."""
+    section = section.rstrip() + "\n"
+    start = document.find(f"\n{STIFF_HEADING}\n")
+    if start >= 0:
+        end = document.find("\n## ", start + 1)
+        tail = "" if end < 0 else document[end + 1:]
+        return document[:start + 1] + section + ("\n" + tail if tail else "")
+    before = document.find("\n## Scaling\n")
+    if before >= 0:
+        return document[:before + 1] + section + "\n" + document[before + 1:]
+    return document.rstrip() + "\n\n" + section
