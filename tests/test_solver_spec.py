@@ -112,7 +112,8 @@ def test_solver_spec_build_solver_generate_and_build_scheme_agree(request, param
     import chaingen.symbolic.schemes as schemes
 
     fields = {name: request[name] for name in ("method", "quadrature", "order")}
-    # build_solver takes None as the scene's own ([simulation]); SolverSpec takes the values.
+    # build_solver and build_scheme take None as the scene's own ([simulation]); SolverSpec
+    # takes the values.
     defaults = {name: getattr(SCENE.simulation, name) if value is None else value
                 for name, value in fields.items()}
     monkeypatch.setattr(key, "solver_key", checked)
@@ -126,7 +127,7 @@ def test_solver_spec_build_solver_generate_and_build_scheme_agree(request, param
             (spec, fields),
             (lambda: chaingen.build_solver(SCENE, **fields, parameters=parameters), defaults),
             (lambda: package.generate_package(SCENE, **fields, parameters=parameters), fields),
-            (lambda: schemes.build_scheme(SCENE, **fields, parameters=parameters), fields)):
+            (lambda: schemes.build_scheme(SCENE, **fields, parameters=parameters), defaults)):
         refused = scheme_refusal(oracle, parameters)
         result = outcome(call)
         assert_same(result, refused, refused and f"{refused.option}: {refused.message}")

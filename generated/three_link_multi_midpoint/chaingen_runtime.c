@@ -814,6 +814,7 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     const int nz = model->nz;
     double *z, *dz, *residual, *jacobian;
     double previous_update = -1.0;   /* update norm of the previous iteration, < 0: none */
+    double previous_residual = -1.0; /* its residual norm */
     int i, iteration = 0, status, fresh = 0;   /* fresh: dF/dz evaluated within this call */
     z = c->z;
     dz = c->dz;
@@ -880,7 +881,11 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
             s->factors_valid = 1;
             s->factors_dt = dt;
             fresh = 1;
-            previous_update = -1.0;   /* a new Jacobian: contraction is measured afresh */
+            if (options->reuse_jacobian != CHAINGEN_JACOBIAN_EVERY_ITERATE) {
+                /* A new kept Jacobian: its contraction is measured afresh. (Full Newton has a
+                 * new one every iterate and compares successive updates for the floor.) */
+                previous_update = -1.0;
+            }
         }
         cg_solve_newton(model, c, dz);
         for (i = 0; i < nz; ++i) {
@@ -893,17 +898,23 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
         if (!isfinite(update_norm)) {
             status = CHAINGEN_NONFINITE;
         } else if (options->reuse_jacobian == CHAINGEN_JACOBIAN_EVERY_ITERATE) {
-            /* Converged; or at the round-off floor: the residual is round-off of its own scale
-             * and the update stopped shrinking (quadratic convergence would have shrunk it by
-             * orders), so the update is round-off of an ill-conditioned dF/dz, and no further
-             * iterate is better. */
+            /* Converged; or at the round-off floor: the update stopped shrinking (quadratic
+             * convergence would have shrunk it by orders) while the residual is round-off of
+             * its scale or stopped shrinking too, so the update is round-off of an
+             * ill-conditioned dF/dz, and no further iterate is better. The residual's scale
+             * counts the Jacobian's terms only; where other terms dominate (vi's momenta on a
+             * long chain), its round-off lies above CG_ROUNDOFF_RESIDUAL and only the second
+             * test sees it. A double root's linear convergence halves the update but quarters
+             * the residual, so it is not taken for the floor. */
             int floor = previous_update > 0.0 && update_norm >= CG_FLOOR_RATE * previous_update
-                        && residual_norm <= CG_ROUNDOFF_RESIDUAL;
+                        && (residual_norm <= CG_ROUNDOFF_RESIDUAL
+                            || residual_norm >= CG_FLOOR_RATE * previous_residual);
             s->factors_valid = 0;
             if (residual_norm <= options->residual_tol && (update_norm <= 1.0 || floor)) {
                 status = CHAINGEN_OK;
             }
             previous_update = update_norm;
+            previous_residual = residual_norm;
         } else {
             /* With contraction rate theta the new iterate's error is at most theta / (1 - theta)
              * times the update. The rate is measured within this step only (a rate carried

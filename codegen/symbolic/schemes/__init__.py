@@ -23,13 +23,14 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
                  quadrature: int | None = None, parameters=(), order: int = 2,
                  gradient: str = "exact") -> DiscreteScheme:
     """The discrete scheme of a SolverSpec, or of `scene` with `method`, `quadrature` (Gauss
-    points for spring terms), the numbers at the key paths `parameters` as run-time parameters
-    p, in that order ("all": every number of the scene a solver can take, chaingen.scene.
-    parameters.compiled_paths), its step composed to `order` (chaingen.symbolic.composition;
-    es at order 6 composes its k = 1 Galerkin step, chaingen.symbolic.schemes.galerkin), es's
-    springs by the discrete `gradient` ("exact" or "quadrature", docs/model.md section 4).
-    SolverSpecError (a SettingsError) for a request the rules refuse."""
-    spec = scene if isinstance(scene, SolverSpec) else SolverSpec(
+    points for spring terms; both the scene's own when None), the numbers at the key paths
+    `parameters` as run-time parameters p, in that order ("all": every number of the scene a
+    solver can take, chaingen.scene.parameters.compiled_paths), its step composed to `order`
+    (chaingen.symbolic.composition; es at order 6 composes its k = 1 Galerkin step,
+    chaingen.symbolic.schemes.galerkin), es's springs by the discrete `gradient` ("exact" or
+    "quadrature", docs/model.md section 4). SolverSpecError (a SettingsError) for a request
+    the rules refuse."""
+    spec = scene if isinstance(scene, SolverSpec) else SolverSpec.create(
         scene, method, quadrature, order=order, parameters=parameters, gradient=gradient)
     scene, quadrature, order = spec.scene, spec.quadrature, spec.order
     stages = FROM_ORDER_4 if spec.galerkin_step else composition(order)

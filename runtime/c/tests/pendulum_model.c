@@ -209,6 +209,13 @@ static void residual_at(const double **arg, double *f, double *jacobian)
     if (f) {
         f[0] = z[0] - dt * omega_m;
         f[1] = f1 + pendulum_knob.cubic * f1 * f1 * f1;
+        if (pendulum_knob.residual_noise != 0.0) {
+            /* A linear congruential sequence in [-1, 1), one draw per evaluation. */
+            static const double scale = 1.0 / 2147483648.0;
+            pendulum_knob.noise_state = pendulum_knob.noise_state * 1103515245u + 12345u;
+            f[1] += pendulum_knob.residual_noise
+                    * ((double)(pendulum_knob.noise_state & 0x7fffffffu) * scale * 2.0 - 1.0);
+        }
         if (pendulum_knob.nan_residual == 1 && knob_active(dt)) {
             f[1] = NAN;
         }

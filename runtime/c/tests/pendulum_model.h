@@ -109,6 +109,9 @@ typedef struct {
     double predictor_bias;   /* added to the predictor's domega: a poor first guess */
     double cubic;            /* F1 becomes F1 + cubic F1^3 (same root): Newton from a poor
                               * guess takes many iterations, from a good one few */
+    double residual_noise;   /* F gains a pseudo-random error of this size at every
+                              * evaluation: round-off of terms larger than the Jacobian's */
+    unsigned noise_state;    /* its generator's state */
     int phi_limited;         /* next_state fails (returns 1) on a step from phi0 > phi_limit */
     double phi_limit;
     long calls[PENDULUM_NFUNCTIONS];   /* evaluations of each function */

@@ -1099,6 +1099,45 @@ static void test_newton_modes(void)
     end();
 }
 
+/* Full Newton at the round-off floor: with a residual whose round-off lies above the Jacobian's
+ * terms (the knob adds a pseudo-random error to F), the updates stop shrinking at a level above
+ * a tight update tolerance. The floor test must see it and accept the step in a few iterations
+ * (before it did, it compared each update with none, since every iterate's Jacobian is new, and
+ * the step ran out of iterations and split: vi on 18 links under the check's tolerances). Once
+ * with noise below CG_ROUNDOFF_RESIDUAL (the residual is round-off of its scale), once above it
+ * (only the residual's stagnation tells). */
+static void test_round_off_floor(void)
+{
+    static const double noises[2] = {1e-14, 1e-11};
+    const double x0[2] = {1.0, 0.5};
+    double x1[2], reference[2];
+    chaingen_options options;
+    int k, iterations = 0;
+    begin("round_off_floor");
+    use(full_variant());
+    chaingen_default_options(&model, &options);
+    options.reuse_jacobian = CHAINGEN_JACOBIAN_EVERY_ITERATE;
+    options.warm_start = 0;
+    STATUS(step(x0, 0.2, 0.01, reference, NULL, &options, &iterations), CHAINGEN_OK);
+    options.update_rtol = 1e-16;
+    options.update_atol = 1e-16;
+    options.max_iterations = 40;
+    for (k = 0; k < 2; ++k) {
+        pendulum_knobs_reset();
+        pendulum_knob.residual_noise = noises[k];
+        iterations = 0;
+        STATUS(step(x0, 0.2, 0.01, x1, NULL, &options, &iterations), CHAINGEN_OK);
+        EXPECT(iterations <= 12 && store->scalars.step_splits == 0,
+               "noise %g: %d iterations, %ld splits", noises[k], iterations,
+               store->scalars.step_splits);
+        EXPECT(close_to(x1[0], reference[0], 1e3 * noises[k])
+                   && close_to(x1[1], reference[1], 1e3 * noises[k]),
+               "noise %g: ends at (%.17g, %.17g), without noise (%.17g, %.17g)", noises[k],
+               x1[0], x1[1], reference[0], reference[1]);
+    }
+    end();
+}
+
 static void test_fallback(void)
 {
     enum { STEPS = 20 };
@@ -1901,6 +1940,7 @@ static const test_group groups[] = {
     {"status_energy_jump", test_energy_jump},
     {"status_unavailable", test_unavailable},
     {"newton_modes", test_newton_modes},
+    {"round_off_floor", test_round_off_floor},
     {"full_newton_fallback", test_fallback},
     {"warm_start", test_warm_start},
     {"workspace_copy", test_workspace_copy},
