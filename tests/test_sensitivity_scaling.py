@@ -50,7 +50,7 @@ def functions_both_ways(spec: SolverSpec, monkeypatch):
         patch.setattr(sensitivities, "DENSE_MAX_INSTRUCTIONS", 10 ** 9)
         dense = scheme_functions(scheme, "t")
     with monkeypatch.context() as patch:
-        patch.setattr(sensitivities, "DENSE_MAX_ENTRIES", 0)
+        patch.setattr(sensitivities, "SWEPT_MIN_LINKS", 0)
         swept = scheme_functions(scheme, "t")
     return scheme, dense, swept
 

@@ -23,14 +23,17 @@ from .jacobians import (
 from .translation import GeneratedFunction
 
 #: A sensitivity function is generated dense, one expression per entry (CasADi's Jacobians,
-#: unrolled), while its Jacobians have at most DENSE_MAX_ENTRIES entries and it takes at most
+#: unrolled), on chains of fewer than SWEPT_MIN_LINKS links while it takes at most
 #: DENSE_MAX_INSTRUCTIONS instructions (jacobians.UNROLLED_JACOBIAN_MAX_INSTRUCTIONS, as the
 #: Newton Jacobian); otherwise by directions. Dense is faster where it is small: every pass of
 #: the directions evaluates the differentiated function's nominal part again (step_sensitivities
 #: on the scaling chain of 3 links by directions: vi 2.6x, midpoint 1.5x, es 1.3x the time of
-#: dense). The entries bound keeps the trial cheap: es's joint_maps at order 4 and n = 10
-#: (2400 entries) took CasADi 15 s dense.
-DENSE_MAX_ENTRIES = 256
+#: dense). From 5 links on every chain goes by directions, so that the code grows as one
+#: function of n (at 5 links dense would be smaller than by directions, at 10 much larger).
+#: DENSE_MAX_ENTRIES keeps the trial cheap where run-time parameters make the Jacobians wide:
+#: es's joint_maps at order 4 and n = 10 (2400 entries) took CasADi 15 s dense.
+SWEPT_MIN_LINKS = 5
+DENSE_MAX_ENTRIES = 1024
 DENSE_MAX_INSTRUCTIONS = UNROLLED_JACOBIAN_MAX_INSTRUCTIONS
 
 
@@ -52,15 +55,16 @@ def blocks(names_and_sizes, tangent: int = 0, start: int = 0) -> list[SweptBlock
 def jacobian_function(t, name: str, seeds: int, tangents_of, swept: list[SweptBlock],
                       dense_of, inputs=None, input_names=None) -> GeneratedFunction:
     """A function of Jacobian blocks of the step's arguments, or of `inputs`: dense_of() ->
-    its outputs unrolled (the blocks' Jacobians) where that is small (DENSE_MAX_ENTRIES,
-    DENSE_MAX_INSTRUCTIONS), else by directions (jacobians.Sweep): tangents_of(seed) -> the
+    its outputs unrolled (the blocks' Jacobians) where that is small (SWEPT_MIN_LINKS,
+    DENSE_MAX_ENTRIES, DENSE_MAX_INSTRUCTIONS), else by directions (jacobians.Sweep):
+    tangents_of(seed) -> the
     tangents, linear in the seed matrix of `seeds` rows."""
     inputs = list(t.step_args if inputs is None else inputs)
     input_names = list(t.step_names if input_names is None else input_names)
     seed = seed_matrix(seeds)
     tangents = tangents_of(seed)
-    if sum(tangents[block.tangent].shape[0] * block.count for block in swept) \
-            <= DENSE_MAX_ENTRIES:
+    entries = sum(tangents[block.tangent].shape[0] * block.count for block in swept)
+    if t.n < SWEPT_MIN_LINKS and entries <= DENSE_MAX_ENTRIES:
         dense = [ca.densify(output) for output in dense_of()]
         if ca.Function("size", inputs, dense).n_instructions() <= DENSE_MAX_INSTRUCTIONS:
             return GeneratedFunction(name, tuple(inputs), tuple(input_names), tuple(dense),
