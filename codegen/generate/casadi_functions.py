@@ -321,8 +321,8 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     has any) after its state-like inputs: step functions (z, x0, u, q, dt), the predictor
     (x0, q, dt), outputs (x, q), initial_state (phi, phidot, q), holding_torques (phi, q),
     where q = parameters(p) are the derived parameters (see build_functions).
-    sensitivities=False leaves out the step-map Jacobians, the largest generated functions
-    (for "vi" about three times the Newton Jacobian), when a package does not need them.
+    sensitivities=False leaves out the step-map Jacobians (chaingen.generate.sensitivities),
+    the largest generated functions, when a package does not need them.
     """
     t = SchemeTranslation(scheme)
     found: dict[str, GeneratedFunction | None] = dict.fromkeys(

@@ -1,5 +1,5 @@
-"""How the Newton Jacobian dF/dz is generated: unrolled entry by entry, or by forward
-directions in a loop (docs/model.md, section 17).
+"""How the Newton Jacobian dF/dz and the step sensitivities' Jacobians are generated: unrolled
+entry by entry, or by forward directions in a loop (docs/model.md, sections 11 and 17).
 
 CasADi's symbolic Jacobian of a residual is fast to evaluate, but its generated code has one
 expression per entry: for a chain in joint space, whose Jacobian is dense, O(n^2), and gcc's
@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-#: Forward directions per pass of a Jacobian evaluated by directions (jacobian_by_directions).
+#: Forward directions per pass of a Jacobian evaluated by directions (jacobian_by_directions,
+#: swept_jacobians).
 JACOBIAN_CHUNK = 4
 #: The Newton Jacobian is generated entry by entry (CasADi's symbolic Jacobian, unrolled) while
 #: that takes at most this many instructions; above, by forward directions in a loop: the code
