@@ -13,7 +13,14 @@ from dataclasses import dataclass
 import casadi as ca
 
 from ..symbolic.schemes import DiscreteScheme
-from .jacobians import JACOBIAN_CHUNK, jacobian_by_directions, unrolled_jacobian
+from .jacobians import (
+    JACOBIAN_CHUNK,
+    jacobian_by_directions,
+    swept_jacobians,
+    unrolled_jacobian,
+)
+from .sensitivities import sensitivity_functions, state_chain_functions
+from .translation import GeneratedFunction as GeneratedFunction
 from .translation import MissingInputError as MissingInputError
 from .translation import SympyToCasadi as SympyToCasadi
 from .translation import check_free_symbols as check_free_symbols
@@ -73,20 +80,6 @@ def chains_state(scheme: DiscreteScheme) -> bool:
     whose x carries a normal velocity the joint-space state does not see) rather than in
     joint space (SchemeFunctions.joint_maps)."""
     return len(scheme.metadata.composition) > 1 and not scheme.maps.state_from_joint_space
-
-
-@dataclass(frozen=True)
-class GeneratedFunction:
-    """One function of the generated C, as SymPy's Routine is one routine: its name (without
-    the package prefix), its arguments and its results, each with its name. The builders below
-    make one each, from expressions that `SchemeTranslation.translated` checked for free
-    symbols before translating them."""
-
-    name: str
-    inputs: tuple[ca.SX, ...]
-    input_names: tuple[str, ...]
-    outputs: tuple[ca.SX, ...]
-    output_names: tuple[str, ...]
 
 
 class SchemeTranslation:
@@ -173,7 +166,7 @@ class SchemeTranslation:
         if self.solve:
             matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
                                   for row in self.solve.matrix.tolist()])
-            solution = ca.solve(matrix, sx_vector(bound, self.solve.rhs))
+            solution = linear_solution(matrix, sx_vector(bound, self.solve.rhs))
             for symbol, value in zip(self.solve.symbols, ca.vertsplit(solution)):
                 bound.bind(symbol, value)
         return bound
@@ -187,6 +180,17 @@ class SchemeTranslation:
                 self.translated("outputs", [maps.energy], translate, symbols),
                 self.translated("outputs", maps.constraint_residuals, translate, symbols))
 
+    def state_tangent(self, state: ca.SX, s_seed: ca.SX, p_seed: ca.SX) -> ca.SX:
+        """dx0 = X_s ds0 + X_p dp of x0 = X(s0, p) (initial_state) at s0 = S(state, p), in
+        the directions of the columns of s_seed (2n rows) and p_seed (np rows)."""
+        s_of_state = ca.vertcat(*self.joint_space(state)[:2])
+        seed = ca.SX.sym("seed", 2 * self.n + self.n_p, s_seed.shape[1])
+        tangent = ca.Function("X", [self.phi, self.phidot, self.p, seed],
+                              [ca.jtimes(self.initial_state,
+                                         ca.vertcat(self.phi, self.phidot, self.p), seed)])
+        return tangent(s_of_state[:self.n], s_of_state[self.n:], self.p,
+                       ca.vertcat(s_seed, p_seed))
+
     def state_maps(self) -> tuple[ca.SX, ca.SX]:
         """X_s = dx0/ds0 and X_p = dx0/dp of x0 = X(s0, p) (initial_state) at s0 = S(x0, p)."""
         s_of_x0 = ca.vertcat(*self.joint_space(self.x0)[:2])
@@ -199,6 +203,30 @@ class SchemeTranslation:
         """A function of the step's arguments (z, x0, u, p, dt)."""
         return GeneratedFunction(name, tuple(self.step_args), tuple(self.step_names),
                                  tuple(outputs), tuple(output_names))
+
+
+#: An output_solve (a LinearSolve of the scheme's outputs: es's velocity projection at orders
+#: 4 and 6) of at most this many unknowns is solved symbolically, unrolled into the generated
+#: expressions (CasADi's QR of the SX matrix). A larger one is a call to a generated function
+#: that factorises the matrix numerically (CasADi's sparse QR, "qr") in a loop: the symbolic
+#: factorisation of es's dense 3n x 3n system has O(n^3) instructions (the outputs of es at
+#: order 4: 116 kB of C at n = 5, 920 kB at n = 10), and every derivative through it as many.
+SYMBOLIC_SOLVE_MAX_UNKNOWNS = 12
+
+
+def linear_solution(matrix: ca.SX, rhs: ca.SX) -> ca.SX:
+    """matrix^-1 rhs: unrolled while the system has at most SYMBOLIC_SOLVE_MAX_UNKNOWNS
+    unknowns, else by a call to a numeric sparse QR on the matrix's structural nonzeros
+    (CasADi differentiates through the call: its forward derivative solves with the same
+    matrix)."""
+    if matrix.shape[0] <= SYMBOLIC_SOLVE_MAX_UNKNOWNS:
+        return ca.solve(matrix, rhs)
+    matrix = ca.sparsify(matrix)
+    a = ca.MX.sym("A", matrix.sparsity())
+    b = ca.MX.sym("b", rhs.shape[0])
+    solve = ca.Function("linear_solution", [a, b], [ca.solve(a, b, "qr")], ["A", "b"], ["x"],
+                        {"never_inline": True})
+    return solve(matrix, rhs)
 
 
 def defined(kind: str, inputs, definitions) -> list:
@@ -219,57 +247,6 @@ def bind_all(translate: SympyToCasadi, definitions) -> SympyToCasadi:
 
 
 # -- one builder per generated function ----------------------------------------------------
-
-def sensitivity_functions(t: SchemeTranslation) -> tuple[GeneratedFunction, GeneratedFunction]:
-    """The controller's state is s = (phi, omega); x0 = X(s0, p) (initial_state), s1 =
-    S(x1, p) (outputs). With F(z*, x0, u, p) = 0, dz*/d(s0, u, p) = -J^-1 [F_x0 X_s, F_u,
-    F_x0 X_p + F_p] (the C code solves it with one LU of J at z*), and ds1/d(s0, u, p) =
-    S_x1 (x1_z dz* + [x1_x0 X_s, x1_u, x1_x0 X_p + x1_p]) + [0, 0, S_p]. X is evaluated at
-    s0 = S(x0, p), so the functions take x0 as the step does."""
-    x_s, x_p = t.state_maps()
-    s1 = ca.vertcat(*t.joint_space(t.next_state)[:2])
-    f_x0 = ca.jacobian(t.residual, t.x0)
-    rhs = ca.densify(ca.horzcat(ca.mtimes(f_x0, x_s), ca.jacobian(t.residual, t.u),
-                                ca.mtimes(f_x0, x_p) + ca.jacobian(t.residual, t.p)))
-    s1_z = ca.densify(ca.jacobian(s1, t.z))
-    s1_x0 = ca.jacobian(s1, t.x0)
-    s1_s0 = ca.densify(ca.mtimes(s1_x0, x_s))
-    s1_u = ca.densify(ca.jacobian(s1, t.u))
-    s1_p = ca.densify(ca.mtimes(s1_x0, x_p) + ca.jacobian(s1, t.p))
-    outputs = [s1_z, s1_s0] + ([s1_u] if t.nu else []) + ([s1_p] if t.n_p else [])
-    names = ["s1_z", "s1_s0"] + (["s1_u"] if t.nu else []) + (["s1_p"] if t.n_p else [])
-    return (t.step_function("sensitivity_rhs", [rhs], ["R"]),
-            t.step_function("sensitivity_map", outputs, names))
-
-
-def state_chain_functions(t: SchemeTranslation) -> tuple[GeneratedFunction, ...]:
-    """The stage Jacobians in the whole state x (SchemeFunctions.joint_maps): with
-    F(z*, x0, u, p) = 0, dx1/d(x0, u, p) = x1_z dz* + [x1_x0, x1_u, x1_p] and
-    dz* = -J^-1 [F_x0, F_u, F_p]; the composed step's ds1/ds0 = S_x1 D X_s."""
-    x1 = t.next_state
-    rhs = ca.densify(ca.horzcat(ca.jacobian(t.residual, t.x0), ca.jacobian(t.residual, t.u),
-                                ca.jacobian(t.residual, t.p)))
-    outputs = [ca.densify(ca.jacobian(x1, t.z)), ca.densify(ca.jacobian(x1, t.x0))]
-    names = ["x1_z", "x1_x0"]
-    if t.nu:
-        outputs.append(ca.densify(ca.jacobian(x1, t.u)))
-        names.append("x1_u")
-    if t.n_p:
-        outputs.append(ca.densify(ca.jacobian(x1, t.p)))
-        names.append("x1_p")
-    x_s, x_p = t.state_maps()
-    s1 = ca.vertcat(*t.joint_space(t.x)[:2])
-    maps = [ca.densify(x_s), ca.densify(ca.jacobian(s1, t.x))]
-    map_names = ["x0_s0", "s1_x1"]
-    if t.n_p:
-        maps += [ca.densify(x_p), ca.densify(ca.jacobian(s1, t.p))]
-        map_names += ["x0_p", "s1_p"]
-    return (t.step_function("sensitivity_rhs", [rhs], ["R"]),
-            t.step_function("sensitivity_map", outputs, names),
-            GeneratedFunction("joint_maps", tuple([t.x0, t.x] + t.with_p[0]),
-                              tuple(["x0", "x1"] + t.with_p[1]), tuple(maps),
-                              tuple(map_names)))
-
 
 def segment_margins(t: SchemeTranslation) -> GeneratedFunction | None:
     """(x0, x1) -> (s_j(x1) / tol_j, cos of each segment's turn over the step), at the scene's
@@ -344,8 +321,8 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     has any) after its state-like inputs: step functions (z, x0, u, q, dt), the predictor
     (x0, q, dt), outputs (x, q), initial_state (phi, phidot, q), holding_torques (phi, q),
     where q = parameters(p) are the derived parameters (see build_functions).
-    sensitivities=False leaves out the step-map Jacobians, the largest generated functions
-    (for "vi" about three times the Newton Jacobian), when a package does not need them.
+    sensitivities=False leaves out the step-map Jacobians (chaingen.generate.sensitivities),
+    the largest generated functions, when a package does not need them.
     """
     t = SchemeTranslation(scheme)
     found: dict[str, GeneratedFunction | None] = dict.fromkeys(
@@ -432,10 +409,17 @@ def build_functions(functions: list[GeneratedFunction], prefix: str, p: ca.SX, o
     q in p's place. The C code evaluates Q once when p changes instead of in every residual
     of every step. directions: the Newton Jacobian's forward directions per pass (None:
     unrolled)."""
+    sweeps = {f.name: f.sweep for f in functions if f.sweep is not None}
+
     def function(name, inputs, input_names, outputs, output_names):
         if name == "residual_jacobian" and directions:   # z is the first input
             return jacobian_by_directions(f"{prefix}_model_{name}", inputs, input_names,
                                           outputs[0], 0, directions, options)
+        if name in sweeps:   # the seed is the last input
+            directional = ca.Function(f"{prefix}_model_{name}_directions", inputs, outputs,
+                                      input_names, output_names, options)
+            return swept_jacobians(f"{prefix}_model_{name}", directional, sweeps[name],
+                                   input_names[:-1])
         return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
                            options)
 

@@ -1,5 +1,5 @@
-"""How the Newton Jacobian dF/dz is generated: unrolled entry by entry, or by forward
-directions in a loop (docs/model.md, section 17).
+"""How the Newton Jacobian dF/dz and the step sensitivities' Jacobians are generated: unrolled
+entry by entry, or by forward directions in a loop (docs/model.md, sections 11 and 17).
 
 CasADi's symbolic Jacobian of a residual is fast to evaluate, but its generated code has one
 expression per entry: for a chain in joint space, whose Jacobian is dense, O(n^2), and gcc's
@@ -8,9 +8,12 @@ forward derivative of F in a few directions, called in a loop over the columns: 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 
-#: Forward directions per pass of a Jacobian evaluated by directions (jacobian_by_directions).
+#: Forward directions per pass of a Jacobian evaluated by directions (jacobian_by_directions,
+#: swept_jacobians).
 JACOBIAN_CHUNK = 4
 #: The Newton Jacobian is generated entry by entry (CasADi's symbolic Jacobian, unrolled) while
 #: that takes at most this many instructions; above, by forward directions in a loop: the code
@@ -53,3 +56,47 @@ def jacobian_by_directions(name: str, inputs, input_names, residual: ca.SX, unkn
              else ca.DM(item.shape[0], passes * chunk) for index, item in enumerate(inputs)]
     tangents = forward(*symbols, value, *seeds)
     return ca.Function(name, symbols, [value, tangents[:, :nz]], input_names, ["F", "J"])
+
+
+@dataclass(frozen=True)
+class SweptBlock:
+    """One output of a function evaluated by directions: columns `first` to `first + count`
+    of the tangent `tangent` (an index into the directional function's outputs), over the
+    sweep's unit seeds."""
+
+    name: str
+    tangent: int
+    first: int
+    count: int
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A function whose outputs are Jacobians (dense blocks), generated as a directional
+    derivative called in a loop (docs/model.md, section 11): the GeneratedFunction's last input
+    is a seed matrix of `seeds` rows and JACOBIAN_CHUNK columns, its outputs are the tangents in
+    those directions (linear in the seed), and the function the package gets takes the other
+    inputs and returns `blocks`, the tangents over the columns of the identity."""
+
+    seeds: int
+    blocks: tuple[SweptBlock, ...]
+
+
+def swept_jacobians(name: str, directional: ca.Function, sweep: Sweep, input_names,
+                    chunk: int = JACOBIAN_CHUNK) -> ca.Function:
+    """The Jacobian blocks of `sweep` by `directional` (inputs..., seed[seeds x chunk]) ->
+    tangents[. x chunk], mapped serially over ceil(seeds / chunk) passes with the columns of
+    the identity as seeds. The generated C is a loop around one directional derivative, so it
+    grows with the function differentiated, O(n), not with the Jacobian's entries; a pass
+    costs one evaluation of that function's nominal part and `chunk` tangents."""
+    passes = -(-sweep.seeds // chunk)
+    count = directional.n_in() - 1
+    symbols = [ca.MX.sym(label, directional.size1_in(i), directional.size2_in(i))
+               for i, label in zip(range(count), input_names)]
+    seeds = ca.horzcat(ca.DM.eye(sweep.seeds), ca.DM(sweep.seeds, passes * chunk - sweep.seeds))
+    tangents = directional.map(passes, "serial")(*symbols, seeds)
+    tangents = tangents if isinstance(tangents, (list, tuple)) else [tangents]
+    outputs = [ca.densify(tangents[block.tangent][:, block.first:block.first + block.count])
+               for block in sweep.blocks]
+    return ca.Function(name, symbols, outputs, list(input_names),
+                       [block.name for block in sweep.blocks])

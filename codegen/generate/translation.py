@@ -7,8 +7,12 @@ goes into (check_free_symbols, style.md).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 import sympy as sp
+
+from .jacobians import Sweep
 
 #: SymPy functions with a CasADi counterpart of the same meaning.
 _FUNCTIONS = {
@@ -124,3 +128,21 @@ def sx_vector(translate: SympyToCasadi, matrix) -> ca.SX:
     """The entries of a SymPy matrix (or sequence), translated, as a CasADi column."""
     entries = [translate(e) for e in matrix]
     return ca.vertcat(*entries) if entries else ca.SX(0, 1)
+
+
+@dataclass(frozen=True)
+class GeneratedFunction:
+    """One function of the generated C, as SymPy's Routine is one routine: its name (without
+    the package prefix), its arguments and its results, each with its name. The builders of
+    casadi_functions and sensitivities make one each, from expressions that
+    `SchemeTranslation.translated` checked for free symbols before translating them."""
+
+    name: str
+    inputs: tuple[ca.SX, ...]
+    input_names: tuple[str, ...]
+    outputs: tuple[ca.SX, ...]
+    output_names: tuple[str, ...]
+    # A function of Jacobian blocks evaluated by directions (jacobians.Sweep): then the last
+    # input is the seed matrix, the outputs are the tangents, and the package's function
+    # takes the other inputs and returns sweep.blocks.
+    sweep: Sweep | None = None
