@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from chaingen.generate import casadi_functions, sensitivities
+from chaingen.generate import sensitivities
 from chaingen.generate.casadi_functions import scheme_functions
 from chaingen.generate.package import render_package
 from chaingen.scene.solver_spec import SolverSpec
@@ -88,26 +88,6 @@ def test_sensitivities_by_directions_equal_the_dense_ones(name, method, order, p
                 a, b = np.array(a), np.array(b)
                 assert a.shape == b.shape and a.size > 0
                 np.testing.assert_allclose(b, a, rtol=1e-11, atol=1e-11 * np.abs(a).max())
-
-
-def test_the_numeric_projection_equals_the_symbolic_one(monkeypatch):
-    """es's velocity projection at order 4 (an output_solve) by the sparse QR call gives the
-    symbolic solve's outputs and joint maps to round-off."""
-    spec = SolverSpec.create(load("three_link_multi"), "es", 3, order=4)
-    scheme = build_scheme(spec)
-    symbolic = scheme_functions(scheme, "t")
-    monkeypatch.setattr(casadi_functions, "SYMBOLIC_SOLVE_MAX_UNKNOWNS", 0)
-    numeric = scheme_functions(scheme, "t")
-    for _ in range(3):
-        x0 = point(symbolic, scheme, 0)["x0"]
-        x1 = x0 + rng.normal(0, 1e-3, x0.shape)
-        for a, b in zip(symbolic.outputs.call([x0]), numeric.outputs.call([x0]),
-                        strict=True):
-            np.testing.assert_allclose(np.array(b), np.array(a), rtol=1e-12, atol=1e-12)
-        for a, b in zip(symbolic.joint_maps.call([x0, x1]),
-                        numeric.joint_maps.call([x0, x1]), strict=True):
-            a, b = np.array(a), np.array(b)
-            np.testing.assert_allclose(b, a, rtol=1e-11, atol=1e-11 * np.abs(a).max())
 
 
 def sensitivity_bytes(method: str, order: int, n: int) -> int:

@@ -81,17 +81,10 @@ TRANSLATION_CASES = ([case(name, "es", name in OWN_SCENES) for name in ALL_SCENE
 
 
 def output_values(scheme, x):
-    """(phi, omega, energy) of the scheme at state x, solving the output's linear system."""
-    solve = scheme.output_solve
-    solved = []
-    if solve:
-        matrix = np.array(scheme.state_function(list(solve.matrix))(*x), dtype=float)
-        size = int(round(np.sqrt(matrix.size)))
-        rhs = np.array(scheme.state_function(solve.rhs)(*x), dtype=float).ravel()
-        solved = list(np.linalg.solve(matrix.reshape(size, size), rhs))
+    """(phi, omega, energy) of the scheme at state x."""
     outputs = scheme.state_function(list(scheme.joint_angles) + list(scheme.joint_velocities)
-                                    + [scheme.energy], list(solve.symbols) if solve else [])
-    values = np.array(outputs(*x, *solved), dtype=float).ravel()
+                                    + [scheme.energy])
+    values = np.array(outputs(*x), dtype=float).ravel()
     n = scheme.scene.n
     return values[:n], values[n:2 * n], values[2 * n]
 

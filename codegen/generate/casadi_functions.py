@@ -109,11 +109,6 @@ class SchemeTranslation:
             "initial definition",
             list(maps.initial_angles) + list(maps.initial_velocities) + self.parameters,
             maps.initial_definitions)
-        self.solve = maps.output_solve
-        if self.solve:
-            check_free_symbols("output_solve", list(self.solve.matrix) + list(self.solve.rhs),
-                               self.state_symbols)
-        self.solved = list(self.solve.symbols) if self.solve else []
 
         self.z, self.x0 = ca.SX.sym("z", self.nz), ca.SX.sym("x0", self.nx)
         self.u, self.p, self.dt = ca.SX.sym("u", self.nu), ca.SX.sym("p", self.n_p), ca.SX.sym("dt")
@@ -156,25 +151,17 @@ class SchemeTranslation:
         return sx_vector(translate, expressions)
 
     def state_translator(self, state: ca.SX, extra: dict | None = None) -> SympyToCasadi:
-        """Expressions in the state, p, the state definitions and the output_solve symbols,
-        bound to `state`."""
+        """Expressions in the state, p and the state definitions, bound to `state`."""
         bindings = dict(zip(self.scheme.maps.state, ca.vertsplit(state)))
         bindings.update(self.parameter_bindings)
         bindings.update(extra or {})
-        bound = bind_all(SympyToCasadi(bindings, self.parameters),
-                         self.scheme.maps.state_definitions)
-        if self.solve:
-            matrix = ca.vertcat(*[ca.horzcat(*[bound(e) for e in row])
-                                  for row in self.solve.matrix.tolist()])
-            solution = linear_solution(matrix, sx_vector(bound, self.solve.rhs))
-            for symbol, value in zip(self.solve.symbols, ca.vertsplit(solution)):
-                bound.bind(symbol, value)
-        return bound
+        return bind_all(SympyToCasadi(bindings, self.parameters),
+                        self.scheme.maps.state_definitions)
 
     def joint_space(self, state: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         """(phi, omega, energy, constraint residuals) of a state, as expressions in it."""
         maps, translate = self.scheme.maps, self.state_translator(state)
-        symbols = self.state_symbols + self.solved
+        symbols = self.state_symbols
         return (self.translated("outputs", maps.joint_angles, translate, symbols),
                 self.translated("outputs", maps.joint_velocities, translate, symbols),
                 self.translated("outputs", [maps.energy], translate, symbols),
@@ -203,30 +190,6 @@ class SchemeTranslation:
         """A function of the step's arguments (z, x0, u, p, dt)."""
         return GeneratedFunction(name, tuple(self.step_args), tuple(self.step_names),
                                  tuple(outputs), tuple(output_names))
-
-
-#: An output_solve (a LinearSolve of the scheme's outputs: es's velocity projection at orders
-#: 4 and 6) of at most this many unknowns is solved symbolically, unrolled into the generated
-#: expressions (CasADi's QR of the SX matrix). A larger one is a call to a generated function
-#: that factorises the matrix numerically (CasADi's sparse QR, "qr") in a loop: the symbolic
-#: factorisation of es's dense 3n x 3n system has O(n^3) instructions (the outputs of es at
-#: order 4: 116 kB of C at n = 5, 920 kB at n = 10), and every derivative through it as many.
-SYMBOLIC_SOLVE_MAX_UNKNOWNS = 12
-
-
-def linear_solution(matrix: ca.SX, rhs: ca.SX) -> ca.SX:
-    """matrix^-1 rhs: unrolled while the system has at most SYMBOLIC_SOLVE_MAX_UNKNOWNS
-    unknowns, else by a call to a numeric sparse QR on the matrix's structural nonzeros
-    (CasADi differentiates through the call: its forward derivative solves with the same
-    matrix)."""
-    if matrix.shape[0] <= SYMBOLIC_SOLVE_MAX_UNKNOWNS:
-        return ca.solve(matrix, rhs)
-    matrix = ca.sparsify(matrix)
-    a = ca.MX.sym("A", matrix.sparsity())
-    b = ca.MX.sym("b", rhs.shape[0])
-    solve = ca.Function("linear_solution", [a, b], [ca.solve(a, b, "qr")], ["A", "b"], ["x"],
-                        {"never_inline": True})
-    return solve(matrix, rhs)
 
 
 def defined(kind: str, inputs, definitions) -> list:
@@ -273,7 +236,7 @@ def energy_check(t: SchemeTranslation) -> GeneratedFunction | None:
     if maps.kinetic_energy is None:
         return None
     energies = t.translated("outputs", [maps.energy, maps.kinetic_energy],
-                            t.state_translator(t.x), t.state_symbols + t.solved)
+                            t.state_translator(t.x), t.state_symbols)
     return GeneratedFunction("energy_check", tuple([t.x] + t.with_p[0]),
                              tuple(["x"] + t.with_p[1]), (energies,), ("H_T",))
 
@@ -300,15 +263,15 @@ def newton_factors(t: SchemeTranslation) -> tuple[GeneratedFunction | None, tupl
 
 
 def predictor(t: SchemeTranslation) -> GeneratedFunction:
-    """(x0, p, dt) -> z: the first Newton guess; it may use the output_solve symbols (vi:
-    w = M^-1 p)."""
+    """(x0, p, dt) -> z: the first Newton guess; it may use the state definitions (vi:
+    w = M^-1 p by its recursion)."""
     step = t.scheme.step
     if not any(step.predictor):
         guess = ca.SX.zeros(step.unknowns.shape[0], 1)
     else:
         guess = t.translated("predictor", step.predictor,
                              t.state_translator(t.x0, {step.dt: t.dt}),
-                             t.state_symbols + t.solved + [step.dt])
+                             t.state_symbols + [step.dt])
     return GeneratedFunction("predictor", tuple([t.x0] + t.with_p[0] + [t.dt]),
                              tuple(["x0"] + t.with_p[1] + ["dt"]), (guess,), ("z",))
 

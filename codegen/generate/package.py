@@ -295,7 +295,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "nsample": len(columns), "nconstraint": scheme.constraint_residuals.shape[0],
         "nsegment": len(scheme.segment_tolerances), "order": scheme.order, "nstage": nstage,
         # The adaptive steps' error test: es's nodal rates at order 2 are off C(q) v = 0 by
-        # O(dt^2) in every step without accumulating (es.tangent_velocity_solve), which step
+        # O(dt^2) in every step without accumulating (model.md 14), which step
         # doubling would take for the local error; there the test takes the angles alone.
         "error_entries": n if scheme.method == "es" and scheme.order == 2 else 2 * n,
         "flows": int(features.flows), "energy_check": int(features.energy_check),

@@ -95,29 +95,18 @@ class _SympyFunctions:
     """The scheme's expressions, lambdified over the same inputs as the C functions."""
 
     def __init__(self, scheme: DiscreteScheme):
-        solve = scheme.maps.output_solve
-        solved = list(solve.symbols) if solve else []
         self.residual = scheme.step_function(scheme.step.residual)
         self.next_state = scheme.step_function(scheme.step.next_state)
         self.composition = scheme.metadata.composition
         self.initial_state = scheme.initial_function()
         maps = scheme.maps
         self.outputs = scheme.state_function(list(maps.joint_angles) + list(maps.joint_velocities)
-                                             + [maps.energy] + list(maps.constraint_residuals),
-                                             solved)
-        self.solve = ((scheme.state_function(list(solve.matrix)),
-                       scheme.state_function(solve.rhs)) if solve else None)
+                                             + [maps.energy] + list(maps.constraint_residuals))
         self.n = scheme.scene.n
         self.nconstraint = scheme.maps.constraint_residuals.shape[0]
 
     def evaluate_outputs(self, x, p) -> np.ndarray:
-        solved = []
-        if self.solve:
-            matrix = np.array(self.solve[0](*x, *p), float)
-            size = int(round(np.sqrt(matrix.size)))
-            solved = list(np.linalg.solve(matrix.reshape(size, size),
-                                          np.array(self.solve[1](*x, *p), float)))
-        return np.array(self.outputs(*x, *p, *solved), float)
+        return np.array(self.outputs(*x, *p), float)
 
 
 def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,

@@ -25,12 +25,14 @@ from .com_model import com_frame_map, number
 from .quadrature import gauss_legendre_nodes
 from .recursion import (
     Definitions,
+    LinkFrames,
     absolute_rates,
     add,
     angle_directions,
     cross,
     link_frames,
     perp,
+    rates_from_momenta,
     scale,
     velocities,
 )
@@ -286,9 +288,11 @@ def averaged_spring_gradient(spring, i: int, js, starts, changes, quadrature: in
     return totals
 
 
-def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:
+def state_quantities(scene: Scene, q, v, defs: Definitions, projected: bool = False) -> dict:
     """The state-only expressions of es by the same recursions: relative joint angles and
-    rates, H = T + V, the constraint residuals and every spring segment vector.
+    rates, H = T + V, the constraint residuals and every spring segment vector; with
+    `projected`, also the joint rates of v's M-orthogonal projection onto C(q) v = 0
+    ("projected_rates", see projected_rates).
 
     T = sum_k 1/2 m_k |v_k|^2 + J_k / (2 |c_k|^2) |v_k - V_k|^2 (model.md 4.1, the constant M
     of COM coordinates), V = gravity + springs; c_k = |x_k - X_k|^2 - |c_k|^2."""
@@ -332,8 +336,38 @@ def state_quantities(scene: Scene, q, v, defs: Definitions) -> dict:
             lengths.append(sp.sqrt(d[0] ** 2 + d[1] ** 2))
         stretch = sp.Add(*lengths) - number(spring.rest_length)
         potential += number(spring.stiffness) / 2 * stretch ** 2
-    return dict(angles=angles, rates=rates, energy=kinetic + potential,
-                constraints=constraints, segment_vectors=segments)
+    out = dict(angles=angles, rates=rates, energy=kinetic + potential,
+               constraints=constraints, segment_vectors=segments)
+    if projected:
+        out["projected_rates"] = projected_rates(scene, joints, arms, directions[1:], com_rates,
+                                                 absolute, defs)
+    return out
+
+
+def projected_rates(scene: Scene, joints, arms, directions, com_rates, absolute,
+                    defs: Definitions) -> list:
+    """The joint rates w of the M-orthogonal projection of the COM velocities v onto
+    C(q) v = 0 (es's composed steps, model.md 14), in O(n): the projection is J w with
+    w = argmin (v - J w)^T M (v - J w), J = dv/dw at q, so (J^T M J) w = J^T M v. J^T M J is
+    the joint-space mass matrix of the chain at q, and (J^T M v)_k the angular momentum about
+    the joint X_k of links k..n moving with v: m_j (x_j - X_k) x v_j + J_j thetadot_j summed,
+    thetadot_j = (x_j - X_j) x (v_j - V_j) / |c_j|^2 (the inertia term of T). Both by the
+    recursions of vi (model.md 17): the momenta from the tip, then the rates by the
+    articulated-body recursion. Equal to the KKT solve [[M, C^T], [C, 0]] (v_t, lambda) =
+    (M v, 0) to round-off (tests/test_es_projection.py), which is dense, O(n^3)."""
+    n = scene.n
+    vectors = [sub(joints[k + 1], joints[k]) for k in range(n)]
+    frames = LinkFrames(tuple(directions), tuple(perp(e) for e in directions), tuple(arms),
+                        tuple(vectors))
+    linear, angular, momenta = ZERO, sp.Integer(0), []
+    for k in range(n - 1, -1, -1):
+        mass = number(scene.links[k].mass)
+        angular = defs.define(f"proj_H{k + 1}", number(scene.links[k].inertia) * absolute[k]
+                              + mass * cross(arms[k], com_rates[k]) + angular
+                              + cross(vectors[k], linear))
+        linear = defs.vector(f"proj_P{k + 1}", add(scale(mass, com_rates[k]), linear))
+        momenta.append(angular)
+    return rates_from_momenta(scene, frames, momenta[::-1], defs, tag="proj_")
 
 
 def joint_space_start(scene: Scene, phi, phidot, defs: Definitions) -> list:

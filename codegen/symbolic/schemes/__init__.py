@@ -12,7 +12,7 @@ from ...scene import METHODS, Scene, SolverSpec
 from ...scene.parameters import with_symbols
 from ..composition import FROM_ORDER_4, composition
 from . import es, galerkin, midpoint, vi
-from .base import DiscreteScheme, FlowDescription, Layout, LinearSolve, segment_tolerances
+from .base import DiscreteScheme, FlowDescription, Layout, segment_tolerances
 
 BUILDERS = {"es": es.build, "vi": vi.build, "midpoint": midpoint.build}
 if tuple(BUILDERS) != METHODS:
@@ -55,4 +55,4 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
         order=order, composition=stages)
 
 
-__all__ = ["DiscreteScheme", "FlowDescription", "Layout", "LinearSolve", "build_scheme"]
+__all__ = ["DiscreteScheme", "FlowDescription", "Layout", "build_scheme"]

@@ -33,19 +33,6 @@ class Layout:
 
 
 @dataclass(frozen=True)
-class LinearSolve:
-    """Symbols defined implicitly by matrix * symbols = rhs, all functions of the state.
-
-    "vi" stores momenta, so its joint rates are w = M(q)^-1 p: the outputs use the symbols w
-    and the C code solves for them, instead of SymPy inverting M symbolically.
-    """
-
-    symbols: ImmutableMatrix
-    matrix: ImmutableMatrix
-    rhs: ImmutableMatrix
-
-
-@dataclass(frozen=True)
 class ArmSpace:
     """The factors of es's Newton matrix (docs/model.md, section 18).
 
@@ -132,10 +119,9 @@ class StateMaps:
     initial_angles: ImmutableMatrix    # symbols phi of initial_state
     initial_velocities: ImmutableMatrix  # symbols phidot of initial_state
     initial_state: ImmutableMatrix     # x(phi, phidot)
-    output_solve: LinearSolve | None = None   # symbols the outputs use beside the state
     # The definitions (as StepSystem's) of the expressions of the state alone (joint_angles,
-    # joint_velocities, energy, constraint_residuals, segment vectors, predictor,
-    # output_solve), in the state and p; and of initial_state, in initial_angles,
+    # joint_velocities, energy, constraint_residuals, segment vectors, predictor), in the
+    # state and p; and of initial_state, in initial_angles,
     # initial_velocities and p. A joint-space chain's recursions (chaingen.symbolic.recursion)
     # keep these O(n) too.
     state_definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()

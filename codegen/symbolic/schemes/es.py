@@ -20,7 +20,7 @@ from sympy import ImmutableMatrix
 from ...runtime.contract import JACOBIAN_PER_STEP
 from ...scene import Scene, quadrature_used
 from ...scene.solver_rules import gradient_used, require
-from ..com_model import com_frame_map, com_model, coordinates, number
+from ..com_model import com_frame_map, coordinates, number
 from ..com_recursion import es_step, joint_space_start, state_quantities
 from ..recursion import Definitions
 from .base import (
@@ -28,7 +28,6 @@ from .base import (
     DiscreteScheme,
     FlowDescription,
     Layout,
-    LinearSolve,
     common_fields,
     has_energy_flows,
     input_symbols,
@@ -54,32 +53,10 @@ FLOWS = FlowDescription(
     "section 7).")
 
 
-def tangent_velocity_solve(model) -> tuple[LinearSolve, ImmutableMatrix]:
-    """The nodal velocity v_k of es satisfies the velocity constraint C(q) v = 0 only to
-    O(dt^2) (the scheme imposes it at the mid-point of each step); a composition of steps
-    cannot cancel that part. Its M-orthogonal projection onto C(q) v = 0,
-
-        [M  C^T] [v_t   ]   [M v]
-        [C   0 ] [lambda] = [ 0 ],
-
-    does: the joint rates of the composed step of order 4 taken from v_t are of order 4
-    (from v, of order 2). Returns the solve and v_t's symbols."""
-    n = model.n
-    tangent = ImmutableMatrix([sp.Dummy(f"vt{i}", real=True) for i in range(2 * n)])
-    multipliers = ImmutableMatrix([sp.Dummy(f"lambda{i}", real=True) for i in range(n)])
-    jacobian = model.constraint_jacobian
-    matrix = ImmutableMatrix.vstack(
-        ImmutableMatrix.hstack(model.mass_matrix, jacobian.T),
-        ImmutableMatrix.hstack(jacobian, ImmutableMatrix.zeros(n, n)))
-    rhs = ImmutableMatrix.vstack(model.mass_matrix * model.v, ImmutableMatrix.zeros(n, 1))
-    return (LinearSolve(symbols=ImmutableMatrix.vstack(tangent, multipliers), matrix=matrix,
-                        rhs=rhs), tangent)
-
-
 def build(scene: Scene, quadrature: int, order: int = 2,
           arm_solve: bool | None = None, gradient: str = "exact") -> DiscreteScheme:
     """The es step; for order > 2 (a composition of steps) the joint rates come from the
-    velocity projected onto C(q) v = 0 (tangent_velocity_solve). arm_solve: whether the
+    velocity projected onto C(q) v = 0 (com_recursion.projected_rates). arm_solve: whether the
     package solves the Newton systems by the factors of the Jacobian (ArmSpace) instead of
     dense LU; None: from ARM_SOLVE_MIN_LINKS links on. gradient: the springs' discrete
     gradient, "exact" (the energy balance holds identically) or "quadrature" (the K-point
@@ -133,18 +110,12 @@ def build(scene: Scene, quadrature: int, order: int = 2,
 
     # Joint space: phi_i is the angle from e_{i-1} to e_i, wrapped to (-pi, pi] by atan2; the
     # state's quantities by the same recursions (com_recursion.state_quantities).
+    # A composed step (order > 2) reports the rates of the velocity projected onto
+    # C(q) v = 0 (the nodal v meets it only to O(dt^2), which a composition cannot cancel;
+    # model.md 14), by recursions in O(n) (com_recursion.projected_rates).
     at_state = Definitions("state_")
-    quantities = state_quantities(scene, q0, v0, at_state)
-    velocities = quantities["rates"]
-    output_solve = None
-    if order > 2:
-        # The rates of the projected velocity: plain expressions in the solve's symbols (the
-        # state definitions are evaluated before the solve).
-        model = com_model(scene)
-        output_solve, tangent = tangent_velocity_solve(model)
-        absolute = [rate.xreplace(dict(zip(v0, tangent))) for rate in model.absolute_rates()]
-        velocities = [after - before for before, after
-                      in zip([sp.Integer(0)] + absolute[:-1], absolute)]
+    quantities = state_quantities(scene, q0, v0, at_state, projected=order > 2)
+    velocities = quantities["projected_rates" if order > 2 else "rates"]
 
     phi = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
     phidot = ImmutableMatrix(sp.symbols(f"phidot1:{n + 1}", real=True))
@@ -163,7 +134,6 @@ def build(scene: Scene, quadrature: int, order: int = 2,
         predictor=ImmutableMatrix.zeros(3 * n, 1),
         joint_angles=ImmutableMatrix(quantities["angles"]),
         joint_velocities=ImmutableMatrix(velocities),
-        output_solve=output_solve,
         energy=quantities["energy"],
         constraint_residuals=ImmutableMatrix(quantities["constraints"]),
         initial_angles=phi, initial_velocities=phidot, initial_state=initial_state,
