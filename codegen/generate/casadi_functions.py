@@ -375,7 +375,8 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
                                         (t.initial_state,), ("x",)))
     directions = None if t.jacobian is not None else JACOBIAN_CHUNK
     built = build_functions([function for function in found.values() if function is not None],
-                            prefix, t.p, {"cse": True}, directions)
+                            prefix, t.p, {"cse": True}, directions,
+                            scheme.step.jacobian_blocks)
     return SchemeFunctions(**{field: None if function is None else built[function.name]
                               for field, function in found.items()},
                            parameters=built.get(PARAMETERS_FUNCTION), arm_pattern=pattern)
@@ -424,18 +425,19 @@ PARAMETERS_FUNCTION = "parameters"
 
 
 def build_functions(functions: list[GeneratedFunction], prefix: str, p: ca.SX, options: dict,
-                    directions: int | None = None) -> dict[str, ca.Function]:
+                    directions: int | None = None, blocks=()) -> dict[str, ca.Function]:
     """The generated functions as CasADi Functions, by name. With run-time parameters p,
     every subexpression that depends on p alone is hoisted out of them (CasADi's
     extract_parametric, one pass over all of them, so a subexpression they share is one
     entry): a function `parameters` computes those, q = Q(p), and every other function takes
     q in p's place. The C code evaluates Q once when p changes instead of in every residual
     of every step. directions: the Newton Jacobian's forward directions per pass (None:
-    unrolled)."""
+    unrolled); blocks: the blocks of z it differentiates separately (StepSystem's
+    jacobian_blocks)."""
     def function(name, inputs, input_names, outputs, output_names):
         if name == "residual_jacobian" and directions:   # z is the first input
             return jacobian_by_directions(f"{prefix}_model_{name}", inputs, input_names,
-                                          outputs[0], 0, directions, options)
+                                          outputs[0], 0, directions, options, blocks)
         return ca.Function(f"{prefix}_model_{name}", inputs, outputs, input_names, output_names,
                            options)
 

@@ -116,6 +116,12 @@ class StepSystem:
     # The factors of the Newton matrix where the package solves it by them (es at large n),
     # else None: dense LU of dF/dz.
     arm_space: ArmSpace | None = None
+    # Where dF/dz is evaluated by forward directions (model.md 17): the sizes of consecutive
+    # blocks of z, each differentiated by its own forward derivative, which carries tangents
+    # from that block alone (es's Galerkin step: its angles, which move every quantity of a
+    # node, then its momenta, which leave the frames and the articulated inertias alone).
+    # Empty: z as one block.
+    jacobian_blocks: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
