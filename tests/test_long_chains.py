@@ -46,6 +46,35 @@ def test_the_jacobian_by_directions_equals_the_unrolled_one(method, monkeypatch)
     assert "for (i=0; i<" in source
 
 
+@pytest.mark.parametrize("parameters", [(), ("links[1].mass", "springs[0].stiffness")])
+def test_the_jacobian_by_blocks_of_directions_equals_the_unrolled_one(parameters, monkeypatch):
+    """es's Galerkin step (order 6) differentiates its angles and its momenta by separate
+    forward derivatives (jacobian_blocks): forced by directions, the Jacobian is the unrolled
+    one to round-off, with and without run-time parameters."""
+    scheme = build_scheme(load("four_link_actuated"), "es", 3, order=6, parameters=parameters)
+    n = scheme.scene.n
+    assert scheme.step.jacobian_blocks == (2 * n, 2 * n)
+    unrolled = scheme_functions(scheme, "t", sensitivities=False)
+    monkeypatch.setattr(casadi_functions, "unrolled_jacobian", lambda *args: None)
+    directions = scheme_functions(scheme, "t", sensitivities=False)
+    assert directions.residual_jacobian.class_name() == "MXFunction"
+    q = [np.array(unrolled.parameters(scheme.parameter_values)).ravel()] if parameters else []
+    for _ in range(3):
+        x0 = np.concatenate([rng.uniform(-1.0, 1.0, n), rng.normal(0, 1, n)])   # (phi, w)
+        point = [rng.normal(0, 0.1, 4 * n), x0, rng.normal(0, 1, len(scheme.inputs))] + q \
+            + [0.01]
+        F0, J0 = (np.array(v) for v in unrolled.residual_jacobian(*point))
+        F1, J1 = (np.array(v) for v in directions.residual_jacobian(*point))
+        np.testing.assert_allclose(F1, F0, rtol=0, atol=1e-14 * max(1.0, np.abs(F0).max()))
+        np.testing.assert_allclose(J1, J0, rtol=1e-12, atol=1e-12 * np.abs(J0).max())
+
+
+def test_blocks_must_partition_the_unknowns():
+    z = casadi_functions.ca.SX.sym("z", 4)
+    with pytest.raises(ValueError, match="do not partition 4 unknowns"):
+        jacobians.jacobian_by_directions("f", [z], ["z"], z ** 2, 0, 4, {}, (2, 3))
+
+
 def test_the_unrolled_jacobian_is_kept_only_while_it_is_small():
     small = build_scheme(load("three_link_multi"), "vi", 3)
     functions = scheme_functions(small, "t", sensitivities=False)
