@@ -42,6 +42,7 @@ from .base import (
     DiscreteScheme,
     FlowDescription,
     Layout,
+    NodeSpace,
     has_energy_flows,
     input_symbols,
     joint_space_state,
@@ -117,6 +118,7 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
     p_rows = [ImmutableMatrix.zeros(n, 1), ImmutableMatrix.zeros(n, 1)]
     dissipated = sp.Integer(0)
     p0 = None
+    node_inputs, node_outputs = [], []
     for g, (s, b) in enumerate(zip(nodes, weights)):
         s_value, b_value = sp.Float(s), sp.Float(b)
         dphi, phi_slope = quadratic(dphi_m, dphi_1, s_value)
@@ -126,14 +128,18 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
             frames = frames_at(tag, list(phi0))
             w_g = list(w0)
         else:
-            frames = frames_at(tag, [step.define(f"phi_node{g}_{i}", value)
-                                     for i, value in enumerate(phi0 + dphi, start=1)])
+            angles = [step.define(f"phi_node{g}_{i}", value)
+                      for i, value in enumerate(phi0 + dphi, start=1)]
             p_g = [step.define(f"p_node{g}_{i}", value)
                    for i, value in enumerate(p0 + dp, start=1)]
+            frames = frames_at(tag, angles)
             w_g = recursion.rates_from_momenta(scene, frames, p_g, step, tag)
         momentum, force = forces_at(tag, frames, w_g)
         if g == 0:
             p0 = momentum
+        else:
+            node_inputs.append(ImmutableMatrix(angles + p_g))
+            node_outputs.append(ImmutableMatrix(list(w_g) + list(force)))
         w_g = ImmutableMatrix(w_g)
         for row, psi in enumerate((sp.Integer(1), 2 * s_value - 1)):
             phi_rows[row] += b_value * psi * (phi_slope - dt * w_g)
@@ -180,6 +186,9 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
         # a node's frames nor its articulated inertias, and their tangents are left out (at 10
         # links, 10.7e3 instructions for 4 columns against 24.9e3 for the angles').
         jacobian_blocks=(2 * n, 2 * n),
+        # The same recursions at every node after the start: (phi_g, p_g) -> (w_g, F_g), and
+        # the residual linear in them (NodeSpace): dF/dz through one node's Jacobian.
+        node_space=NodeSpace(tuple(node_inputs), tuple(node_outputs)),
         # Its stages start from their own previous solutions as es's composed ones do: the
         # same tolerance (four_link_actuated, K = 7, 400 steps of 0.01 s: balance drift
         # 2.0e-11 J at 1e-10, 1.0e-12 J at 1e-12).
