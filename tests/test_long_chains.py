@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from chaingen.generate import casadi_functions, jacobians
+from chaingen.generate import casadi_functions, jacobians, node_jacobian
 from chaingen.generate.casadi_functions import scheme_functions
 from chaingen.generate.casadi_source import casadi_c_source
 from chaingen.scene import kinematics
@@ -70,6 +70,7 @@ def test_the_jacobian_through_the_nodes_equals_the_unrolled_one(monkeypatch):
     node_unrolled = casadi_functions.jacobian_by_nodes(
         casadi_functions.SchemeTranslation(scheme), "t", {"cse": True})
     monkeypatch.setattr(casadi_functions, "unrolled_jacobian", lambda *args: None)
+    monkeypatch.setattr(node_jacobian, "unrolled_jacobian", lambda *args: None)
     node_directions = scheme_functions(scheme, "t", sensitivities=False).residual_jacobian
     assert node_directions.class_name() == "MXFunction"
     for _ in range(3):
