@@ -51,7 +51,8 @@ class NumpyStep:
         self.flows = scheme.step_function([scheme.input_work, scheme.dissipated])
         arguments = list(scheme.state) + [scheme.dt]
         self.predictor = sp.lambdify(arguments, list(scheme.predictor))
-        self.energy = sp.lambdify(list(scheme.state), scheme.energy)
+        energy = scheme.state_function([scheme.energy])
+        self.energy = lambda *x: energy(*x)[0]
         self.n = scene.n
 
     def solve(self, x, u, dt):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from chaingen.generate import casadi_functions, jacobians
+from chaingen.generate import casadi_functions, jacobians, node_jacobian
 from chaingen.generate.casadi_functions import scheme_functions
 from chaingen.generate.casadi_source import casadi_c_source
 from chaingen.scene import kinematics
@@ -44,6 +44,62 @@ def test_the_jacobian_by_directions_equals_the_unrolled_one(method, monkeypatch)
         np.testing.assert_allclose(J1, J0, rtol=1e-12, atol=1e-12 * np.abs(J0).max())
     source, _ = casadi_c_source([directions], "t")
     assert "for (i=0; i<" in source
+
+
+def galerkin_point(scheme, q=()):
+    n = scheme.scene.n
+    x0 = np.concatenate([rng.uniform(-1.0, 1.0, n), rng.normal(0, 1, n)])   # (phi, w)
+    inputs = [rng.normal(0, 1, len(scheme.inputs))] if len(scheme.inputs) else []
+    return [rng.normal(0, 0.1, 4 * n), x0] + inputs + list(q) + [0.01]
+
+
+def assert_same_jacobian(reference, other, point):
+    F0, J0 = (np.array(v) for v in reference(*point))
+    F1, J1 = (np.array(v) for v in other(*point))
+    np.testing.assert_allclose(F1, F0, rtol=0, atol=1e-14 * max(1.0, np.abs(F0).max()))
+    np.testing.assert_allclose(J1, J0, rtol=1e-12, atol=1e-12 * np.abs(J0).max())
+
+
+def test_the_jacobian_through_the_nodes_equals_the_unrolled_one(monkeypatch):
+    """es's Galerkin step (order 6) has its Jacobian through one node's (NodeSpace): with that
+    node's Jacobian unrolled, or by directions, it is the unrolled Jacobian to round-off."""
+    scheme = build_scheme(load("four_link_actuated"), "es", 3, order=6)
+    assert len(scheme.step.node_space.inputs) == 3
+    unrolled = scheme_functions(scheme, "t", sensitivities=False).residual_jacobian
+    assert unrolled.class_name() == "SXFunction"
+    node_unrolled = casadi_functions.jacobian_by_nodes(
+        casadi_functions.SchemeTranslation(scheme), "t", {"cse": True})
+    monkeypatch.setattr(casadi_functions, "unrolled_jacobian", lambda *args: None)
+    monkeypatch.setattr(node_jacobian, "unrolled_jacobian", lambda *args: None)
+    node_directions = scheme_functions(scheme, "t", sensitivities=False).residual_jacobian
+    assert node_directions.class_name() == "MXFunction"
+    for _ in range(3):
+        point = galerkin_point(scheme)
+        assert_same_jacobian(unrolled, node_unrolled, point)
+        assert_same_jacobian(unrolled, node_directions, point)
+
+
+def test_the_jacobian_by_blocks_of_directions_equals_the_unrolled_one(monkeypatch):
+    """With run-time parameters, es's Galerkin step differentiates its angles and its momenta
+    by separate forward derivatives (jacobian_blocks): the unrolled Jacobian to round-off."""
+    scheme = build_scheme(load("four_link_actuated"), "es", 3, order=6,
+                          parameters=("links[1].mass", "springs[0].stiffness"))
+    n = scheme.scene.n
+    assert scheme.step.jacobian_blocks == (2 * n, 2 * n)
+    unrolled = scheme_functions(scheme, "t", sensitivities=False)
+    monkeypatch.setattr(casadi_functions, "unrolled_jacobian", lambda *args: None)
+    directions = scheme_functions(scheme, "t", sensitivities=False)
+    assert directions.residual_jacobian.class_name() == "MXFunction"
+    q = [np.array(unrolled.parameters(scheme.parameter_values)).ravel()]
+    for _ in range(3):
+        assert_same_jacobian(unrolled.residual_jacobian, directions.residual_jacobian,
+                             galerkin_point(scheme, q))
+
+
+def test_blocks_must_partition_the_unknowns():
+    z = casadi_functions.ca.SX.sym("z", 4)
+    with pytest.raises(ValueError, match="do not partition 4 unknowns"):
+        jacobians.jacobian_by_directions("f", [z], ["z"], z ** 2, 0, 4, {}, (2, 3))
 
 
 def test_the_unrolled_jacobian_is_kept_only_while_it_is_small():

@@ -19,6 +19,7 @@ from .jacobians import (
     swept_jacobians,
     unrolled_jacobian,
 )
+from .node_jacobian import jacobian_by_nodes
 from .sensitivities import sensitivity_functions, state_chain_functions
 from .translation import GeneratedFunction as GeneratedFunction
 from .translation import MissingInputError as MissingInputError
@@ -314,8 +315,16 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
                                         tuple(["phi", "phidot"] + t.with_p[1]),
                                         (t.initial_state,), ("x",)))
     directions = None if t.jacobian is not None else JACOBIAN_CHUNK
+    by_nodes = (t.jacobian is None and scheme.step.node_space is not None and not t.n_p)
+    if by_nodes:
+        del found["residual_jacobian"]
     built = build_functions([function for function in found.values() if function is not None],
-                            prefix, t.p, {"cse": True}, directions)
+                            prefix, t.p, {"cse": True}, directions,
+                            scheme.step.jacobian_blocks)
+    if by_nodes:
+        found["residual_jacobian"] = t.step_function("residual_jacobian", [], [])
+        built["residual_jacobian"] = jacobian_by_nodes(t, f"{prefix}_model_residual_jacobian",
+                                                       {"cse": True})
     return SchemeFunctions(**{field: None if function is None else built[function.name]
                               for field, function in found.items()},
                            parameters=built.get(PARAMETERS_FUNCTION), arm_pattern=pattern)
@@ -364,20 +373,21 @@ PARAMETERS_FUNCTION = "parameters"
 
 
 def build_functions(functions: list[GeneratedFunction], prefix: str, p: ca.SX, options: dict,
-                    directions: int | None = None) -> dict[str, ca.Function]:
+                    directions: int | None = None, blocks=()) -> dict[str, ca.Function]:
     """The generated functions as CasADi Functions, by name. With run-time parameters p,
     every subexpression that depends on p alone is hoisted out of them (CasADi's
     extract_parametric, one pass over all of them, so a subexpression they share is one
     entry): a function `parameters` computes those, q = Q(p), and every other function takes
     q in p's place. The C code evaluates Q once when p changes instead of in every residual
     of every step. directions: the Newton Jacobian's forward directions per pass (None:
-    unrolled)."""
+    unrolled); blocks: the blocks of z it differentiates separately (StepSystem's
+    jacobian_blocks)."""
     sweeps = {f.name: f.sweep for f in functions if f.sweep is not None}
 
     def function(name, inputs, input_names, outputs, output_names):
         if name == "residual_jacobian" and directions:   # z is the first input
             return jacobian_by_directions(f"{prefix}_model_{name}", inputs, input_names,
-                                          outputs[0], 0, directions, options)
+                                          outputs[0], 0, directions, options, blocks)
         if name in sweeps:   # the seed is the last input
             directional = ca.Function(f"{prefix}_model_{name}_directions", inputs, outputs,
                                       input_names, output_names, options)

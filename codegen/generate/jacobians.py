@@ -38,24 +38,35 @@ def unrolled_jacobian(residual: ca.SX, z: ca.SX, inputs) -> ca.SX | None:
 
 
 def jacobian_by_directions(name: str, inputs, input_names, residual: ca.SX, unknown: int,
-                           chunk: int, options: dict) -> ca.Function:
+                           chunk: int, options: dict, blocks=()) -> ca.Function:
     """(F, dF/dz dense) with dF/dz computed `chunk` columns at a time: the forward derivative
-    of F in `chunk` directions, mapped serially over ceil(nz / chunk) passes with the columns
-    of the identity as seeds. The generated C is a loop over the passes around one forward
+    of F in `chunk` directions, mapped serially over the passes with the columns of the
+    identity as seeds. The generated C is a loop over the passes around one forward
     derivative, so it grows with F, not with the nz^2 entries of the Jacobian; the cost is
-    one evaluation of F's nominal part per pass more than the unrolled Jacobian's."""
+    one evaluation of F's nominal part per pass more than the unrolled Jacobian's.
+
+    blocks: sizes of consecutive blocks of z (empty: one block). Each block has its own
+    forward derivative, with respect to that block alone (CasADi's jtimes), so that the
+    tangents of the quantities the block does not move are not computed."""
     z = inputs[unknown]
     nz = z.shape[0]
-    passes = -(-nz // chunk)
-    nominal = ca.Function(f"{name}_F", inputs, [residual], options)
-    forward = nominal.forward(chunk).map(passes, "serial")
+    blocks = tuple(blocks) or (nz,)
+    if sum(blocks) != nz or min(blocks) < 1:
+        raise ValueError(f"{name}: blocks {blocks} do not partition {nz} unknowns")
     symbols = [ca.MX.sym(label, item.shape[0], item.shape[1])
-                for label, item in zip(input_names, inputs)]
-    value = nominal(*symbols)
-    seeds = [ca.horzcat(ca.DM.eye(nz), ca.DM(nz, passes * chunk - nz)) if index == unknown
-             else ca.DM(item.shape[0], passes * chunk) for index, item in enumerate(inputs)]
-    tangents = forward(*symbols, value, *seeds)
-    return ca.Function(name, symbols, [value, tangents[:, :nz]], input_names, ["F", "J"])
+               for label, item in zip(input_names, inputs)]
+    value = ca.Function(f"{name}_F", inputs, [residual], options)(*symbols)
+    columns, start = [], 0
+    for index, size in enumerate(blocks):
+        passes = -(-size // chunk)
+        seeds = ca.SX.sym("seeds", size, chunk)
+        tangent = ca.jtimes(residual, z[start:start + size], seeds)
+        forward = ca.Function(f"{name}_D{index}", list(inputs) + [seeds], [tangent],
+                              options).map(passes, "serial")
+        identity = ca.horzcat(ca.DM.eye(size), ca.DM(size, passes * chunk - size))
+        columns.append(forward(*symbols, identity)[:, :size])
+        start += size
+    return ca.Function(name, symbols, [value, ca.horzcat(*columns)], input_names, ["F", "J"])
 
 
 @dataclass(frozen=True)

@@ -89,12 +89,13 @@ def link_frames(scene: Scene, directions) -> LinkFrames:
     return LinkFrames(tuple(directions), normals, arms, vectors)
 
 
-def angle_directions(defs: Definitions, angles, name: str = "e") -> list:
-    """e_k = (cos theta_k, sin theta_k), theta_k = phi_1 + ... + phi_k, as definitions."""
+def angle_directions(defs: Definitions, angles, name: str = "e", tag: str = "") -> list:
+    """e_k = (cos theta_k, sin theta_k), theta_k = phi_1 + ... + phi_k, as definitions (tag:
+    a prefix of their names, for more than one set in one Definitions)."""
     directions, theta = [], sp.Integer(0)
     for k, phi in enumerate(angles, start=1):
-        theta = defs.define(f"theta{k}", theta + phi)
-        directions.append(defs.vector(f"{name}{k}", (sp.cos(theta), sp.sin(theta))))
+        theta = defs.define(f"{tag}theta{k}", theta + phi)
+        directions.append(defs.vector(f"{tag}{name}{k}", (sp.cos(theta), sp.sin(theta))))
     return directions
 
 

@@ -50,6 +50,19 @@ class ArmSpace:
 
 
 @dataclass(frozen=True)
+class NodeSpace:
+    """A residual that is linear in the outputs of one local function evaluated at several
+    nodes (es's Galerkin step, docs/model.md section 16): node g's outputs o_g = N(y_g, u, p)
+    with the same N at every node, y_g affine in z. Then dF/dz = F_z + sum_g F_o_g N'(y_g) Y_g,
+    with F_z, F_o_g and Y_g = dy_g/dz constant or sparse, and N' the Jacobian of one node
+    (m x m): generated once, evaluated at each node, instead of every column of dF/dz carrying
+    its tangent through every node."""
+
+    inputs: tuple[ImmutableMatrix, ...]    # y_g: symbols defined in `definitions`, m per node
+    outputs: tuple[ImmutableMatrix, ...]   # o_g: symbols defined in `definitions`, per node
+
+
+@dataclass(frozen=True)
 class FlowDescription:
     """How a scheme measures the energy flows of a step, and the balance they satisfy
     (docs/model.md, section 7); written into the generated header."""
@@ -103,6 +116,15 @@ class StepSystem:
     # The factors of the Newton matrix where the package solves it by them (es at large n),
     # else None: dense LU of dF/dz.
     arm_space: ArmSpace | None = None
+    # Where dF/dz is evaluated by forward directions (model.md 17): the sizes of consecutive
+    # blocks of z, each differentiated by its own forward derivative, which carries tangents
+    # from that block alone (es's Galerkin step: its angles, which move every quantity of a
+    # node, then its momenta, which leave the frames and the articulated inertias alone).
+    # Empty: z as one block.
+    jacobian_blocks: tuple[int, ...] = ()
+    # Where dF/dz is evaluated through a local function of several nodes (NodeSpace), that
+    # structure; None: by the residual as a whole.
+    node_space: NodeSpace | None = None
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,11 @@ symmetric, of order 4 in phi and in w (the nodes are superconvergent: 2k + 2), a
 constraints to keep: the chain's geometry is exact in joint angles.
 
 Unknowns (increments from the step's start, so that nothing cancels at O(|p|)):
-dphi_m = phi(1/2) - phi_0, dphi_1 = phi_1 - phi_0, dp_m, dp_1 likewise, and dw_g = w_g - w_0 at
-the N - 1 nodes after s = 0 (the last is w_1): (K + 4) n unknowns. The state is (phi, w): p_0 =
+dphi_m = phi(1/2) - phi_0, dphi_1 = phi_1 - phi_0, dp_m, dp_1 likewise: 4n, whatever K. The
+rates w_g at the N - 1 nodes after s = 0 (the last is w_1) are not unknowns: each is the solution
+of M(phi_g) w_g = p_g by the articulated-body recursion (O(n), model.md 17), so Newton's system
+is the Galerkin equations alone, the per-node equations eliminated exactly. Every node's
+quantities are recursions over the links, no whole-chain M(phi). The state is (phi, w): p_0 =
 M(phi_0) w_0 follows from it.
 """
 from __future__ import annotations
@@ -33,17 +36,17 @@ from sympy import ImmutableMatrix
 from ...runtime.contract import JACOBIAN_PER_STEP
 from ...scene import Scene
 from ...scene.solver_rules import GALERKIN_ORDER, require
+from .. import recursion
 from ..com_model import number
-from ..joint_model import angle_directions, joint_space_model
 from .base import (
     DiscreteScheme,
     FlowDescription,
     Layout,
+    NodeSpace,
     has_energy_flows,
     input_symbols,
     joint_space_state,
     joint_torques,
-    segment_vectors,
 )
 from .es import COMPOSED_UPDATE_RTOL
 
@@ -73,26 +76,36 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
     dt = sp.Symbol("dt", positive=True)
     phi0 = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
     w0 = ImmutableMatrix(sp.symbols(f"w1:{n + 1}", real=True))
-    model = joint_space_model(scene, angle_directions(phi0), w0)
     nodes, weights = gauss_lobatto_nodes(quadrature + 1)
 
     def vector(name):
         return ImmutableMatrix(sp.symbols(f"{name}1:{n + 1}", real=True))
 
     dphi_m, dphi_1, dp_m, dp_1 = (vector(name) for name in ("dphim_", "dphi1_", "dpm_", "dp1_"))
-    dws = [vector(f"dw{g}_") for g in range(1, len(nodes))]
-
-    # Generic expressions in (phi0, w0), evaluated at each node by substitution.
-    lagrangian_gradient = ImmutableMatrix(
-        [model.kinetic_energy - model.potential]).jacobian(phi0).T
     inputs = input_symbols(scene)
     torques = ImmutableMatrix(joint_torques(scene, inputs))
-    damping = ImmutableMatrix([number(link.damping) for link in scene.links])
-    mass_matrix = model.mass_matrix
+    damping = [number(link.damping) for link in scene.links]
 
-    definitions = []
-    p0 = vector("p0_")
-    definitions += list(zip(p0, mass_matrix * w0))
+    # Every node's quantities by the recursions over the links (chaingen.symbolic.recursion,
+    # model.md 17): O(n) definitions a node, no M(phi) of the whole chain. The rates at the
+    # nodes after the start solve M(phi_g) w_g = p_g by the articulated-body recursion, O(n):
+    # they are functions of the unknowns, not unknowns.
+    step = recursion.Definitions("step_")
+
+    def frames_at(tag, angles):
+        return recursion.link_frames(scene, recursion.angle_directions(step, angles, tag=tag))
+
+    def forces_at(tag, frames, rates):
+        """(M(phi) w, dL/dphi + tau - D w) at a node, by definitions."""
+        momentum, kinetic_gradient = recursion.momenta(
+            scene, frames, recursion.absolute_rates(step, rates, f"{tag}Omega"), step, tag)
+        springs, _ = recursion.spring_gradient(scene, frames, step, tag)
+        gravity = recursion.gravity_gradient(scene, frames, step, tag)
+        forces = [step.define(f"{tag}force{k}", dT - spring - weight + tau - d * rate)
+                  for k, (dT, spring, weight, tau, d, rate)
+                  in enumerate(zip(kinetic_gradient, springs, gravity, torques, damping, rates),
+                               start=1)]
+        return ImmutableMatrix(momentum), ImmutableMatrix(forces)
 
     def quadratic(start_change_mid, change_end, s):
         """Increment of the quadratic through (0, 0), (1/2, mid), (1, end) at s, and its
@@ -103,59 +116,79 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
 
     phi_rows = [ImmutableMatrix.zeros(n, 1), ImmutableMatrix.zeros(n, 1)]
     p_rows = [ImmutableMatrix.zeros(n, 1), ImmutableMatrix.zeros(n, 1)]
-    momentum_rows = []
     dissipated = sp.Integer(0)
+    p0 = None
+    node_inputs, node_outputs = [], []
     for g, (s, b) in enumerate(zip(nodes, weights)):
         s_value, b_value = sp.Float(s), sp.Float(b)
         dphi, phi_slope = quadratic(dphi_m, dphi_1, s_value)
         dp, p_slope = quadratic(dp_m, dp_1, s_value)
+        tag = f"n{g}_"
         if g == 0:
-            phi_g, w_g, p_g = phi0, w0, p0
+            frames = frames_at(tag, list(phi0))
+            w_g = list(w0)
         else:
-            phi_g, w_g = vector(f"phi_node{g}_"), vector(f"w_node{g}_")
-            p_g = vector(f"p_node{g}_")
-            definitions += list(zip(phi_g, phi0 + dphi)) + list(zip(w_g, w0 + dws[g - 1]))
-            definitions += list(zip(p_g, p0 + dp))
-            at_node = {**dict(zip(phi0, phi_g)), **dict(zip(w0, w_g))}
-            # w_g from M(phi_g) w_g = p_g, as a residual: Newton solves it with the rest.
-            momentum_rows.append(mass_matrix.xreplace(at_node) * w_g - p_g)
-        at_node = {**dict(zip(phi0, phi_g)), **dict(zip(w0, w_g))}
-        force = vector(f"force_node{g}_")
-        definitions += list(zip(force, lagrangian_gradient.xreplace(at_node) + torques
-                                - ImmutableMatrix([d * w for d, w in zip(damping, w_g)])))
+            angles = [step.define(f"phi_node{g}_{i}", value)
+                      for i, value in enumerate(phi0 + dphi, start=1)]
+            p_g = [step.define(f"p_node{g}_{i}", value)
+                   for i, value in enumerate(p0 + dp, start=1)]
+            frames = frames_at(tag, angles)
+            w_g = recursion.rates_from_momenta(scene, frames, p_g, step, tag)
+        momentum, force = forces_at(tag, frames, w_g)
+        if g == 0:
+            p0 = momentum
+        else:
+            node_inputs.append(ImmutableMatrix(angles + p_g))
+            node_outputs.append(ImmutableMatrix(list(w_g) + list(force)))
+        w_g = ImmutableMatrix(w_g)
         for row, psi in enumerate((sp.Integer(1), 2 * s_value - 1)):
             phi_rows[row] += b_value * psi * (phi_slope - dt * w_g)
             p_rows[row] += b_value * psi * (p_slope - dt * force)
         dissipated += b_value * sp.Add(*(number(link.damping) * phi_slope[i] ** 2
                                          for i, link in enumerate(scene.links) if link.damping))
+    w_1 = w_g
     dissipated = dissipated / dt
-    residual = ImmutableMatrix.vstack(*phi_rows, *p_rows, *momentum_rows)
-    unknowns = ImmutableMatrix.vstack(dphi_m, dphi_1, dp_m, dp_1, *dws)
+    residual = ImmutableMatrix.vstack(*phi_rows, *p_rows)
+    unknowns = ImmutableMatrix.vstack(dphi_m, dphi_1, dp_m, dp_1)
+
+    # The state's energy H = T + V and its segment vectors, by the same recursions.
+    at_state = recursion.Definitions("state_")
+    frames0 = recursion.link_frames(scene, recursion.angle_directions(at_state, phi0))
+    rates0 = recursion.absolute_rates(at_state, w0)
+    velocities, _ = recursion.velocities(scene, frames0, rates0, at_state)
+    _, spring_energy = recursion.spring_gradient(scene, frames0, at_state)
+    energy = (recursion.kinetic_energy(scene, rates0, velocities)
+              + recursion.gravity_potential(scene, frames0, at_state) + spring_energy)
 
     names = [f"{kind}_{i}" for kind in ("dphim", "dphi1", "dpm", "dp1") for i in range(1, n + 1)]
-    names += [f"dw{g}_{i}" for g in range(1, len(nodes)) for i in range(1, n + 1)]
     return DiscreteScheme.of(
         method="es", quadrature=quadrature, scene=scene, summary=SUMMARY, dt=dt,
         unknowns=unknowns,
         residual=residual,
-        next_state=ImmutableMatrix.vstack(phi0 + dphi_1, w0 + dws[-1]),
+        next_state=ImmutableMatrix.vstack(phi0 + dphi_1, w_1),
         predictor=ImmutableMatrix.vstack(dt * w0 / 2, dt * w0,
-                                         ImmutableMatrix.zeros((2 + len(dws)) * n, 1)),
-        **joint_space_state(scene, phi0, w0, model.energy),
+                                         ImmutableMatrix.zeros(2 * n, 1)),
+        **joint_space_state(scene, phi0, w0, energy),
         unknowns_layout=Layout(
             tuple(names),
             "increments from the step's start of the joint angles at its mid-point and end "
-            "(rad), of the momenta there (N m s), and of the joint rates at the Gauss-Lobatto "
-            "nodes after its start, the last its end (rad/s)"),
+            "(rad), then of the momenta there (N m s)"),
         residual_description=(
-            "the Galerkin equations of phi tested with 1 and 2s - 1 (2n entries, rad), those of "
-            "p (2n entries, N m s), then M(phi_g) w_g - p_g at each node after the start "
-            "(N m s)"),
-        inputs=inputs, segment_vectors=segment_vectors(model), definitions=tuple(definitions),
+            "the Galerkin equations of phi tested with 1 and 2s - 1 (2n entries, rad), then "
+            "those of p (2n entries, N m s); the rates at the nodes solve M(phi_g) w_g = p_g"),
+        inputs=inputs, segment_vectors=recursion.segment_vector_entries(scene, frames0),
+        definitions=tuple(step.items), state_definitions=tuple(at_state.items),
         input_work=sp.Add(*(tau * d for tau, d in zip(torques, dphi_1))),
         dissipated=dissipated,
         flow_description=FLOWS if has_energy_flows(scene) else None,
         jacobian_reuse=JACOBIAN_PER_STEP, order=order,
+        # By directions, the angles' and the momenta's columns apart: a momentum moves neither
+        # a node's frames nor its articulated inertias, and their tangents are left out (at 10
+        # links, 10.7e3 instructions for 4 columns against 24.9e3 for the angles').
+        jacobian_blocks=(2 * n, 2 * n),
+        # The same recursions at every node after the start: (phi_g, p_g) -> (w_g, F_g), and
+        # the residual linear in them (NodeSpace): dF/dz through one node's Jacobian.
+        node_space=NodeSpace(tuple(node_inputs), tuple(node_outputs)),
         # Its stages start from their own previous solutions as es's composed ones do: the
         # same tolerance (four_link_actuated, K = 7, 400 steps of 0.01 s: balance drift
         # 2.0e-11 J at 1e-10, 1.0e-12 J at 1e-12).
