@@ -873,12 +873,13 @@ static double cg_residual_norm(const chaingen_model *table, const cg_solver *c)
  * they shrink so slowly that more than CG_REFRESH_ITERATIONS further updates would be needed
  * (a Newton step converges quadratically from there). A step starts with a Jacobian at its first
  * guess when the last solve had to replace one evaluated within it (refresh_first: the Jacobian
- * changes fast along the motion). And it gives up, *diverged set, when a Newton step (an update
- * by a Jacobian evaluated at its iterate) fails the monotonicity test: neither the residual nor
- * the next update (by the same Jacobian) shrank. There is then no root within Newton's reach
- * (on a long chain at dt = 0.01 s, the root of a step ends in a fold at a shorter dt: vi's
- * discrete Legendre transform is no longer invertible), and the step is split at once. Full
- * Newton and Newton-chord never give up early. */
+ * changes fast along the motion). In a package whose own Newton is simplified (vi) it gives up,
+ * *diverged set, when a Newton step fails the monotonicity test: the next update, by the
+ * Jacobian evaluated at the step's start, did not shrink (after a residual that did not shrink,
+ * that Jacobian is kept for this test). There is then no root within Newton's reach (on a long
+ * chain at dt = 0.01 s, the root of a step ends in a fold at a shorter dt: vi's discrete
+ * Legendre transform is no longer invertible), and the step is split at once. Full Newton,
+ * Newton-chord and es's and midpoint's simplified Newton never give up early. */
 static int cg_newton(const chaingen_model *table, const cg_solver *c, const double *x0,
                      const double *u, const double *p, double dt, const chaingen_options *options,
                      int warm, int *iterations, int *diverged)
@@ -887,6 +888,10 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     chaingen_workspace_scalars *s = c->s;
     const int nz = model->nz;
     const int simplified = options->reuse_jacobian == CHAINGEN_JACOBIAN_ACROSS_STEPS;
+    /* Only the scheme whose own Newton is simplified (vi) gives up early: es and midpoint keep
+     * their ladder under every option. */
+    const int gives_up = simplified
+                         && model->defaults.reuse_jacobian == CHAINGEN_JACOBIAN_ACROSS_STEPS;
     double *z, *dz, *residual;
     double previous_update = -1.0;   /* update norm of the previous iteration, < 0: none */
     double previous_residual = -1.0; /* its residual norm */
@@ -916,11 +921,11 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
         if (simplified && previous_residual > 0.0 && residual_norm > options->residual_tol
             && !isnan(residual_norm)) {
             if (evaluated_at == iteration - 1 && residual_norm >= previous_residual) {
-                /* The Newton step from the previous iterate did not reduce the residual. */
-                *diverged = 1;
-                break;
-            }
-            if (!here && residual_norm > CHAINGEN_REFRESH_RATE * previous_residual) {
+                /* The Newton step from the previous iterate did not reduce the residual. The
+                 * Jacobian it was taken with stays for this update, whose size tells (the
+                 * residual's norm is not affine invariant; the update is): the step diverged
+                 * when it does not shrink, tested after the solve. */
+            } else if (!here && residual_norm > CHAINGEN_REFRESH_RATE * previous_residual) {
                 /* The kept Jacobian reduced the residual too little: a Newton step from here. */
                 here = 1;
                 if (cg_newton_evaluate(model, c, x0, u, p, dt, 1)) {
@@ -1002,7 +1007,7 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
                             || (rate >= CG_FLOOR_RATE && residual_norm <= CG_ROUNDOFF_RESIDUAL));
             if (residual_norm <= options->residual_tol && (contracted || floor)) {
                 status = CHAINGEN_OK;
-            } else if (simplified && measured && evaluated_at == iteration - 1 && rate >= 1.0) {
+            } else if (gives_up && measured && evaluated_at == iteration - 1 && rate >= 1.0) {
                 /* The Newton step from the previous iterate failed the monotonicity test:
                  * the update by the Jacobian evaluated there did not shrink. */
                 *diverged = 1;
@@ -1030,8 +1035,9 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
 
 /* Newton from the first guess; a warm start that fails is retried once from the scheme's
  * predictor with a fresh Jacobian (an extrapolated guess can be poor where the motion changes
- * abruptly), and a kept Jacobian that fails is replaced by full Newton from the predictor: a
- * step does at most 3 max_iterations linear solves. options NULL: the model's defaults. */
+ * abruptly), and a kept Jacobian that fails is replaced by full Newton from the predictor
+ * (unless simplified Newton gave up on a diverging Newton step, newton()): a step does at most
+ * 3 max_iterations linear solves. options NULL: the model's defaults. */
 static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const double *x0,
                          const double *u, const double *p, double dt,
                          const chaingen_options *options, int *iterations)

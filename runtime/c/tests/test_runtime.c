@@ -823,16 +823,18 @@ static void test_not_converged(void)
 }
 
 /* A step past a fold of its root has none (the knob: F1^2 + fold for steps longer than 0.006 s).
- * Simplified Newton, the Jacobian kept across steps, stops at the first Newton step that fails
- * the monotonicity test (neither the residual nor the next update shrank) and skips full
- * Newton's rung: the step is split after a few solves, and its halves, which have a root, pass.
- * Newton-chord and full Newton keep their failure path: every rung runs to max_iterations. */
+ * A package whose own Newton is simplified (vi's), run with it, stops at the first Newton step
+ * that fails the monotonicity test (the next update, by the Jacobian evaluated at its start,
+ * did not shrink) and skips full Newton's rung: the step is split after a few solves, and its
+ * halves, which have a root, pass. Every other configuration keeps its failure path, every rung
+ * run to max_iterations: full Newton, Newton-chord, and simplified Newton in a package whose
+ * own Newton is another (es, midpoint; the pendulum's is full Newton). */
 static void test_diverged(void)
 {
     const double x0[2] = {0.5, 0.3};
     double x1[2], reference[2];
     chaingen_options options;
-    int mode, iterations[3];
+    int own, mode, iterations[2][3];
     begin("diverged");
     use(full_variant());
     chaingen_default_options(&model, &options);
@@ -840,29 +842,42 @@ static void test_diverged(void)
     options.energy_tol = 0.0;
     STATUS(step(x0, 0.0, 0.005, reference, NULL, &options, NULL), CHAINGEN_OK);
     STATUS(step(reference, 0.0, 0.005, reference, NULL, &options, NULL), CHAINGEN_OK);
-    for (mode = 0; mode < 3; ++mode) {
-        use(full_variant());
-        pendulum_knob.fold = 1e-3;
-        pendulum_knob.above_dt = 0.006;
-        options.reuse_jacobian = mode;
-        iterations[mode] = 0;
-        STATUS(step(x0, 0.0, 0.01, x1, NULL, &options, &iterations[mode]), CHAINGEN_OK);
-        EXPECT(store->scalars.step_splits == 1 && store->scalars.step_fallbacks == 0,
-               "mode %d: %ld splits, %ld fallbacks", mode, store->scalars.step_splits,
-               store->scalars.step_fallbacks);
-        EXPECT(close_to(x1[0], reference[0], 1e-9) && close_to(x1[1], reference[1], 1e-9),
-               "mode %d: the halves end at (%.15g, %.15g), not at (%.15g, %.15g)", mode, x1[0],
-               x1[1], reference[0], reference[1]);
+    for (own = 0; own < 2; ++own) {
+        for (mode = 0; mode < 3; ++mode) {
+            use(full_variant());
+            if (own) {
+                model.defaults.reuse_jacobian = CHAINGEN_JACOBIAN_ACROSS_STEPS;
+            }
+            pendulum_knob.fold = 1e-3;
+            pendulum_knob.above_dt = 0.006;
+            options.reuse_jacobian = mode;
+            iterations[own][mode] = 0;
+            STATUS(step(x0, 0.0, 0.01, x1, NULL, &options, &iterations[own][mode]),
+                   CHAINGEN_OK);
+            EXPECT(store->scalars.step_splits == 1 && store->scalars.step_fallbacks == 0,
+                   "own %d, mode %d: %ld splits, %ld fallbacks", own, mode,
+                   store->scalars.step_splits, store->scalars.step_fallbacks);
+            EXPECT(close_to(x1[0], reference[0], 1e-9) && close_to(x1[1], reference[1], 1e-9),
+                   "own %d, mode %d: the halves end at (%.15g, %.15g), not at (%.15g, %.15g)",
+                   own, mode, x1[0], x1[1], reference[0], reference[1]);
+        }
+        printf("# diverged, own Newton %s: iterations full %d, simplified %d, chord %d\n",
+               own ? "simplified" : "full", iterations[own][0], iterations[own][1],
+               iterations[own][2]);
     }
-    EXPECT(iterations[CHAINGEN_JACOBIAN_ACROSS_STEPS] < 15,
-           "simplified: %d iterations for a step without a root and its halves",
-           iterations[CHAINGEN_JACOBIAN_ACROSS_STEPS]);
-    EXPECT(iterations[CHAINGEN_JACOBIAN_EVERY_ITERATE] > options.max_iterations
-               && iterations[CHAINGEN_JACOBIAN_PER_STEP] > 2 * options.max_iterations,
-           "full Newton %d, chord %d iterations: a rung gave up early",
-           iterations[CHAINGEN_JACOBIAN_EVERY_ITERATE], iterations[CHAINGEN_JACOBIAN_PER_STEP]);
-    printf("# diverged: iterations full %d, simplified %d, chord %d\n", iterations[0],
-           iterations[1], iterations[2]);
+    EXPECT(iterations[1][CHAINGEN_JACOBIAN_ACROSS_STEPS] < 15,
+           "simplified, its own Newton: %d iterations for a step without a root and its halves",
+           iterations[1][CHAINGEN_JACOBIAN_ACROSS_STEPS]);
+    for (own = 0; own < 2; ++own) {
+        EXPECT(iterations[own][CHAINGEN_JACOBIAN_EVERY_ITERATE] > options.max_iterations
+                   && iterations[own][CHAINGEN_JACOBIAN_PER_STEP] > 2 * options.max_iterations,
+               "own %d: full Newton %d, chord %d iterations: a rung gave up early", own,
+               iterations[own][CHAINGEN_JACOBIAN_EVERY_ITERATE],
+               iterations[own][CHAINGEN_JACOBIAN_PER_STEP]);
+    }
+    EXPECT(iterations[0][CHAINGEN_JACOBIAN_ACROSS_STEPS] > 2 * options.max_iterations,
+           "simplified in a package of another Newton: %d iterations: a rung gave up early",
+           iterations[0][CHAINGEN_JACOBIAN_ACROSS_STEPS]);
     end();
 }
 
