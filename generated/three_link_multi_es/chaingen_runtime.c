@@ -63,6 +63,10 @@
  * 2^MAX_SPLIT substeps.) */
 #define CG_FLOOR_RATE 0.5
 #define CG_ROUNDOFF_RESIDUAL (1024.0 * DBL_EPSILON)
+/* Simplified Newton evaluates its Jacobian anew when its measured contraction would need more
+ * than this many further updates to meet the tolerance: a Newton step converges quadratically,
+ * in about as many. */
+#define CG_REFRESH_ITERATIONS 2.0
 /* The adaptive steps' controller (see adaptive_interval). */
 #define CG_SAFETY 0.9
 #define CG_MIN_FACTOR 0.2
@@ -802,25 +806,103 @@ static int cg_choose_warm_start(const chaingen_model *table, const cg_solver *c,
     return CHAINGEN_OK;
 }
 
+/* F (with_jacobian: and dF/dz, factorised later, and the residual's scale at it) at z, for
+ * Newton. Returns nonzero when an evaluation failed. */
+static int cg_newton_evaluate(const chaingen_model *table, const cg_solver *c, const double *x0,
+                              const double *u, const double *p, double dt, int with_jacobian)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    const int nz = model->nz;
+    const double *z = c->z, *jacobian = c->jacobian;
+    int i, j, evaluated;
+    if (!with_jacobian) {
+        return cg_evaluate_residual(model, c, z, x0, u, p, dt, c->residual);
+    }
+    c->s->factors_valid = 0;   /* the factors' storage is overwritten */
+    if (model->arm_nh > 0) {
+        chaingen_arm_system system = cg_arm_system(model, c);
+        evaluated = cg_newton_factors(model, c, z, x0, u, dt, c->residual);
+        /* The residual's scale at this Jacobian, 1 + sum_j |dF_i/dz_j| |z_j|, bounded by its
+         * factors. */
+        if (!evaluated) {
+            chaingen_arm_scale(&system, z, c->residual_scale);
+        }
+        return evaluated;
+    }
+    evaluated = cg_evaluate_residual_jacobian(model, c, z, x0, u, p, dt, c->residual,
+                                              c->jacobian);
+    /* The residual's scale at this Jacobian: 1 + sum_j |dF_i/dz_j| |z_j|. */
+    for (i = 0; i < nz; ++i) {
+        c->residual_scale[i] = 1.0;
+    }
+    for (j = 0; j < nz; ++j) {
+        for (i = 0; i < nz; ++i) {
+            c->residual_scale[i] += fabs(jacobian[i + j * nz]) * fabs(z[j]);
+        }
+    }
+    return evaluated;
+}
+
+/* The residual's norm relative to its scale, max_i |F_i| / (1 + S_i); NaN when an entry of F is
+ * not finite. */
+static double cg_residual_norm(const chaingen_model *table, const cg_solver *c)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    double norm = 0.0;
+    int i;
+    for (i = 0; i < model->nz; ++i) {
+        const double scaled = fabs(c->residual[i]) / c->residual_scale[i];
+        if (!isfinite(c->residual[i])) {
+            return NAN;
+        }
+        if (scaled > norm) {
+            norm = scaled;
+        }
+    }
+    return norm;
+}
+
 /* Newton's method on F(z, x0, [u], [q], dt) = 0 from the first guess, full, simplified or chord
  * (see the options in the package header), with the linear solves of factorise() and
- * solve_newton(), at most options->max_iterations of them. Leaves z in the workspace. */
+ * solve_newton(), at most options->max_iterations of them. Leaves z in the workspace.
+ *
+ * Simplified Newton (the Jacobian kept across steps) takes a Newton step wherever the kept
+ * Jacobian contracts poorly: it evaluates the Jacobian at the iterate when the residual shrank
+ * by less than CHAINGEN_REFRESH_RATE since the last iterate (before the solve: no update is
+ * spent on a Jacobian that no longer fits), when the updates shrink by less than that, or when
+ * they shrink so slowly that more than CG_REFRESH_ITERATIONS further updates would be needed
+ * (a Newton step converges quadratically from there). A step starts with a Jacobian at its first
+ * guess when the last solve had to replace one evaluated within it (refresh_first: the Jacobian
+ * changes fast along the motion). In a package whose own Newton is simplified (vi) it gives up,
+ * *diverged set, when a Newton step fails the monotonicity test: the next update, by the
+ * Jacobian evaluated at the step's start, did not shrink (after a residual that did not shrink,
+ * that Jacobian is kept for this test). There is then no root within Newton's reach (on a long
+ * chain at dt = 0.01 s, the root of a step ends in a fold at a shorter dt: vi's discrete
+ * Legendre transform is no longer invertible), and the step is split at once. Full Newton,
+ * Newton-chord and es's and midpoint's simplified Newton never give up early. */
 static int cg_newton(const chaingen_model *table, const cg_solver *c, const double *x0,
                      const double *u, const double *p, double dt, const chaingen_options *options,
-                     int warm, int *iterations)
+                     int warm, int *iterations, int *diverged)
 {
     const chaingen_model *const model = CG_MODEL(table);
     chaingen_workspace_scalars *s = c->s;
     const int nz = model->nz;
-    double *z, *dz, *residual, *jacobian;
+    const int simplified = options->reuse_jacobian == CHAINGEN_JACOBIAN_ACROSS_STEPS;
+    /* Only the scheme whose own Newton is simplified (vi) gives up early: es and midpoint keep
+     * their ladder under every option. */
+    const int gives_up = simplified
+                         && model->defaults.reuse_jacobian == CHAINGEN_JACOBIAN_ACROSS_STEPS;
+    double *z, *dz, *residual;
     double previous_update = -1.0;   /* update norm of the previous iteration, < 0: none */
     double previous_residual = -1.0; /* its residual norm */
     int i, iteration = 0, status, fresh = 0;   /* fresh: dF/dz evaluated within this call */
+    int evaluated_at = 0;   /* the iteration at whose iterate dF/dz was last evaluated (0: none) */
+    int evaluations = 0;    /* of dF/dz within this call */
     z = c->z;
     dz = c->dz;
     residual = c->residual;
-    jacobian = c->jacobian;
-    if (options->reuse_jacobian != CHAINGEN_JACOBIAN_ACROSS_STEPS || s->factors_dt != dt) {
+    *diverged = 0;
+    if (!simplified || s->factors_dt != dt || s->refresh_first) {
         s->factors_valid = 0;
     }
     status = cg_first_guess(model, c, x0, dt, warm);
@@ -828,59 +910,49 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
         status = CHAINGEN_NOT_CONVERGED;
     }
     while (status == CHAINGEN_NOT_CONVERGED && iteration < options->max_iterations) {
-        double residual_norm = 0.0, update_norm = 0.0;
-        int evaluated, j;
+        double residual_norm, update_norm = 0.0;
+        int here = !s->factors_valid;   /* dF/dz evaluated at this iterate */
         ++iteration;
-        if (!s->factors_valid) {
-            if (model->arm_nh > 0) {
-                chaingen_arm_system system = cg_arm_system(model, c);
-                evaluated = cg_newton_factors(model, c, z, x0, u, dt, residual);
-                /* The residual's scale at this Jacobian, 1 + sum_j |dF_i/dz_j| |z_j|, bounded by
-                 * its factors. */
-                if (!evaluated) {
-                    chaingen_arm_scale(&system, z, c->residual_scale);
-                }
-            } else {
-                evaluated = cg_evaluate_residual_jacobian(model, c, z, x0, u, p, dt, residual,
-                                                          jacobian);
-                /* The residual's scale at this Jacobian: 1 + sum_j |dF_i/dz_j| |z_j|. */
-                for (i = 0; i < nz; ++i) {
-                    c->residual_scale[i] = 1.0;
-                }
-                for (j = 0; j < nz; ++j) {
-                    for (i = 0; i < nz; ++i) {
-                        c->residual_scale[i] += fabs(jacobian[i + j * nz]) * fabs(z[j]);
-                    }
-                }
-            }
-        } else {
-            evaluated = cg_evaluate_residual(model, c, z, x0, u, p, dt, residual);
-        }
-        if (evaluated) {
+        if (cg_newton_evaluate(model, c, x0, u, p, dt, here)) {
             status = CHAINGEN_EVALUATION_FAILED;
             break;
         }
-        for (i = 0; i < nz; ++i) {
-            double scaled = fabs(residual[i]) / c->residual_scale[i];
-            if (!isfinite(residual[i])) {
-                status = CHAINGEN_NONFINITE;
+        residual_norm = cg_residual_norm(model, c);
+        if (simplified && previous_residual > 0.0 && residual_norm > options->residual_tol
+            && !isnan(residual_norm)) {
+            if (evaluated_at == iteration - 1 && residual_norm >= previous_residual) {
+                /* The Newton step from the previous iterate did not reduce the residual. The
+                 * Jacobian it was taken with stays for this update, whose size tells (the
+                 * residual's norm is not affine invariant; the update is): the step diverged
+                 * when it does not shrink, tested after the solve. */
+            } else if (!here && residual_norm > CHAINGEN_REFRESH_RATE * previous_residual) {
+                /* The kept Jacobian reduced the residual too little: a Newton step from here. */
+                here = 1;
+                if (cg_newton_evaluate(model, c, x0, u, p, dt, 1)) {
+                    status = CHAINGEN_EVALUATION_FAILED;
+                    break;
+                }
+                residual_norm = cg_residual_norm(model, c);
             }
-            if (scaled > residual_norm) {
-                residual_norm = scaled;
-            }
-            dz[i] = -residual[i];
         }
-        if (status != CHAINGEN_NOT_CONVERGED) {
+        if (isnan(residual_norm)) {
+            status = CHAINGEN_NONFINITE;
             break;
         }
-        if (!s->factors_valid) {
+        for (i = 0; i < nz; ++i) {
+            dz[i] = -residual[i];
+        }
+        if (here) {
             if (cg_factorise(model, c)) {
+                s->factors_valid = 0;
                 status = CHAINGEN_SINGULAR_JACOBIAN;
                 break;
             }
             s->factors_valid = 1;
             s->factors_dt = dt;
             fresh = 1;
+            evaluated_at = iteration;
+            ++evaluations;
             if (options->reuse_jacobian != CHAINGEN_JACOBIAN_EVERY_ITERATE) {
                 /* A new kept Jacobian: its contraction is measured afresh. (Full Newton has a
                  * new one every iterate and compares successive updates for the floor.) */
@@ -935,11 +1007,24 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
                             || (rate >= CG_FLOOR_RATE && residual_norm <= CG_ROUNDOFF_RESIDUAL));
             if (residual_norm <= options->residual_tol && (contracted || floor)) {
                 status = CHAINGEN_OK;
-            } else if (measured && rate > CHAINGEN_REFRESH_RATE) {
+            } else if (gives_up && measured && evaluated_at == iteration - 1 && rate >= 1.0) {
+                /* The Newton step from the previous iterate failed the monotonicity test:
+                 * the update by the Jacobian evaluated there did not shrink. */
+                *diverged = 1;
+                break;
+            } else if (measured
+                       && (rate > CHAINGEN_REFRESH_RATE
+                           || (simplified
+                               && log(margin * (1.0 - rate) / (rate * update_norm))
+                                      < CG_REFRESH_ITERATIONS * log(rate)))) {
                 s->factors_valid = 0;
             }
             previous_update = update_norm;
+            previous_residual = residual_norm;
         }
+    }
+    if (simplified) {
+        s->refresh_first = evaluations > 1;
     }
     if (status == CHAINGEN_OK) {
         status = cg_choose_warm_start(model, c, x0, dt, options);
@@ -950,15 +1035,16 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
 
 /* Newton from the first guess; a warm start that fails is retried once from the scheme's
  * predictor with a fresh Jacobian (an extrapolated guess can be poor where the motion changes
- * abruptly), and a kept Jacobian that fails is replaced by full Newton from the predictor: a
- * step does at most 3 max_iterations linear solves. options NULL: the model's defaults. */
+ * abruptly), and a kept Jacobian that fails is replaced by full Newton from the predictor
+ * (unless simplified Newton gave up on a diverging Newton step, newton()): a step does at most
+ * 3 max_iterations linear solves. options NULL: the model's defaults. */
 static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const double *x0,
                          const double *u, const double *p, double dt,
                          const chaingen_options *options, int *iterations)
 {
     const chaingen_model *const model = CG_MODEL(table);
     chaingen_options defaults;
-    int status, spent = 0, retried = 0;
+    int status, spent = 0, retried = 0, diverged = 0;
     if (!x0 || (!u && model->nu > 0) || (!p && model->np > 0) || !(dt != 0.0) || !isfinite(dt)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
@@ -970,18 +1056,20 @@ static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const 
         || options->reuse_jacobian > CHAINGEN_JACOBIAN_PER_STEP || !(options->energy_tol >= 0.0)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
-    status = cg_newton(model, c, x0, u, p, dt, options, options->warm_start, &spent);
+    status = cg_newton(model, c, x0, u, p, dt, options, options->warm_start, &spent, &diverged);
     if (status != CHAINGEN_OK && c->s->chained) {
         c->s->factors_valid = 0;
-        status = cg_newton(model, c, x0, u, p, dt, options, 0, &retried);
+        status = cg_newton(model, c, x0, u, p, dt, options, 0, &retried, &diverged);
         spent += retried;
     }
-    if (status != CHAINGEN_OK && status != CHAINGEN_EVALUATION_FAILED
+    /* Simplified Newton that diverged took Newton steps already (newton()): full Newton from
+     * the predictor would only repeat them. */
+    if (status != CHAINGEN_OK && status != CHAINGEN_EVALUATION_FAILED && !diverged
         && options->reuse_jacobian != CHAINGEN_JACOBIAN_EVERY_ITERATE) {
         chaingen_options full = *options;
         full.reuse_jacobian = CHAINGEN_JACOBIAN_EVERY_ITERATE;
         c->s->factors_valid = 0;
-        status = cg_newton(model, c, x0, u, p, dt, &full, 0, &retried);
+        status = cg_newton(model, c, x0, u, p, dt, &full, 0, &retried, &diverged);
         spent += retried;
         if (status == CHAINGEN_OK) {
             ++c->s->step_fallbacks;

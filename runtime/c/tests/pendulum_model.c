@@ -216,6 +216,9 @@ static void residual_at(const double **arg, double *f, double *jacobian)
             f[1] += pendulum_knob.residual_noise
                     * ((double)(pendulum_knob.noise_state & 0x7fffffffu) * scale * 2.0 - 1.0);
         }
+        if (pendulum_knob.fold > 0.0 && knob_active(dt)) {
+            f[1] = f1 * f1 + pendulum_knob.fold;
+        }
         if (pendulum_knob.nan_residual == 1 && knob_active(dt)) {
             f[1] = NAN;
         }
@@ -225,6 +228,9 @@ static void residual_at(const double **arg, double *f, double *jacobian)
                            ? pendulum_knob.jacobian_scale : 1.0;
         if (pendulum_knob.zero_jacobian && knob_active(dt)) {
             scale = 0.0;
+        }
+        if (pendulum_knob.fold > 0.0 && knob_active(dt)) {
+            cubic *= 2.0 * f1;   /* d(F1^2 + fold)/dF1 */
         }
         jacobian[0] = scale * 1.0;
         jacobian[1] = scale * cubic * 0.5 * dt * v[2];

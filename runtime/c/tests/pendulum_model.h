@@ -109,6 +109,8 @@ typedef struct {
     double predictor_bias;   /* added to the predictor's domega: a poor first guess */
     double cubic;            /* F1 becomes F1 + cubic F1^3 (same root): Newton from a poor
                               * guess takes many iterations, from a good one few */
+    double fold;             /* > 0: F1 becomes F1^2 + fold (steps longer than above_dt): no
+                              * root, as where a step runs past a fold of its root */
     double residual_noise;   /* F gains a pseudo-random error of this size at every
                               * evaluation: round-off of terms larger than the Jacobian's */
     unsigned noise_state;    /* its generator's state */

@@ -366,7 +366,8 @@ static void test_workspace_init(void)
                && s->previous_error == 0.0 && s->composed_dt == 0.0 && s->energy_ends[0] == 0.0
                && s->energy_ends[1] == 0.0 && s->step_fallbacks == 0 && s->step_splits == 0
                && s->history == 0 && s->warm_choice == 0 && s->chained == 0
-               && s->factors_valid == 0 && s->energy_valid == 0 && s->q_valid == 0
+               && s->factors_valid == 0 && s->refresh_first == 0 && s->energy_valid == 0
+               && s->q_valid == 0
                && s->composed_valid == 0,
            "a scalar of the workspace is not zero after workspace_init");
     doubles = chaingen_workspace_doubles(&model);
@@ -818,6 +819,65 @@ static void test_not_converged(void)
     STATUS(step(x0, 0.0, 0.01, x1, NULL, &options, &iterations), CHAINGEN_NOT_CONVERGED);
     EXPECT(iterations == 2 * (CHAINGEN_MAX_SPLIT + 1), "chord: iterations %d, expected %d",
            iterations, 2 * (CHAINGEN_MAX_SPLIT + 1));
+    end();
+}
+
+/* A step past a fold of its root has none (the knob: F1^2 + fold for steps longer than 0.006 s).
+ * A package whose own Newton is simplified (vi's), run with it, stops at the first Newton step
+ * that fails the monotonicity test (the next update, by the Jacobian evaluated at its start,
+ * did not shrink) and skips full Newton's rung: the step is split after a few solves, and its
+ * halves, which have a root, pass. Every other configuration keeps its failure path, every rung
+ * run to max_iterations: full Newton, Newton-chord, and simplified Newton in a package whose
+ * own Newton is another (es, midpoint; the pendulum's is full Newton). */
+static void test_diverged(void)
+{
+    const double x0[2] = {0.5, 0.3};
+    double x1[2], reference[2];
+    chaingen_options options;
+    int own, mode, iterations[2][3];
+    begin("diverged");
+    use(full_variant());
+    chaingen_default_options(&model, &options);
+    options.warm_start = 0;
+    options.energy_tol = 0.0;
+    STATUS(step(x0, 0.0, 0.005, reference, NULL, &options, NULL), CHAINGEN_OK);
+    STATUS(step(reference, 0.0, 0.005, reference, NULL, &options, NULL), CHAINGEN_OK);
+    for (own = 0; own < 2; ++own) {
+        for (mode = 0; mode < 3; ++mode) {
+            use(full_variant());
+            if (own) {
+                model.defaults.reuse_jacobian = CHAINGEN_JACOBIAN_ACROSS_STEPS;
+            }
+            pendulum_knob.fold = 1e-3;
+            pendulum_knob.above_dt = 0.006;
+            options.reuse_jacobian = mode;
+            iterations[own][mode] = 0;
+            STATUS(step(x0, 0.0, 0.01, x1, NULL, &options, &iterations[own][mode]),
+                   CHAINGEN_OK);
+            EXPECT(store->scalars.step_splits == 1 && store->scalars.step_fallbacks == 0,
+                   "own %d, mode %d: %ld splits, %ld fallbacks", own, mode,
+                   store->scalars.step_splits, store->scalars.step_fallbacks);
+            EXPECT(close_to(x1[0], reference[0], 1e-9) && close_to(x1[1], reference[1], 1e-9),
+                   "own %d, mode %d: the halves end at (%.15g, %.15g), not at (%.15g, %.15g)",
+                   own, mode, x1[0], x1[1], reference[0], reference[1]);
+        }
+        printf("# diverged, own Newton %s: iterations full %d, simplified %d, chord %d\n",
+               own ? "simplified" : "full", iterations[own][0], iterations[own][1],
+               iterations[own][2]);
+    }
+    EXPECT(iterations[1][CHAINGEN_JACOBIAN_ACROSS_STEPS] < 15,
+           "simplified, its own Newton: %d iterations for a step without a root and its halves",
+           iterations[1][CHAINGEN_JACOBIAN_ACROSS_STEPS]);
+    for (own = 0; own < 2; ++own) {
+        EXPECT(iterations[own][CHAINGEN_JACOBIAN_EVERY_ITERATE] > options.max_iterations
+                   && iterations[own][CHAINGEN_JACOBIAN_PER_STEP] > 2 * options.max_iterations,
+               "own %d: full Newton %d, chord %d iterations: a rung gave up early", own,
+               iterations[own][CHAINGEN_JACOBIAN_EVERY_ITERATE],
+               iterations[own][CHAINGEN_JACOBIAN_PER_STEP]);
+    }
+    EXPECT(iterations[0][CHAINGEN_JACOBIAN_ACROSS_STEPS] > 2 * options.max_iterations,
+           "simplified in a package of another Newton: %d iterations: a rung gave up early",
+           iterations[0][CHAINGEN_JACOBIAN_ACROSS_STEPS]);
     end();
 }
 
@@ -1934,6 +1994,7 @@ static const test_group groups[] = {
     {"status_nonfinite", test_nonfinite},
     {"status_singular_jacobian", test_singular},
     {"status_not_converged", test_not_converged},
+    {"diverged", test_diverged},
     {"status_segment_collapsed", test_segment_collapsed},
     {"status_interrupted", test_interrupted},
     {"status_step_too_small", test_step_too_small},
