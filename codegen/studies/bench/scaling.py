@@ -26,7 +26,7 @@ from ...scene import Scene
 from .config import HARNESS_FLAGS, SCALING_DTS, VARIANTS, BenchConfig
 from .harness import Harness, HarnessError
 from .runs import method_label, mujoco_step_seconds
-from .scenes import SCALING_CHAINS
+from .scenes import SCALING_CHAINS, scaling_scene  # noqa: F401  (docs/studies import it from here)
 
 
 @dataclass(frozen=True)
