@@ -152,10 +152,11 @@ def test_uneven_only_runs_es_on_both_chains(tmp_path):
     config = bench_config(uneven_only=True, scaling_n="2,20", out=tmp_path / "b.md")
     assert config.uneven_only and config.run_scaling
     assert not (config.run_reference or config.run_sweep or config.run_stiff)
-    assert config.scaling_series == (("identical", "es", 3), ("uneven", "es", 3))
+    assert config.scaling_series == (("identical", "es", 3, "exact"), ("uneven", "es", 3, "exact"),
+                                     ("identical", "es", 3, "chain"), ("uneven", "es", 3, "chain"))
     assert config.command == (f"chaingen bench --scaling-n 2,20 --uneven-only --out "
                               f"{tmp_path / 'b.md'}")
-    assert ("uneven", "es", 3) in bench_config(out=tmp_path / "b.md").scaling_series
+    assert ("uneven", "es", 3, "exact") in bench_config(out=tmp_path / "b.md").scaling_series
     for clash in ({"stiff_only": True}, {"skip_scaling": True}):
         with pytest.raises(Exception, match="--uneven-only"):
             bench_config(uneven_only=True, out=tmp_path / "b.md", **clash)
@@ -179,8 +180,8 @@ def test_uneven_comparison_table_pairs_the_chains():
                        mujoco_step_seconds=4e-5, newton_iterations=7.0, chain=chain)
             for variant in VARIANTS for chain, step in (("identical", 2e-5), ("uneven", 3e-5))]
     table = uneven_comparison_table(rows)
-    assert "| 20 | default options | 20.00 us | 40.00 us | 0.50 | 30.00 us | 40.00 us | 0.75 |" \
-        in table
+    assert ("| 20 | es K=3 | default options | 20.00 us | 40.00 us | 0.50 | 30.00 us | 40.00 us "
+            "| 0.75 |") in table
 
 
 # -- headline c: cost at an energy error -----------------------------------------------------

@@ -223,7 +223,7 @@ def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> Benc
                                                     config.figures / f"bench_{name}.png")
     if scaling is not None and drawing is not None:
         figures["scaling"] = drawing.plot_scaling(
-            [row for row in scaling if row.chain == "identical"],
+            [row for row in scaling if row.chain == "identical" and row.gradient == "exact"],
             config.figures / "bench_scaling.png")
     if stiff is not None and drawing is not None:
         figures[STIFF_FIGURE] = _stiff_figure(stiff, config, drawing)

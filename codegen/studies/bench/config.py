@@ -82,13 +82,15 @@ ADAPTIVE_SAMPLE = 0.05
 SCALING_NS = (2, 3, 5, 10, 20, 50, 100)
 #: (method, quadrature) of the scaling series.
 SCALING_METHODS = (("es", 3), ("vi", 3), ("midpoint", 3))
-#: (chain, method, quadrature) of the scaling series: every scheme on the chain of identical
-#: links (scenes.scaling_scene), es on its uneven sibling (scenes.uneven_scene: uneven links,
-#: COMs off the link axis) too.
-SCALING_SERIES = tuple(("identical", method, quadrature) for method, quadrature in
-                       SCALING_METHODS) + (("uneven", "es", 3),)
-#: What `--uneven-only` runs: es on both chains, side by side.
-UNEVEN_ONLY_SERIES = (("identical", "es", 3), ("uneven", "es", 3))
+#: es on both scaling chains (scenes.scaling_scene and its uneven sibling scenes.uneven_scene:
+#: uneven links, COMs off the link axis), with its default gradient and with the chain rule's
+#: (chain, method, quadrature, gradient); what `--uneven-only` runs.
+UNEVEN_ONLY_SERIES = (("identical", "es", 3, "exact"), ("uneven", "es", 3, "exact"),
+                      ("identical", "es", 3, "chain"), ("uneven", "es", 3, "chain"))
+#: The scaling series: every scheme on the chain of identical links, and UNEVEN_ONLY_SERIES.
+SCALING_SERIES = tuple(dict.fromkeys(
+    tuple(("identical", method, quadrature, "exact") for method, quadrature in SCALING_METHODS)
+    + UNEVEN_ONLY_SERIES))
 #: dt of the scaling series' per-step time, and the smaller ones tried if a scheme fails at it.
 SCALING_DTS = (0.01, 0.005, 0.0025)
 MUJOCO_TIMED_STEPS = 20_000
@@ -227,7 +229,7 @@ class BenchConfig:
     adaptive_runs: tuple[tuple[str, int, int, tuple[float, ...]], ...]
     scaling_ns: tuple[int, ...]
     scaling_methods: tuple[tuple[str, int], ...]
-    scaling_series: tuple[tuple[str, str, int], ...]   # (chain, method, quadrature)
+    scaling_series: tuple[tuple[str, str, int, str], ...]   # (chain, method, K, gradient)
     timeout: float
     repeats: int                         # harness and MuJoCo timing repeats
     scipy_repeats: int

@@ -389,7 +389,8 @@ def scaling_headlines(scaling: list[ScalingRow] | None, variant: Variant) -> lis
     for claim, method, n, target, limit, build, chain in wanted:
         row = None if scaling is None else next(
             (r for r in scaling if r.method == method and r.n == n
-             and r.variant == variant.label and r.chain == chain), None)
+             and r.variant == variant.label and r.chain == chain
+             and r.gradient == "exact"), None)
         if row is None:
             reason = ("scaling series skipped" if scaling is None
                       else f"n = {n} not in the scaling series")

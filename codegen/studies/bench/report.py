@@ -254,7 +254,8 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
                   "same model, dt and steps, and the ratio is of the two medians.",
                   "",
                   f"![scaling]({_link(figures['scaling'], config.out)})", "",
-                  scaling_table([row for row in scaling if row.chain == "identical"]), ""]
+                  scaling_table([row for row in scaling if row.chain == "identical"
+                                 and row.gradient == "exact"]), ""]
         if any(row.chain == "uneven" for row in scaling):
             lines += [uneven_section(scaling, config)]
     if knobs:
@@ -425,14 +426,15 @@ UNEVEN_HEADING = "### Uneven links, centres of mass off the axis"
 
 def uneven_comparison_table(rows: list[ScalingRow]) -> str:
     """es per step / MuJoCo RK4 per step at each n, on the two chains side by side (the rows
-    of es K=3 of both chains)."""
-    lines = ["| n | variant | identical: per step | RK4 | ratio | uneven: per step | RK4 | "
-             "ratio | Newton it. (identical / uneven) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    of es of both chains, one line per gradient and Newton variant)."""
+    lines = ["| n | method | variant | identical: per step | RK4 | ratio | uneven: per step | "
+             "RK4 | ratio | Newton it. (identical / uneven) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     ns = sorted({row.n for row in rows if row.chain == "uneven"})
+    methods = list(dict.fromkeys(row.method for row in rows if row.chain == "uneven"))
     for n in ns:
-        for variant in VARIANTS:
-            pair = {row.chain: row for row in rows if row.n == n and row.method == "es K=3"
+        for method, variant in ((m, v) for m in methods for v in VARIANTS):
+            pair = {row.chain: row for row in rows if row.n == n and row.method == method
                     and row.variant == variant.label}
             same, uneven = pair.get("identical"), pair.get("uneven")
             cells = []
@@ -441,7 +443,8 @@ def uneven_comparison_table(rows: list[ScalingRow]) -> str:
                            _fixed(row.ratio)] if row is not None else ["-", "-", "-"])
             iterations = " / ".join(_fixed(None if row is None else row.newton_iterations)
                                     for row in (same, uneven))
-            lines.append(f"| {n} | {variant.label} | {' | '.join(cells)} | {iterations} |")
+            lines.append(f"| {n} | {method} | {variant.label} | {' | '.join(cells)} | "
+                         f"{iterations} |")
     return "\n".join(lines)
 
 
@@ -464,9 +467,12 @@ def uneven_section(rows: list[ScalingRow], config: BenchConfig,
         "(`chaingen.reference.mjcf`; es agrees with MuJoCo on it at n = 5, "
         "tests/test_mujoco_agreement.py). Measured as the rest of the scaling series (es K=3, "
         "each n in a child process, each repeat followed by one of MuJoCo RK4 on the same "
-        "model), the chain of identical links measured in the same run.", "",
+        "model), the chain of identical links measured in the same run. \"es K=3\" is es with "
+        "its default gradient of the springs (exact, docs/model.md 4.3), \"es K=3 chain\" with "
+        "the chain rule's (`gradient = \"chain\"`, exact too, without quadrature).", "",
         uneven_comparison_table(rows), "",
-        scaling_table([row for row in rows if row.chain == "uneven"]), ""]
+        scaling_table([row for row in rows if row.chain == "uneven" or row.gradient != "exact"]),
+        ""]
     return "\n".join(lines)
 
 

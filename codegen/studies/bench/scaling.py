@@ -47,6 +47,7 @@ class ScalingRow:
     mujoco_step_seconds: float | None = None
     failure: str | None = None
     chain: str = "identical"     # scenes.SCALING_CHAINS: "identical" or "uneven"
+    gradient: str = "exact"      # es's discrete gradient of the springs
 
     @property
     def generate_and_build_seconds(self) -> float | None:
@@ -96,7 +97,8 @@ def _compiler_with_peak(directory: Path) -> tuple[Path, Path] | None:
 
 
 def measure_scaling_point(method: str, quadrature: int, n: int, *, n_steps: int,
-                          repeats: int, chain: str = "identical") -> dict:
+                          repeats: int, chain: str = "identical",
+                          gradient: str = "exact") -> dict:
     """Generate, build and time the scaling chain of n links (`chain`: scaling_scene(n),
     "identical", or uneven_scene(n), "uneven") with one scheme; run in a child process.
 
@@ -112,7 +114,7 @@ def measure_scaling_point(method: str, quadrature: int, n: int, *, n_steps: int,
 
     scene = SCALING_CHAINS[chain](n)
     started = time.perf_counter()
-    scheme = build_scheme(scene, method, quadrature)
+    scheme = build_scheme(scene, method, quadrature, gradient=gradient)
     package = render_package(scheme, sensitivities=False)
     generate_seconds = time.perf_counter() - started
     generate_peak = peak_resident_kib()
@@ -171,7 +173,7 @@ TIMING_ALLOWANCE = 300.0
 
 
 def run_scaling_point(method: str, quadrature: int, n: int, config: BenchConfig,
-                      chain: str = "identical") -> dict:
+                      chain: str = "identical", gradient: str = "exact") -> dict:
     """measure_scaling_point in a child process (its own session, so that on timeout the
     compiler it started is stopped with it); {"failure": ...} if it fails or runs over."""
     # Beyond 20 links a step costs milliseconds: fewer steps and repeats keep the timing within
@@ -180,7 +182,8 @@ def run_scaling_point(method: str, quadrature: int, n: int, config: BenchConfig,
     repeats = config.repeats if n <= 20 else min(config.repeats, 3)
     program = ("import json\nfrom chaingen.studies.bench.scaling import measure_scaling_point\n"
                f"print(json.dumps(measure_scaling_point({method!r}, {quadrature}, {n}, "
-               f"n_steps={n_steps}, repeats={repeats}, chain={chain!r})))\n")
+               f"n_steps={n_steps}, repeats={repeats}, chain={chain!r}, "
+               f"gradient={gradient!r})))\n")
     # The child's temporary files (the harness's build directory) go to a directory of ours,
     # removed afterwards even when the child had to be killed before cleaning up.
     with tempfile.TemporaryDirectory(prefix="chaingen-bench-") as scratch:
@@ -231,17 +234,19 @@ def scaling_study(config: BenchConfig, note) -> list[ScalingRow]:
     same n and dt. A scheme that runs over the time limit at some n is not run at larger n on
     that chain."""
     rows = []
-    for chain, method, quadrature in config.scaling_series:
+    for chain, method, quadrature, gradient in config.scaling_series:
         skip_reason = None
+        tags = {"chain": chain, "gradient": gradient}
         for n in config.scaling_ns:
             label = method_label(SCALING_CHAINS[chain](n), method, quadrature)
+            label += "" if gradient == "exact" or method != "es" else f" {gradient}"
             if skip_reason is not None:
-                rows += [ScalingRow(label, n, variant.label, failure=skip_reason, chain=chain)
+                rows += [ScalingRow(label, n, variant.label, failure=skip_reason, **tags)
                          for variant in VARIANTS]
                 note(f"scaling {chain} {label} n={n}: {skip_reason}")
                 continue
             started = time.perf_counter()
-            point = run_scaling_point(method, quadrature, n, config, chain)
+            point = run_scaling_point(method, quadrature, n, config, chain, gradient)
             if "failure" not in point:
                 seconds = point["generate_seconds"] + point["build_seconds"]
                 skip_reason = _predicted_over_limit(n, seconds, config)
@@ -249,7 +254,7 @@ def scaling_study(config: BenchConfig, note) -> list[ScalingRow]:
                 if point["failure"].startswith("over limit"):
                     skip_reason = f"not run: over the limit at n = {n}"
                 rows += [ScalingRow(label, n, variant.label, failure=point["failure"],
-                                    chain=chain) for variant in VARIANTS]
+                                    **tags) for variant in VARIANTS]
                 note(f"scaling {chain} {label} n={n}: {point['failure']}")
                 continue
             for variant in VARIANTS:
@@ -259,7 +264,7 @@ def scaling_study(config: BenchConfig, note) -> list[ScalingRow]:
                     build_seconds=point["build_seconds"],
                     generate_peak_mb=_mebibytes(point["generate_peak_kb"]),
                     compile_peak_mb=_mebibytes(point["compile_peak_kb"]),
-                    model_c_bytes=point["model_c_bytes"], chain=chain)
+                    model_c_bytes=point["model_c_bytes"], **tags)
                 if "dt" not in timing:
                     rows.append(ScalingRow(label, n, variant.label, **common,
                                            failure="; ".join(timing["failures"])))
