@@ -481,15 +481,10 @@ def replace_uneven_section(document: str, section: str) -> str:
     or "### " heading); without one, `section` put at the end of the scaling section, or at the
     end of the document."""
     section = section.rstrip() + "\n"
-
-    def next_heading(start: int) -> int:
-        found = [index for index in (document.find("\n## ", start), document.find("\n### ", start))
-                 if index >= 0]
-        return min(found) if found else -1
-
     start = document.find(f"\n{UNEVEN_HEADING}\n")
-    if start >= 0:
-        end = next_heading(start + 1)
+    if start >= 0:   # the next heading of either level
+        end = min([i for i in (document.find("\n## ", start + 1),
+                               document.find("\n### ", start + 1)) if i >= 0], default=-1)
     else:
         scaling = document.find("\n## Scaling\n")
         if scaling < 0:
