@@ -66,8 +66,9 @@ def add_scheme_options(parser: argparse.ArgumentParser,
                              "(default: the scene's)")
     parser.add_argument("--gradient", choices=GRADIENTS,
                         help="es's discrete gradient of the springs: exact (the energy balance "
-                             "holds identically) or quadrature (the K-point average alone, the "
-                             "thesis's) (default: the scene's)")
+                             "holds identically), quadrature (the K-point average alone, the "
+                             "thesis's) or chain (the chain rule's, exact without quadrature) "
+                             "(default: the scene's)")
     parser.add_argument("--order", type=int, choices=ORDERS,
                         help="order of the step: 2 (the scheme's), 4 or 6 (a symmetric "
                              f"composition of its steps; {ORDERS_TAKEN}) (default: "

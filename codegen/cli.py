@@ -176,6 +176,10 @@ def parser() -> argparse.ArgumentParser:
     bench.add_argument("--stiff-only", action="store_true",
                        help="run the stiff chain's work-precision alone and write its section "
                             "into --out in place (the rest of the report kept)")
+    bench.add_argument("--uneven-only", action="store_true",
+                       help="run es on the scaling chain and on its uneven sibling alone and "
+                            "write the uneven chain's subsection of the scaling section into "
+                            "--out in place (the rest of the report kept)")
     bench.add_argument("--timeout", type=number, default=300.0, metavar="SECONDS",
                        help="limit of generate + build per scheme and n (default 300)")
     return main
@@ -287,6 +291,7 @@ def command_bench(args) -> int:
                           timeout=args.timeout, skip_scaling=args.skip_scaling,
                           skip_reference=args.skip_reference, skip_sweep=args.skip_sweep,
                           skip_stiff=args.skip_stiff, stiff_only=args.stiff_only,
+                          uneven_only=args.uneven_only,
                           out=args.out,
                           figures=args.figures)
     run_bench(config, figures=bench_figures)

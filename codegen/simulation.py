@@ -107,7 +107,7 @@ def build_solver(scene: Scene | SolverSpec, method: str | None = None,
     parameters: key paths of the scene's numbers the solver takes at run time (every call
     then takes their values, the scene's own by default). order: of the step, 2 (the
     scheme's own), 4 or 6 (a symmetric composition of its steps). gradient: es's discrete
-    gradient of the springs, "exact" or "quadrature" (docs/model.md, section 4; the scene's
+    gradient of the springs, "exact", "quadrature" or "chain" (docs/model.md, section 4; the scene's
     own by default). A request the rules refuse
     raises SolverSpecError (a SettingsError) before anything is generated.
 

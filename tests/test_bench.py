@@ -32,13 +32,16 @@ from chaingen.studies.bench.headlines import (
 )
 from chaingen.studies.bench.report import (
     STIFF_HEADING,
+    UNEVEN_HEADING,
     machine_description,
     markdown,
     replace_stiff_section,
+    replace_uneven_section,
+    uneven_comparison_table,
 )
 from chaingen.studies.bench.runs import RunRow
 from chaingen.studies.bench.scaling import ScalingRow
-from chaingen.studies.bench.scenes import scaling_scene
+from chaingen.studies.bench.scenes import scaling_scene, uneven_scene
 from chaingen.studies.bench.stiff import StiffRow, cheapest, stiff_scene
 
 from helpers import ROOT, load
@@ -125,6 +128,60 @@ def test_scaling_scene(n):
     assert scene.gravity == 9.81
     link = scene.links[0]
     assert math.isclose(link.inertia, link.mass * link.length ** 2 / 12)
+
+
+@pytest.mark.parametrize("n", [2, 3, 5, 20])
+def test_uneven_scene(n):
+    """The uneven sibling: the scaling chain's springs and initial state on links that differ
+    from their neighbours, every COM off the link axis."""
+    scene, chain = uneven_scene(n), scaling_scene(n)
+    assert scene.n == n and scene.gravity == chain.gravity
+    assert [(s.first, s.last, s.stiffness) for s in scene.springs] == \
+        [(s.first, s.last, s.stiffness) for s in chain.springs]
+    assert scene.initial_angles == chain.initial_angles
+    assert all(link.com_normal != 0 for link in scene.links)
+    for a, b in zip(scene.links, scene.links[1:]):
+        assert a.mass != b.mass and a.length != b.length and a.inertia != b.inertia
+    straight = np.zeros(n)
+    for spring in scene.springs:
+        length = spring_geometry(scene, spring, straight).total_length
+        assert math.isclose(spring.rest_length, 0.95 * length, rel_tol=1e-12)
+
+
+def test_uneven_only_runs_es_on_both_chains(tmp_path):
+    config = bench_config(uneven_only=True, scaling_n="2,20", out=tmp_path / "b.md")
+    assert config.uneven_only and config.run_scaling
+    assert not (config.run_reference or config.run_sweep or config.run_stiff)
+    assert config.scaling_series == (("identical", "es", 3, "exact"), ("uneven", "es", 3, "exact"),
+                                     ("identical", "es", 3, "chain"), ("uneven", "es", 3, "chain"))
+    assert config.command == (f"chaingen bench --scaling-n 2,20 --uneven-only --out "
+                              f"{tmp_path / 'b.md'}")
+    assert ("uneven", "es", 3, "exact") in bench_config(out=tmp_path / "b.md").scaling_series
+    for clash in ({"stiff_only": True}, {"skip_scaling": True}):
+        with pytest.raises(Exception, match="--uneven-only"):
+            bench_config(uneven_only=True, out=tmp_path / "b.md", **clash)
+
+
+def test_uneven_section_is_replaced_in_place():
+    section = f"{UNEVEN_HEADING}\n\nnew\n"
+    old = f"# T\n\n## Scaling\n\ns\n\n{UNEVEN_HEADING}\n\nold\n\n## Speed knobs\n\nk\n"
+    expected = f"# T\n\n## Scaling\n\ns\n\n{UNEVEN_HEADING}\n\nnew\n\n## Speed knobs\n\nk\n"
+    assert replace_uneven_section(old, section) == expected
+    # without one: at the end of the scaling section, or at the end
+    assert replace_uneven_section("# T\n\n## Scaling\n\ns\n\n## Speed knobs\n\nk\n",
+                                  section) == expected
+    assert replace_uneven_section("# T\n\nh\n", section) == f"# T\n\nh\n\n{UNEVEN_HEADING}\n\nnew\n"
+    assert replace_uneven_section(f"# T\n\n## Scaling\n\n{UNEVEN_HEADING}\n\nold\n", section) \
+        == f"# T\n\n## Scaling\n\n{UNEVEN_HEADING}\n\nnew\n"
+
+
+def test_uneven_comparison_table_pairs_the_chains():
+    rows = [ScalingRow("es K=3", 20, variant.label, dt=0.01, step_seconds=step,
+                       mujoco_step_seconds=4e-5, newton_iterations=7.0, chain=chain)
+            for variant in VARIANTS for chain, step in (("identical", 2e-5), ("uneven", 3e-5))]
+    table = uneven_comparison_table(rows)
+    assert ("| 20 | es K=3 | default options | 20.00 us | 40.00 us | 0.50 | 30.00 us | 40.00 us "
+            "| 0.75 |") in table
 
 
 # -- headline c: cost at an energy error -----------------------------------------------------

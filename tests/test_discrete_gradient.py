@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from chaingen.scene.values import Spring
 from chaingen.symbolic.com_recursion import (
     averaged_spring_gradient,
+    chain_rule_spring_gradient,
     exact_spring_gradient,
 )
 from chaingen.symbolic.recursion import Definitions
@@ -34,6 +35,8 @@ def gradient_function(segments: int, quadrature: int, gradient: str):
     js = list(range(1, segments + 1))
     if gradient == "exact":
         totals = exact_spring_gradient(spring, 0, js, starts, changes, quadrature, defs)
+    elif gradient == "chain":
+        totals = chain_rule_spring_gradient(spring, 0, js, starts, changes, defs)
     else:
         totals = averaged_spring_gradient(spring, 0, js, starts, changes, quadrature, defs)
     expressions = [entry for total in totals for entry in total]
@@ -48,7 +51,7 @@ def gradient_function(segments: int, quadrature: int, gradient: str):
 
 FUNCTIONS = {(segments, quadrature, gradient): gradient_function(segments, quadrature, gradient)
              for segments in (1, 2, 3) for quadrature in (1, 3)
-             for gradient in ("exact", "quadrature")}
+             for gradient in ("exact", "quadrature", "chain")}
 
 
 def energy_change(d, dd, k, s0):
@@ -100,6 +103,22 @@ def spring_steps(draw):
 def test_the_exact_gradient_is_exact_at_any_step(step, quadrature):
     d, dd, k, rest, segments = step
     assert mismatch(d, dd, k, rest, segments, quadrature, "exact") <= 1.0
+
+
+@given(spring_steps())
+@settings(max_examples=300, deadline=None)
+def test_the_chain_rule_gradient_is_exact_at_any_step(step):
+    d, dd, k, rest, segments = step
+    assert mismatch(d, dd, k, rest, segments, 1, "chain") <= 1.0
+
+
+def test_the_chain_rule_gradient_at_rest_is_the_gradient():
+    """A step that does not move the spring: the chain rule's gradient is the spring's own
+    gradient k (L - S0) d_j / s_j, finite (no division by the step)."""
+    d = np.array([[0.3, 0.1], [0.2, -0.4]])
+    G = FUNCTIONS[2, 1, "chain"](d, np.zeros_like(d), 100.0, 0.5)
+    s = np.linalg.norm(d, axis=1)
+    np.testing.assert_allclose(G, 100.0 * (s.sum() - 0.5) * d / s[:, None], rtol=1e-15)
 
 
 def test_the_correction_is_smooth_at_rest():

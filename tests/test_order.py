@@ -105,6 +105,17 @@ def test_trajectory_order_is_two(method, quadrature):
     assert result.newton_settings == ()      # order 2: the package's Newton defaults
 
 
+def test_the_chain_rule_gradient_is_second_order_and_exact():
+    """es with the chain rule's gradient of the springs: the trajectory's order is 2, and the
+    energy is held to round-off at every dt (no order to fit)."""
+    result = study(MONO, "es", 3, "chain")
+    assert result.gradient == "chain" and result.failed_dts == ()
+    assert result.trajectory_order == pytest.approx(2.0, abs=0.3), format_table(result)
+    assert result.rate_order == pytest.approx(2.0, abs=0.3), format_table(result)
+    assert all(row.mean_balance_error < 1e-12 * result.energy_scale for row in result.rows)
+    assert result.energy_order is None
+
+
 def test_energy_exact_without_springs_has_no_order():
     """es with gravity only conserves energy exactly: every point is at round-off."""
     result = study("three_link_gravity", "es", 3)

@@ -397,7 +397,7 @@ def generate_package(scene: Scene | SolverSpec, method: str | None = None,
     """SolverSpec -> scheme -> C package, all in memory; or of `scene` with the keywords a
     SolverSpec is made of. parameters: key paths of the scene's numbers the solver takes at
     run time; order: 2 (the scheme's step), 4 or 6 (composed); gradient: es's discrete
-    gradient of the springs ("exact" or "quadrature"). progress: see render_package."""
+    gradient of the springs ("exact", "quadrature" or "chain"). progress: see render_package."""
     spec = scene if isinstance(scene, SolverSpec) else SolverSpec(
         scene, method, quadrature, order=order, parameters=parameters,
         sensitivities=sensitivities, gradient=gradient)

@@ -32,7 +32,9 @@ def scheme_label(method: str, quadrature: int | None = None, order: int = 2, *,
     composed = order != 2
     if style == "header":
         label = f'method "{method}"'
-        if quadrature is not None:
+        if gradient == "chain":
+            label += ", the springs by the chain rule's exact discrete gradient (no quadrature)"
+        elif quadrature is not None:
             label += ", " + (quadrature_rule or f"{quadrature}-point Gauss-Legendre "
                                                 "quadrature of the spring terms")
         if gradient == "exact":
@@ -45,8 +47,8 @@ def scheme_label(method: str, quadrature: int | None = None, order: int = 2, *,
         return label
     if style == "short":
         label = method if quadrature is None else f"{method} K={quadrature}"
-        if gradient == "quadrature":
-            label += " quadrature"
+        if gradient in ("quadrature", "chain"):
+            label += f" {gradient}"
         return f"{label} order {order}" if composed else label
     if style in ("summary", "study"):
         label = f"method {method}"
@@ -54,5 +56,7 @@ def scheme_label(method: str, quadrature: int | None = None, order: int = 2, *,
             label += f", quadrature {quadrature}"
         if gradient == "quadrature":
             label += " (gradient by the quadrature alone)"
+        elif gradient == "chain":
+            label += " (gradient by the chain rule)"
         return f"{label}, order {order}" if composed or style == "study" else label
     raise ValueError(f"scheme_label: style {style!r} is none of {', '.join(LABEL_STYLES)}")

@@ -31,9 +31,10 @@ GALERKIN_ORDER = 6
 GALERKIN_MIN_QUADRATURE = 2
 #: es's discrete gradient of the spring energy (simulation.gradient, --gradient): "exact", the
 #: K-point average corrected so that the energy balance holds identically (docs/model.md,
-#: section 4), or "quadrature", the K-point average alone (the thesis's scheme: its energy
-#: error scales like dt^(2K)).
-GRADIENTS = ("exact", "quadrature")
+#: section 4), "quadrature", the K-point average alone (the thesis's scheme: its energy
+#: error scales like dt^(2K)), or "chain", the chain rule's discrete gradient of each spring,
+#: exact too and without quadrature (K plays no role for the springs).
+GRADIENTS = ("exact", "quadrature", "chain")
 #: The fields of a request that have a rule of their own, in the order they are checked.
 REQUEST_KEYS = ("method", "quadrature", "order", "gradient", *ADAPTIVE_TOLERANCES)
 

@@ -31,8 +31,8 @@ class SolverSpec:
     (chaingen.scene.parameters); "all" (or ("all",)) is every number a solver can take
     (compiled_paths), stored expanded. order: of the step, 2 (the scheme's own), 4 or 6 (a
     symmetric composition of its steps). gradient: es's discrete gradient of the springs,
-    "exact" or "quadrature" (solver_rules.GRADIENTS). A SolverSpec is hashable: two equal
-    requests are one solver.
+    "exact", "quadrature" or "chain" (solver_rules.GRADIENTS). A SolverSpec is hashable: two
+    equal requests are one solver.
     """
 
     scene: Scene

@@ -252,7 +252,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
     Newton settings of every run, the reference's too (a dict is taken over the package's
     defaults); default ORDER_NEWTON_OPTIONS[order]. order: of the step (2, or 4 and 6
     composed), of the built solver and of a given one. gradient: es's discrete gradient of the
-    springs ("exact" or "quadrature"), of the built solver and of a given one.
+    springs ("exact", "quadrature" or "chain"), of the built solver and of a given one.
     Raises OrderStudyError for step sizes that do not fit the sample grid and when the
     reference run fails; a failing dt is recorded in its row.
     """

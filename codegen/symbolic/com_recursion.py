@@ -200,6 +200,8 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
                    for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
         if gradient == "exact":
             totals = exact_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
+        elif gradient == "chain":
+            totals = chain_rule_spring_gradient(spring, i, js, starts, changes, defs)
         else:
             totals = averaged_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
         for j, total, r0, r1 in zip(js, totals, offsets[:-1], offsets[1:]):
@@ -256,6 +258,29 @@ def exact_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
     ratio = defs.define(f"spring{i}_correction", (energy_change - sp.Add(*projected))
                         / sp.Max(sp.Add(*squared), smallest * length_sum ** 2))
     return [add(total, scale(ratio, change)) for total, change in zip(totals, changes)]
+
+
+def chain_rule_spring_gradient(spring, i: int, js, starts, changes, defs: Definitions) -> list:
+    """The chain rule's discrete gradient of one spring's energy V = k/2 (L - S_0)^2,
+    L = sum_j s_j, s_j = |d_j| (model.md 4.3): the exact difference quotient of V in L times
+    that of each |d_j| in d_j,
+
+        G_j = k/2 (L_0 + L_1 - 2 S_0) (d_j(0) + d_j(1)) / (s_j(0) + s_j(1)),
+
+    so that sum_j G_j . dd_j = k/2 (L_0 + L_1 - 2 S_0) (L_1 - L_0) = V(1) - V(0) identically
+    (the mean of (d_0 + d_1) / (s_0 + s_1) with dd = d_1 - d_0 is s_1 - s_0). No quadrature:
+    two segment lengths per segment. Symmetric in the step's ends, second order."""
+    sums, means = [], []
+    for j, start, change in zip(js, starts, changes):
+        end = add(start, change)
+        s0 = defs.define(f"spring{i}_s{j}_start", sp.sqrt(start[0] ** 2 + start[1] ** 2))
+        s1 = defs.define(f"spring{i}_s{j}_end", sp.sqrt(end[0] ** 2 + end[1] ** 2))
+        total = defs.define(f"spring{i}_s{j}_sum", s0 + s1)
+        sums.append(total)
+        means.append((start[0] + end[0], start[1] + end[1], total))
+    factor = defs.define(f"spring{i}_chain", number(spring.stiffness) / 2
+                         * (sp.Add(*sums) - 2 * number(spring.rest_length)))
+    return [(factor * x / total, factor * y / total) for x, y, total in means]
 
 
 def exact_gradient_scale(quadrature: int) -> float:

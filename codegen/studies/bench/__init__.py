@@ -2,7 +2,8 @@
 
     chaingen bench [--quick] [--out FILE.md] [--figures DIR] [--dts 0.04,0.02,...]
                    [--scaling-n 2,3,5,10,20] [--skip-scaling] [--skip-reference]
-                   [--skip-sweep] [--skip-stiff] [--stiff-only] [--timeout SECONDS]
+                   [--skip-sweep] [--skip-stiff] [--stiff-only] [--uneven-only]
+                   [--timeout SECONDS]
 
 Four parts, all measured side by side on one machine in one process (the scaling series in
 child processes, so that a size that takes too long can be stopped):
@@ -16,7 +17,9 @@ child processes, so that a size that takes too long can be stopped):
    ours the Newton iterations per step and the step's cost in residual-and-Jacobian
    evaluations.
 2. A scaling series: `scaling_scene(n)` for n = 2 ... 100; generate and build seconds, peak
-   memory, model C size, per-step time, and MuJoCo RK4's per-step time at the same n.
+   memory, model C size, per-step time, and MuJoCo RK4's per-step time at the same n; es also
+   on `uneven_scene(n)` (uneven links, COMs off the axis). `--uneven-only` runs es on both
+   chains alone and writes the uneven chain's subsection into an existing report in place.
 3. Headline ratios with the issue's targets, computed from parts 1 and 2.
 4. Studies: run-time parameters against constants compiled in, and a sweep of many runs on
    this machine's cores and on Dask against a loop of single runs (the studies module).
@@ -59,10 +62,13 @@ from .report import (
     markdown,
     reference_table,
     replace_stiff_section,
+    replace_uneven_section,
     scaling_table,
     stiff_section,
     stiff_summary_table,
     stiff_table,
+    uneven_comparison_table,
+    uneven_section,
 )
 from .scaling import scaling_study
 from .scenes import scaling_scene
@@ -162,9 +168,35 @@ def _run_stiff_only(config: BenchConfig, note, emit, started: float, drawing) ->
                        {STIFF_FIGURE: figure} if figure else {}, wall)
 
 
+def _run_uneven_only(config: BenchConfig, note, emit, started: float) -> BenchReport:
+    """es on the two scaling chains alone: the uneven chain's subsection replaces the one of an
+    existing report at config.out (or is added to its scaling section), the rest kept; without
+    a report there, a document of the title and the subsection."""
+    machine = dict(machine_description())
+    scaling = scaling_study(config, note)
+    emit(f"\nuneven scaling chain\n\n{uneven_comparison_table(scaling)}")
+    wall = time.perf_counter() - started
+    measured = (f"Written by `{config.command}` in {wall / 60:.1f} min of wall time on "
+                f"{time.strftime('%Y-%m-%d')}, apart from the rest of this report (its Machine "
+                f"section and the tables above are of another run). CPU: "
+                f"{machine['CPU']}; cores: {machine['cores']}; {_versions()}."
+                + (" Quick mode: a smoke test, not the benchmark." if config.quick else ""))
+    section = uneven_section(scaling, config, measured)
+    existing = config.out.read_text(encoding="utf-8") if config.out.is_file() else ""
+    if existing.startswith(REPORT_TITLE):
+        text = replace_uneven_section(existing, section)
+    else:
+        text = f"{REPORT_TITLE}\n\n{section}"
+    document = write_text(config.out, text)
+    emit(f"\nwrote the uneven chain's subsection into {document} ({wall / 60:.1f} min)")
+    return BenchReport([], {}, scaling, document, None, {}, wall)
+
+
 def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> BenchReport:
     if config.stiff_only:
         return _run_stiff_only(config, note, emit, started, drawing)
+    if config.uneven_only:
+        return _run_uneven_only(config, note, emit, started)
     machine = machine_description()
     def emit_scene(name: str, t_end: float, rows) -> None:
         emit(f"\n{name} (t_end = {t_end:g} s)\n\n{reference_table(rows)}")
@@ -190,7 +222,9 @@ def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> Benc
         figures[name] = drawing.plot_work_precision(name, rows,
                                                     config.figures / f"bench_{name}.png")
     if scaling is not None and drawing is not None:
-        figures["scaling"] = drawing.plot_scaling(scaling, config.figures / "bench_scaling.png")
+        figures["scaling"] = drawing.plot_scaling(
+            [row for row in scaling if row.chain == "identical" and row.gradient == "exact"],
+            config.figures / "bench_scaling.png")
     if stiff is not None and drawing is not None:
         figures[STIFF_FIGURE] = _stiff_figure(stiff, config, drawing)
     wall = time.perf_counter() - started

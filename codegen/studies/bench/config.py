@@ -82,6 +82,15 @@ ADAPTIVE_SAMPLE = 0.05
 SCALING_NS = (2, 3, 5, 10, 20, 50, 100)
 #: (method, quadrature) of the scaling series.
 SCALING_METHODS = (("es", 3), ("vi", 3), ("midpoint", 3))
+#: es on both scaling chains (scenes.scaling_scene and its uneven sibling scenes.uneven_scene:
+#: uneven links, COMs off the link axis), with its default gradient and with the chain rule's
+#: (chain, method, quadrature, gradient); what `--uneven-only` runs.
+UNEVEN_ONLY_SERIES = (("identical", "es", 3, "exact"), ("uneven", "es", 3, "exact"),
+                      ("identical", "es", 3, "chain"), ("uneven", "es", 3, "chain"))
+#: The scaling series: every scheme on the chain of identical links, and UNEVEN_ONLY_SERIES.
+SCALING_SERIES = tuple(dict.fromkeys(
+    tuple(("identical", method, quadrature, "exact") for method, quadrature in SCALING_METHODS)
+    + UNEVEN_ONLY_SERIES))
 #: dt of the scaling series' per-step time, and the smaller ones tried if a scheme fails at it.
 SCALING_DTS = (0.01, 0.005, 0.0025)
 MUJOCO_TIMED_STEPS = 20_000
@@ -101,6 +110,8 @@ TARGET_SCALING_BUILD = ((20, TARGET_BUILD_SECONDS), (50, 60.0))
 #: target): es at most half of RK4's at n = 20 and 50, vi and midpoint at most RK4's at n = 20.
 TARGET_SCALING_RATIOS = (("es K=3", 20, 0.5), ("es K=3", 50, 0.5), ("vi", 20, 1.0),
                          ("midpoint", 20, 1.0))
+#: d, issue 32 f: the same ratio on the uneven scaling chain (scenes.uneven_scene).
+TARGET_UNEVEN_RATIOS = (("es K=3", 20, 0.5),)
 TARGET_STEP_OVER_EVALUATION = 2.5   # e: es K=3 step / one residual-and-Jacobian evaluation
 HEADLINE_DT = 0.01
 #: f, g: (trajectory error at EARLY_T [rad], energy error [J]) that a run must hold both of;
@@ -218,6 +229,7 @@ class BenchConfig:
     adaptive_runs: tuple[tuple[str, int, int, tuple[float, ...]], ...]
     scaling_ns: tuple[int, ...]
     scaling_methods: tuple[tuple[str, int], ...]
+    scaling_series: tuple[tuple[str, str, int, str], ...]   # (chain, method, K, gradient)
     timeout: float
     repeats: int                         # harness and MuJoCo timing repeats
     scipy_repeats: int
@@ -227,6 +239,7 @@ class BenchConfig:
     run_sweep: bool                      # part 4's sweeps (the parameter timings always run)
     run_stiff: bool                      # the stiff chain's work-precision
     stiff_only: bool                     # that part alone, its section written in place
+    uneven_only: bool                    # es on both scaling chains alone, written in place
     stiff: StiffSettings
     out: Path
     figures: Path
@@ -281,16 +294,24 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
                  timeout: float = 300.0, skip_scaling: bool = False,
                  skip_reference: bool = False, skip_sweep: bool = False,
                  skip_stiff: bool = False, stiff_only: bool = False,
+                 uneven_only: bool = False,
                  out: Path | None = None, figures: Path | None = None) -> BenchConfig:
     """The run's settings from the command line's values; BenchError names a bad one.
     stiff_only: the stiff chain's part alone, its section written into `out` in place (the
-    rest of an existing report kept)."""
+    rest of an existing report kept). uneven_only: es on the two scaling chains alone (at the
+    scaling series' n), the uneven chain's subsection of the scaling section written into
+    `out` in place."""
     if stiff_only and skip_stiff:
         raise BenchError("--stiff-only and --skip-stiff: the one runs only what the other "
                          "leaves out; give one of them")
+    if uneven_only and (stiff_only or skip_scaling):
+        raise BenchError("--uneven-only runs a part of the scaling series alone: it goes with "
+                         "neither --stiff-only nor --skip-scaling")
     command_skips = (skip_scaling, skip_reference, skip_sweep)
     if stiff_only:
         skip_scaling = skip_reference = skip_sweep = True
+    if uneven_only:
+        skip_reference = skip_sweep = skip_stiff = True
     if not (math.isfinite(timeout) and timeout > 0):
         raise BenchError(f"--timeout: must be > 0 seconds and finite, got {timeout}")
     for module in ("mujoco", "scipy", "matplotlib") + (
@@ -334,7 +355,7 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
     if not figures.exists() and not figures.parent.is_dir():
         raise BenchError(f"--figures: directory {figures.parent} does not exist")
     if figures.is_dir():   # the figures it will write, checked as every output is
-        names = ((STIFF_FIGURE,) if stiff_only else
+        names = ((STIFF_FIGURE,) if stiff_only else () if uneven_only else
                  (*scenes, "scaling") + (() if skip_stiff else (STIFF_FIGURE,)))
         for name in names:
             check_output_file(figures / f"bench_{name}.png", "--figures", [out])
@@ -344,10 +365,11 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
     command += ["--dts", dts] if dts is not None else []
     command += ["--scaling-n", scaling_n] if scaling_n is not None else []
     command += ["--stiff-only"] if stiff_only else []
+    command += ["--uneven-only"] if uneven_only else []
     command += ["--skip-scaling"] if command_skips[0] else []
     command += ["--skip-reference"] if command_skips[1] else []
     command += ["--skip-sweep"] if command_skips[2] else []
-    command += ["--skip-stiff"] if skip_stiff else []
+    command += ["--skip-stiff"] if skip_stiff and not uneven_only else []
     command += ["--timeout", f"{timeout:g}"] if timeout != 300.0 else []
     command += [] if out_default else ["--out", str(out)]
     command += [] if figures_default else ["--figures", str(figures)]
@@ -363,11 +385,14 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
         higher_orders=(("es", 4, 5), ("vi", 6, 3)) if quick else HIGHER_ORDERS,
         higher_order_dts=(0.1, 0.05) if quick else HIGHER_ORDER_DTS,
         adaptive_runs=(("es", 2, 3, (1e-6,)),) if quick else ADAPTIVE_RUNS,
-        scaling_ns=ns, scaling_methods=SCALING_METHODS, timeout=float(timeout),
+        scaling_ns=ns, scaling_methods=SCALING_METHODS,
+        scaling_series=UNEVEN_ONLY_SERIES if uneven_only else SCALING_SERIES,
+        timeout=float(timeout),
         repeats=3 if quick else 7, scipy_repeats=1 if quick else 3,
         scaling_steps=200 if quick else 1000,
         run_reference=not skip_reference, run_scaling=not skip_scaling,
         run_sweep=not skip_sweep, run_stiff=not skip_stiff, stiff_only=stiff_only,
+        uneven_only=uneven_only,
         stiff=STIFF_QUICK_SETTINGS if quick else STIFF_SETTINGS,
         out=out, figures=figures, command=" ".join(command))
 

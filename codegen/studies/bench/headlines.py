@@ -25,6 +25,7 @@ from .config import (
     TARGET_SCALING_RATIOS,
     TARGET_SCIPY_OVER_ES,
     TARGET_STEP_OVER_EVALUATION,
+    TARGET_UNEVEN_RATIOS,
     TRAJECTORY_LEVELS,
     VARIANTS,
     BenchConfig,
@@ -373,17 +374,23 @@ SCALING_LABELS = ("es K=3", "vi", "midpoint")
 
 def scaling_headlines(scaling: list[ScalingRow] | None, variant: Variant) -> list[Headline]:
     """d: generate + build of each scheme at the n of TARGET_SCALING_BUILD, and the step
-    ratios of TARGET_SCALING_RATIOS, on the scaling chain."""
+    ratios of TARGET_SCALING_RATIOS, on the scaling chain; the step ratios of
+    TARGET_UNEVEN_RATIOS on the uneven one."""
     wanted = [(f"{method} generate + build seconds, scaling series n = {n}", method, n,
                f"<= {limit:g} s", limit, True)
               for n, limit in TARGET_SCALING_BUILD for method in SCALING_LABELS]
     wanted += [(f"{method} step / MuJoCo RK4 step, scaling series n = {n}", method, n,
                 f"<= {limit:g}", limit, False) for method, n, limit in TARGET_SCALING_RATIOS]
+    wanted = [(*entry, "identical") for entry in wanted]
+    wanted += [(f"{method} step / MuJoCo RK4 step, uneven scaling chain n = {n}", method, n,
+                f"<= {limit:g}", limit, False, "uneven")
+               for method, n, limit in TARGET_UNEVEN_RATIOS]
     found = []
-    for claim, method, n, target, limit, build in wanted:
+    for claim, method, n, target, limit, build, chain in wanted:
         row = None if scaling is None else next(
             (r for r in scaling if r.method == method and r.n == n
-             and r.variant == variant.label), None)
+             and r.variant == variant.label and r.chain == chain
+             and r.gradient == "exact"), None)
         if row is None:
             reason = ("scaling series skipped" if scaling is None
                       else f"n = {n} not in the scaling series")

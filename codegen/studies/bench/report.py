@@ -254,7 +254,10 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
                   "same model, dt and steps, and the ratio is of the two medians.",
                   "",
                   f"![scaling]({_link(figures['scaling'], config.out)})", "",
-                  scaling_table(scaling), ""]
+                  scaling_table([row for row in scaling if row.chain == "identical"
+                                 and row.gradient == "exact"]), ""]
+        if any(row.chain == "uneven" for row in scaling):
+            lines += [uneven_section(scaling, config)]
     if knobs:
         tolerances = ", ".join(f"{field.name} = {c_literal(field.default)}"
                                for field in contract.NEWTON_OPTIONS
@@ -409,3 +412,85 @@ def replace_stiff_section(document: str, section: str) -> str:
     if before >= 0:
         return document[:before + 1] + section + "\n" + document[before + 1:]
     return document.rstrip() + "\n\n" + section
+
+
+
+# --------------------------------------------------------------------------------------------
+# The uneven scaling chain (a subsection of the scaling section)
+# --------------------------------------------------------------------------------------------
+
+#: The heading of the uneven chain's subsection; `chaingen bench --uneven-only` replaces the
+#: subsection it starts (up to the next "## " or "### ") in an existing report.
+UNEVEN_HEADING = "### Uneven links, centres of mass off the axis"
+
+
+def uneven_comparison_table(rows: list[ScalingRow]) -> str:
+    """es per step / MuJoCo RK4 per step at each n, on the two chains side by side (the rows
+    of es of both chains, one line per gradient and Newton variant)."""
+    lines = ["| n | method | variant | identical: per step | RK4 | ratio | uneven: per step | "
+             "RK4 | ratio | Newton it. (identical / uneven) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    ns = sorted({row.n for row in rows if row.chain == "uneven"})
+    methods = list(dict.fromkeys(row.method for row in rows if row.chain == "uneven"))
+    for n in ns:
+        for method, variant in ((m, v) for m in methods for v in VARIANTS):
+            pair = {row.chain: row for row in rows if row.n == n and row.method == method
+                    and row.variant == variant.label}
+            same, uneven = pair.get("identical"), pair.get("uneven")
+            cells = []
+            for row in (same, uneven):
+                cells += ([_time(row.step_seconds), _time(row.mujoco_step_seconds),
+                           _fixed(row.ratio)] if row is not None else ["-", "-", "-"])
+            iterations = " / ".join(_fixed(None if row is None else row.newton_iterations)
+                                    for row in (same, uneven))
+            lines.append(f"| {n} | {method} | {variant.label} | {' | '.join(cells)} | "
+                         f"{iterations} |")
+    return "\n".join(lines)
+
+
+def uneven_section(rows: list[ScalingRow], config: BenchConfig,
+                   measured: str | None = None) -> str:
+    """The uneven chain's subsection (UNEVEN_HEADING): es on it beside es on the chain of
+    identical links, and its rows of the scaling table; `measured`: a line naming the run that
+    wrote it, where it was written apart from the rest of the report."""
+    lines = [UNEVEN_HEADING, ""]
+    if measured:
+        lines += [measured, ""]
+    lines += [
+        "`chaingen.studies.bench.scenes.uneven_scene(n)`: the scaling chain's springs, initial "
+        "state and gravity on n uneven links. Link i (from 0) takes entry i mod the table's "
+        "length of fixed tables: mass (1.0, 1.6, 0.7, 1.3, 0.5) kg, length (0.4, 0.3, 0.5, "
+        "0.35) m, COM along the link (0.5, 0.35, 0.65) of the length, COM normal to the link "
+        "(0.03, -0.02, 0.05, -0.04, 0.01) m (every COM off the axis), inertia (1.0, 1.8, 0.6) "
+        "x m L^2 / 12, distal fastening (0.05, 0.04, 0.06, 0.045) m; rest lengths 95 % of the "
+        "straight posture's. Parsed from TOML like a user's file; MuJoCo runs its MJCF export "
+        "(`chaingen.reference.mjcf`; es agrees with MuJoCo on it at n = 5, "
+        "tests/test_mujoco_agreement.py). Measured as the rest of the scaling series (es K=3, "
+        "each n in a child process, each repeat followed by one of MuJoCo RK4 on the same "
+        "model), the chain of identical links measured in the same run. \"es K=3\" is es with "
+        "its default gradient of the springs (exact, docs/model.md 4.3), \"es K=3 chain\" with "
+        "the chain rule's (`gradient = \"chain\"`, exact too, without quadrature).", "",
+        uneven_comparison_table(rows), "",
+        scaling_table([row for row in rows if row.chain == "uneven" or row.gradient != "exact"]),
+        ""]
+    return "\n".join(lines)
+
+
+def replace_uneven_section(document: str, section: str) -> str:
+    """`document` with its uneven chain subsection replaced by `section` (up to the next "## "
+    or "### " heading); without one, `section` put at the end of the scaling section, or at the
+    end of the document."""
+    section = section.rstrip() + "\n"
+    start = document.find(f"\n{UNEVEN_HEADING}\n")
+    if start >= 0:   # the next heading of either level
+        end = min([i for i in (document.find("\n## ", start + 1),
+                               document.find("\n### ", start + 1)) if i >= 0], default=-1)
+    else:
+        scaling = document.find("\n## Scaling\n")
+        if scaling < 0:
+            return document.rstrip() + "\n\n" + section
+        start = end = document.find("\n## ", scaling + 1)
+        if start < 0:
+            return document.rstrip() + "\n\n" + section
+    tail = "" if end < 0 else document[end + 1:]
+    return document[:start + 1] + section + ("\n" + tail if tail else "")

@@ -1,8 +1,8 @@
 """Part 2 of the benchmark: the scaling series, generate, build and step cost against n.
 
-Each scheme at each n of scaling_scene(n) is generated, built and timed in a child process of
-its own (so that a size over the time limit can be stopped, with the compiler it started), with
-MuJoCo RK4 on the same chain beside it.
+Each scheme at each n of scaling_scene(n), and es of uneven_scene(n), is generated, built and
+timed in a child process of its own (so that a size over the time limit can be stopped, with
+the compiler it started), with MuJoCo RK4 on the same chain beside it.
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from ...scene import Scene
 from .config import HARNESS_FLAGS, SCALING_DTS, VARIANTS, BenchConfig
 from .harness import Harness, HarnessError
 from .runs import method_label, mujoco_step_seconds
-from .scenes import scaling_scene
+from .scenes import SCALING_CHAINS, scaling_scene  # noqa: F401  (docs/studies import it from here)
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,8 @@ class ScalingRow:
     newton_iterations: float | None = None
     mujoco_step_seconds: float | None = None
     failure: str | None = None
+    chain: str = "identical"     # scenes.SCALING_CHAINS: "identical" or "uneven"
+    gradient: str = "exact"      # es's discrete gradient of the springs
 
     @property
     def generate_and_build_seconds(self) -> float | None:
@@ -95,8 +97,10 @@ def _compiler_with_peak(directory: Path) -> tuple[Path, Path] | None:
 
 
 def measure_scaling_point(method: str, quadrature: int, n: int, *, n_steps: int,
-                          repeats: int) -> dict:
-    """Generate, build and time scaling_scene(n) with one scheme; run in a child process.
+                          repeats: int, chain: str = "identical",
+                          gradient: str = "exact") -> dict:
+    """Generate, build and time the scaling chain of n links (`chain`: scaling_scene(n),
+    "identical", or uneven_scene(n), "uneven") with one scheme; run in a child process.
 
     generate_seconds: SymPy scheme, CasADi functions and rendering (generate_package's work,
     done as build_scheme + render_package to keep the scheme for the initial state).
@@ -108,9 +112,9 @@ def measure_scaling_point(method: str, quadrature: int, n: int, *, n_steps: int,
     """
     from ...symbolic.schemes import build_scheme
 
-    scene = scaling_scene(n)
+    scene = SCALING_CHAINS[chain](n)
     started = time.perf_counter()
-    scheme = build_scheme(scene, method, quadrature)
+    scheme = build_scheme(scene, method, quadrature, gradient=gradient)
     package = render_package(scheme, sensitivities=False)
     generate_seconds = time.perf_counter() - started
     generate_peak = peak_resident_kib()
@@ -168,7 +172,8 @@ def measure_scaling_point(method: str, quadrature: int, n: int, *, n_steps: int,
 TIMING_ALLOWANCE = 300.0
 
 
-def run_scaling_point(method: str, quadrature: int, n: int, config: BenchConfig) -> dict:
+def run_scaling_point(method: str, quadrature: int, n: int, config: BenchConfig,
+                      chain: str = "identical", gradient: str = "exact") -> dict:
     """measure_scaling_point in a child process (its own session, so that on timeout the
     compiler it started is stopped with it); {"failure": ...} if it fails or runs over."""
     # Beyond 20 links a step costs milliseconds: fewer steps and repeats keep the timing within
@@ -177,7 +182,8 @@ def run_scaling_point(method: str, quadrature: int, n: int, config: BenchConfig)
     repeats = config.repeats if n <= 20 else min(config.repeats, 3)
     program = ("import json\nfrom chaingen.studies.bench.scaling import measure_scaling_point\n"
                f"print(json.dumps(measure_scaling_point({method!r}, {quadrature}, {n}, "
-               f"n_steps={n_steps}, repeats={repeats})))\n")
+               f"n_steps={n_steps}, repeats={repeats}, chain={chain!r}, "
+               f"gradient={gradient!r})))\n")
     # The child's temporary files (the harness's build directory) go to a directory of ours,
     # removed afterwards even when the child had to be killed before cleaning up.
     with tempfile.TemporaryDirectory(prefix="chaingen-bench-") as scratch:
@@ -224,29 +230,32 @@ def _predicted_over_limit(n: int, seconds: float, config: BenchConfig) -> str | 
 
 
 def scaling_study(config: BenchConfig, note) -> list[ScalingRow]:
-    """Part 2: each scheme at each n, with MuJoCo RK4 at the same n and dt. A scheme that runs
-    over the time limit at some n is not run at larger n."""
+    """Part 2: each (chain, scheme) of config.scaling_series at each n, with MuJoCo RK4 at the
+    same n and dt. A scheme that runs over the time limit at some n is not run at larger n on
+    that chain."""
     rows = []
-    for method, quadrature in config.scaling_methods:
+    for chain, method, quadrature, gradient in config.scaling_series:
         skip_reason = None
+        tags = {"chain": chain, "gradient": gradient}
         for n in config.scaling_ns:
-            label = method_label(scaling_scene(n), method, quadrature)
+            label = method_label(SCALING_CHAINS[chain](n), method, quadrature)
+            label += "" if gradient == "exact" or method != "es" else f" {gradient}"
             if skip_reason is not None:
-                rows += [ScalingRow(label, n, variant.label, failure=skip_reason)
+                rows += [ScalingRow(label, n, variant.label, failure=skip_reason, **tags)
                          for variant in VARIANTS]
-                note(f"scaling {label} n={n}: {skip_reason}")
+                note(f"scaling {chain} {label} n={n}: {skip_reason}")
                 continue
             started = time.perf_counter()
-            point = run_scaling_point(method, quadrature, n, config)
+            point = run_scaling_point(method, quadrature, n, config, chain, gradient)
             if "failure" not in point:
                 seconds = point["generate_seconds"] + point["build_seconds"]
                 skip_reason = _predicted_over_limit(n, seconds, config)
             if "failure" in point:
                 if point["failure"].startswith("over limit"):
                     skip_reason = f"not run: over the limit at n = {n}"
-                rows += [ScalingRow(label, n, variant.label, failure=point["failure"])
-                         for variant in VARIANTS]
-                note(f"scaling {label} n={n}: {point['failure']}")
+                rows += [ScalingRow(label, n, variant.label, failure=point["failure"],
+                                    **tags) for variant in VARIANTS]
+                note(f"scaling {chain} {label} n={n}: {point['failure']}")
                 continue
             for variant in VARIANTS:
                 timing = point["timings"][variant.label]
@@ -255,7 +264,7 @@ def scaling_study(config: BenchConfig, note) -> list[ScalingRow]:
                     build_seconds=point["build_seconds"],
                     generate_peak_mb=_mebibytes(point["generate_peak_kb"]),
                     compile_peak_mb=_mebibytes(point["compile_peak_kb"]),
-                    model_c_bytes=point["model_c_bytes"])
+                    model_c_bytes=point["model_c_bytes"], **tags)
                 if "dt" not in timing:
                     rows.append(ScalingRow(label, n, variant.label, **common,
                                            failure="; ".join(timing["failures"])))
@@ -266,7 +275,7 @@ def scaling_study(config: BenchConfig, note) -> list[ScalingRow]:
                     step_seconds=timing["step_ns"] * 1e-9,
                     newton_iterations=timing["iterations"],
                     mujoco_step_seconds=timing["mujoco_step_seconds"], failure=failures))
-            note(f"scaling {label} n={n}: generate {point['generate_seconds']:.1f} s, "
+            note(f"scaling {chain} {label} n={n}: generate {point['generate_seconds']:.1f} s, "
                  f"build {point['build_seconds']:.1f} s "
                  f"({time.perf_counter() - started:.0f} s in all)")
     return rows

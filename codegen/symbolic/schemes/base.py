@@ -86,8 +86,8 @@ class SchemeMetadata:
     quadrature_rule: str | None = None
     order: int = 2
     composition: tuple[float, ...] = (1.0,)
-    # es's discrete gradient of the springs ("exact" or "quadrature"), None where it plays no
-    # role (chaingen.scene.solver_rules.gradient_used).
+    # es's discrete gradient of the springs ("exact", "quadrature" or "chain"), None where it
+    # plays no role (chaingen.scene.solver_rules.gradient_used).
     gradient: str | None = None
 
 

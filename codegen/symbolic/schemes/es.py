@@ -59,8 +59,9 @@ def build(scene: Scene, quadrature: int, order: int = 2,
     velocity projected onto C(q) v = 0 (com_recursion.projected_rates). arm_solve: whether the
     package solves the Newton systems by the factors of the Jacobian (ArmSpace) instead of
     dense LU; None: from ARM_SOLVE_MIN_LINKS links on. gradient: the springs' discrete
-    gradient, "exact" (the energy balance holds identically) or "quadrature" (the K-point
-    average alone; docs/model.md, section 4)."""
+    gradient, "exact" (the energy balance holds identically), "quadrature" (the K-point
+    average alone) or "chain" (the chain rule's, exact without quadrature; docs/model.md,
+    section 4.3)."""
     require(method="es", quadrature=quadrature, order=order, gradient=gradient)
     if order > 4:
         raise ValueError("es composes its own step to order 4 at most: order 6 is "
