@@ -73,9 +73,9 @@ def gauss_lobatto_nodes(points: int) -> tuple[tuple[float, ...], tuple[float, ..
 
 
 def energy_correction(defs: recursion.Definitions, defect, dphi_1, dt,
-                      quadrature: int) -> ImmutableMatrix:
-    """The term added to the momentum equation tested with 1 (docs/model.md 16, 'Energy'):
-    Gonzalez's correction of the rule's energy defect along dphi_1 = phi_1 - phi_0,
+                      quadrature: int) -> sp.Symbol:
+    """The factor of dphi_1 = phi_1 - phi_0 in the term added to the momentum equation tested
+    with 1 (docs/model.md 16, 'Energy'): Gonzalez's correction of the rule's energy defect,
 
         dt e / max(|dphi_1|^2, delta^2) dphi_1,    e = H_1 - H_0 - sum_g b_g dH/ds(s_g),
 
@@ -94,7 +94,7 @@ def energy_correction(defs: recursion.Definitions, defect, dphi_1, dt,
     smallest = sp.Float(exact_gradient_scale(quadrature) ** 2)
     ratio = defs.define("energy_correction",
                         dt * defect / sp.Max(sp.Add(*(d ** 2 for d in dphi_1)), smallest))
-    return ImmutableMatrix([ratio * d for d in dphi_1])
+    return ratio
 
 
 def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
@@ -185,11 +185,14 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
                                          for i, link in enumerate(scene.links) if link.damping))
     w_1 = w_g
     dissipated = dissipated / dt
+    scalars = ()
     if exact_energy:
         # H(phi_1, p_1) = 1/2 p_1 . w_1 + V(phi_1) from the last node's quantities.
         energy_end = sp.Add(*(p * w for p, w in zip(p_g, w_1))) / 2 + potential
-        p_rows[0] += energy_correction(step, energy_end - energy_start - energy_rate, dphi_1,
-                                       dt, quadrature)
+        ratio = energy_correction(step, energy_end - energy_start - energy_rate, dphi_1, dt,
+                                  quadrature)
+        p_rows[0] += ratio * dphi_1
+        scalars = (ratio,)
     residual = ImmutableMatrix.vstack(*phi_rows, *p_rows)
     unknowns = ImmutableMatrix.vstack(dphi_m, dphi_1, dp_m, dp_1)
 
@@ -229,9 +232,9 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
         # links, 10.7e3 instructions for 4 columns against 24.9e3 for the angles').
         jacobian_blocks=(2 * n, 2 * n),
         # The same recursions at every node after the start: (phi_g, p_g) -> (w_g, F_g), and
-        # the residual linear in them but for the energy correction (NodeSpace): dF/dz
-        # through one node's Jacobian.
-        node_space=NodeSpace(tuple(node_inputs), tuple(node_outputs)),
+        # the residual linear in them but for the energy correction's factor, a scalar
+        # (NodeSpace): dF/dz through one node's Jacobian.
+        node_space=NodeSpace(tuple(node_inputs), tuple(node_outputs), scalars),
         # Its stages start from their own previous solutions as es's composed ones do: the
         # same tolerance (four_link_actuated, K = 7, 400 steps of 0.01 s: balance drift
         # 2.0e-11 J at 1e-10, 1.0e-12 J at 1e-12).
