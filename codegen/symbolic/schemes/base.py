@@ -51,15 +51,18 @@ class ArmSpace:
 
 @dataclass(frozen=True)
 class NodeSpace:
-    """A residual that is linear in the outputs of one local function evaluated at several
-    nodes (es's Galerkin step, docs/model.md section 16): node g's outputs o_g = N(y_g, u, p)
-    with the same N at every node, y_g affine in z. Then dF/dz = F_z + sum_g F_o_g N'(y_g) Y_g,
-    with F_z, F_o_g and Y_g = dy_g/dz constant or sparse, and N' the Jacobian of one node
-    (m x m): generated once, evaluated at each node, instead of every column of dF/dz carrying
-    its tangent through every node."""
+    """A residual that is a function of z and the outputs of one local function evaluated at
+    several nodes (es's Galerkin step, docs/model.md section 16): node g's outputs
+    o_g = N(y_g, u, p) with the same N at every node, y_g affine in z. Then
+    dF/dz = F_z + sum_g F_o_g N'(y_g) Y_g, with F_z, F_o_g and Y_g = dy_g/dz sparse, and N' the
+    Jacobian of one node (m x m): generated once, evaluated at each node, instead of every
+    column of dF/dz carrying its tangent through every node. A few scalars r of the
+    definitions through which F depends on all of z and the outputs (es's energy correction)
+    are taken apart: F_r dr/dz, dr/dz through the nodes as a few rows."""
 
     inputs: tuple[ImmutableMatrix, ...]    # y_g: symbols defined in `definitions`, m per node
     outputs: tuple[ImmutableMatrix, ...]   # o_g: symbols defined in `definitions`, per node
+    scalars: tuple[sp.Symbol, ...] = ()    # r: symbols defined in `definitions`
 
 
 @dataclass(frozen=True)

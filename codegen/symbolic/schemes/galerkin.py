@@ -14,8 +14,10 @@ linear test functions psi in {1, 2 s - 1}:
 F = dL/dphi + tau - D w, the integrals taken by the N = K + 1 point Gauss-Lobatto rule (exact to
 degree 2K - 1) and w at each node s_g from M(phi_g) w_g = p_g. Testing the first equation with
 the projection of dH/dphi and the second with that of dH/dp shows
-H_1 - H_0 = tau . (phi_1 - phi_0) - (dissipated >= 0) up to the quadrature of int dH: the
-energy error of the step is the rule's error, O(dt^(2K+1)) per step, nothing else. The step is
+H_1 - H_0 = tau . (phi_1 - phi_0) - (dissipated >= 0) up to the quadrature of int dH, the rule's
+error, O(dt^(2K+1)) per step. A correction of that size along phi_1 - phi_0 in the momentum
+equation tested with 1 (energy_correction, Gonzalez's construction) makes the identity exact
+to round-off. The step is
 symmetric, of order 4 in phi and in w (the nodes are superconvergent: 2k + 2), and there are no
 constraints to keep: the chain's geometry is exact in joint angles.
 
@@ -38,6 +40,7 @@ from ...scene import Scene
 from ...scene.solver_rules import GALERKIN_ORDER, require
 from .. import recursion
 from ..com_model import number
+from ..com_recursion import exact_gradient_scale
 from .base import (
     DiscreteScheme,
     FlowDescription,
@@ -69,8 +72,36 @@ def gauss_lobatto_nodes(points: int) -> tuple[tuple[float, ...], tuple[float, ..
     return tuple((x + 1.0) / 2.0), tuple(weights / 2.0)
 
 
-def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> DiscreteScheme:
-    """The k = 1 step of `scene` with the (quadrature + 1)-point Gauss-Lobatto rule."""
+def energy_correction(defs: recursion.Definitions, defect, dphi_1, dt,
+                      quadrature: int) -> sp.Symbol:
+    """The factor of dphi_1 = phi_1 - phi_0 in the term added to the momentum equation tested
+    with 1 (docs/model.md 16, 'Energy'): Gonzalez's correction of the rule's energy defect,
+
+        dt e / max(|dphi_1|^2, delta^2) dphi_1,    e = H_1 - H_0 - sum_g b_g dH/ds(s_g),
+
+    dH/ds = -dL/dphi . phi' + w . p' at the nodes: e is the (K + 1)-point Gauss-Lobatto rule's
+    error on int dH, O(|dphi_1|^(2K+1)) relative to H, so the correction has that size and the
+    trajectory stays the rule's. Tested with phi' (whose mean is dphi_1), that row enters the
+    energy identity as -dphi_1 . row / dt: the correction contributes -e, and
+    H_1 - H_0 = tau . dphi_1 - dissipated holds to round-off for every step with
+    |dphi_1| >= delta. delta = c_K rad, c_K = eps^(1/(2K+1)) (5.8e-3 rad at K = 3: the angles
+    enter H through sines and cosines of unit frequency), is the step below which the rule is
+    exact to the round-off of H anyway: there the correction fades out as |dphi_1|, and e, a
+    difference of energies with round-off eps H, is never divided by less than delta^2 (at rest
+    the step's derivatives stay the rule's). Under the step's reversal e and dphi_1 change sign
+    with dt: the step stays symmetric."""
+    defect = defs.define("energy_defect", defect)
+    smallest = sp.Float(exact_gradient_scale(quadrature) ** 2)
+    ratio = defs.define("energy_correction",
+                        dt * defect / sp.Max(sp.Add(*(d ** 2 for d in dphi_1)), smallest))
+    return ratio
+
+
+def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
+          exact_energy: bool = True) -> DiscreteScheme:
+    """The k = 1 step of `scene` with the (quadrature + 1)-point Gauss-Lobatto rule, its energy
+    defect corrected (energy_correction) unless exact_energy is False (the rule's step alone,
+    for comparison)."""
     require(method="es", quadrature=quadrature, order=GALERKIN_ORDER)
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
@@ -96,16 +127,17 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
         return recursion.link_frames(scene, recursion.angle_directions(step, angles, tag=tag))
 
     def forces_at(tag, frames, rates):
-        """(M(phi) w, dL/dphi + tau - D w) at a node, by definitions."""
+        """(M(phi) w, dL/dphi + tau - D w, V(phi)) at a node, by definitions."""
         momentum, kinetic_gradient = recursion.momenta(
             scene, frames, recursion.absolute_rates(step, rates, f"{tag}Omega"), step, tag)
-        springs, _ = recursion.spring_gradient(scene, frames, step, tag)
+        springs, spring_energy = recursion.spring_gradient(scene, frames, step, tag)
         gravity = recursion.gravity_gradient(scene, frames, step, tag)
         forces = [step.define(f"{tag}force{k}", dT - spring - weight + tau - d * rate)
                   for k, (dT, spring, weight, tau, d, rate)
                   in enumerate(zip(kinetic_gradient, springs, gravity, torques, damping, rates),
                                start=1)]
-        return ImmutableMatrix(momentum), ImmutableMatrix(forces)
+        potential = spring_energy + recursion.gravity_potential(scene, frames, step, tag)
+        return ImmutableMatrix(momentum), ImmutableMatrix(forces), potential
 
     def quadratic(start_change_mid, change_end, s):
         """Increment of the quadratic through (0, 0), (1/2, mid), (1, end) at s, and its
@@ -116,7 +148,7 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
 
     phi_rows = [ImmutableMatrix.zeros(n, 1), ImmutableMatrix.zeros(n, 1)]
     p_rows = [ImmutableMatrix.zeros(n, 1), ImmutableMatrix.zeros(n, 1)]
-    dissipated = sp.Integer(0)
+    dissipated = energy_rate = sp.Integer(0)
     p0 = None
     node_inputs, node_outputs = [], []
     for g, (s, b) in enumerate(zip(nodes, weights)):
@@ -134,13 +166,18 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
                    for i, value in enumerate(p0 + dp, start=1)]
             frames = frames_at(tag, angles)
             w_g = recursion.rates_from_momenta(scene, frames, p_g, step, tag)
-        momentum, force = forces_at(tag, frames, w_g)
+        momentum, force, potential = forces_at(tag, frames, w_g)
         if g == 0:
             p0 = momentum
+            energy_start = sp.Add(*(p * w for p, w in zip(p0, w_g))) / 2 + potential
         else:
             node_inputs.append(ImmutableMatrix(angles + p_g))
             node_outputs.append(ImmutableMatrix(list(w_g) + list(force)))
         w_g = ImmutableMatrix(w_g)
+        # dH/ds = -dL/dphi . phi' + w . p' at the node, dL/dphi = F - tau + D w.
+        energy_rate += b_value * sp.Add(*(
+            w_g[i] * p_slope[i] - (force[i] - torques[i] + damping[i] * w_g[i]) * phi_slope[i]
+            for i in range(n)))
         for row, psi in enumerate((sp.Integer(1), 2 * s_value - 1)):
             phi_rows[row] += b_value * psi * (phi_slope - dt * w_g)
             p_rows[row] += b_value * psi * (p_slope - dt * force)
@@ -148,6 +185,14 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
                                          for i, link in enumerate(scene.links) if link.damping))
     w_1 = w_g
     dissipated = dissipated / dt
+    scalars = ()
+    if exact_energy:
+        # H(phi_1, p_1) = 1/2 p_1 . w_1 + V(phi_1) from the last node's quantities.
+        energy_end = sp.Add(*(p * w for p, w in zip(p_g, w_1))) / 2 + potential
+        ratio = energy_correction(step, energy_end - energy_start - energy_rate, dphi_1, dt,
+                                  quadrature)
+        p_rows[0] += ratio * dphi_1
+        scalars = (ratio,)
     residual = ImmutableMatrix.vstack(*phi_rows, *p_rows)
     unknowns = ImmutableMatrix.vstack(dphi_m, dphi_1, dp_m, dp_1)
 
@@ -187,8 +232,9 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER) -> Discret
         # links, 10.7e3 instructions for 4 columns against 24.9e3 for the angles').
         jacobian_blocks=(2 * n, 2 * n),
         # The same recursions at every node after the start: (phi_g, p_g) -> (w_g, F_g), and
-        # the residual linear in them (NodeSpace): dF/dz through one node's Jacobian.
-        node_space=NodeSpace(tuple(node_inputs), tuple(node_outputs)),
+        # the residual linear in them but for the energy correction's factor, a scalar
+        # (NodeSpace): dF/dz through one node's Jacobian.
+        node_space=NodeSpace(tuple(node_inputs), tuple(node_outputs), scalars),
         # Its stages start from their own previous solutions as es's composed ones do: the
         # same tolerance (four_link_actuated, K = 7, 400 steps of 0.01 s: balance drift
         # 2.0e-11 J at 1e-10, 1.0e-12 J at 1e-12).
