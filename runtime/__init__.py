@@ -10,7 +10,12 @@ each key path of a scene's numbers one way; `trajectory` writes and reads trajec
 `files` writes all or nothing.
 """
 from .build import build_shared_library, cache_directory
-from .contract import JACOBIAN_ACROSS_STEPS, JACOBIAN_EVERY_ITERATE, JACOBIAN_PER_STEP
+from .contract import (
+    JACOBIAN_ACROSS_STEPS,
+    JACOBIAN_CHORD_ACROSS_STEPS,
+    JACOBIAN_EVERY_ITERATE,
+    JACOBIAN_PER_STEP,
+)
 from .errors import BuildError, ChaingenError, NewtonError, RunFailedError
 from .interface import NewtonOptions
 from .results import Sensitivities, SimulationResult, StepResult
@@ -18,7 +23,8 @@ from .solver import Solver, StopSignal
 from .stepper import Stepper
 from .trajectory import read_trajectory, write_trajectory
 
-__all__ = ["JACOBIAN_ACROSS_STEPS", "JACOBIAN_EVERY_ITERATE", "JACOBIAN_PER_STEP",
+__all__ = ["JACOBIAN_ACROSS_STEPS", "JACOBIAN_CHORD_ACROSS_STEPS", "JACOBIAN_EVERY_ITERATE",
+           "JACOBIAN_PER_STEP",
            "BuildError", "ChaingenError", "NewtonError", "NewtonOptions", "RunFailedError",
            "Sensitivities", "SimulationResult", "Solver", "StepResult", "Stepper", "StopSignal",
            "build_shared_library", "cache_directory", "read_trajectory", "write_trajectory"]

@@ -194,9 +194,10 @@ JACOBIAN_MODES = (
     JacobianMode("JACOBIAN_EVERY_ITERATE", 0, "full Newton"),
     JacobianMode("JACOBIAN_ACROSS_STEPS", 1, "simplified Newton"),
     JacobianMode("JACOBIAN_PER_STEP", 2, "Newton-chord: once a step"),
+    JacobianMode("JACOBIAN_CHORD_ACROSS_STEPS", 3, "Newton-chord, kept across chained steps"),
 )
-JACOBIAN_EVERY_ITERATE, JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP = (
-    mode.value for mode in JACOBIAN_MODES)
+(JACOBIAN_EVERY_ITERATE, JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP,
+ JACOBIAN_CHORD_ACROSS_STEPS) = (mode.value for mode in JACOBIAN_MODES)
 
 
 @dataclass(frozen=True)

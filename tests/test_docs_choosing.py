@@ -73,8 +73,8 @@ def test_the_defaults_and_stages_it_names_are_the_programs():
     assert {d["update_rtol"] for d in defaults.values()} == {1e-10}
     assert "(`update_rtol` 1e-10, and simplified Newton kept across steps)" in doc
     assert defaults["vi"]["reuse_jacobian"] == contract.JACOBIAN_ACROSS_STEPS
-    assert defaults["es"]["reuse_jacobian"] == defaults["midpoint"]["reuse_jacobian"] \
-        == contract.JACOBIAN_PER_STEP
+    assert defaults["midpoint"]["reuse_jacobian"] == contract.JACOBIAN_PER_STEP
+    assert defaults["es"]["reuse_jacobian"] == contract.JACOBIAN_CHORD_ACROSS_STEPS
     assert "`es` and `midpoint` solve each step with Newton-chord" in doc
 
 

@@ -163,6 +163,44 @@ def test_a_twenty_link_chain_agrees_with_mujoco(method):
 
 
 @pytest.mark.compile
+def test_es_keeps_its_chord_jacobian_across_steps_and_finds_the_same_roots():
+    """es's default Newton-chord keeps its Jacobian across chained steps of a long chain
+    (docs/model.md, section 13). Each of 300 chained steps of the uneven 20-link chain at
+    dt = 0.01 s, with the Jacobian kept and once a step, lands within Newton's update
+    tolerance of the root that full Newton finds from the same start at tolerances 1e-4 of
+    the defaults (the chain is chaotic, so runs are compared step by step, not as
+    trajectories)."""
+    from chaingen.runtime import (
+        JACOBIAN_CHORD_ACROSS_STEPS,
+        JACOBIAN_EVERY_ITERATE,
+        JACOBIAN_PER_STEP,
+        NewtonOptions,
+    )
+    from chaingen.simulation import build_solver
+    from chaingen.studies.bench.scenes import uneven_scene
+
+    scene = uneven_scene(20)
+    solver = build_solver(scene, "es", 3, sensitivities=False)
+    assert solver.default_options.reuse_jacobian == JACOBIAN_CHORD_ACROSS_STEPS
+    defaults = solver.default_options
+    tight = NewtonOptions(reuse_jacobian=JACOBIAN_EVERY_ITERATE, warm_start=False,
+                          update_rtol=1e-14, update_atol=1e-17, residual_tol=1e-12,
+                          max_iterations=40)
+    reference = build_solver(scene, "es", 3, sensitivities=False)
+    x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
+    for mode in (JACOBIAN_CHORD_ACROSS_STEPS, JACOBIAN_PER_STEP):
+        solver.reset()
+        x, worst = x0, 0.0
+        for _ in range(300):
+            x1 = solver.step(x, dt=0.01, options={"reuse_jacobian": mode}).x1
+            root = reference.step(x, dt=0.01, options=tight).x1
+            scale = defaults.update_atol + defaults.update_rtol * np.abs(root)
+            worst = max(worst, float(np.max(np.abs(x1 - root) / scale)))
+            x = x1
+        assert worst <= 0.1, f"mode {mode}: {worst:.3g} update tolerances from the root"
+
+
+@pytest.mark.compile
 def test_a_step_whose_solution_turns_a_segment_is_retried_in_halves():
     """midpoint on the 20-link chain at dt = 0.01 s: whole steps whose Newton solution turns a
     segment through 90 degrees (a spurious root of a step too long for the motion; the
@@ -187,13 +225,17 @@ def test_the_warm_start_is_never_worse_than_the_predictor():
     from the predictor. The warm start now takes the guess that was closest on the previous
     step: no more iterations than the predictor alone. On three links, where the steps resolve
     the motion, it keeps extrapolating: 2.0 iterations a step against 3.9 from the predictor
-    (a chooser that fell back to the predictor there would take as many)."""
+    (a chooser that fell back to the predictor there would take as many). Newton-chord with
+    its Jacobian once a step in both runs: es's default keeps it across chained steps, which
+    a cold start never is, and trades iterations for Jacobians (docs/model.md, section 13)."""
+    from chaingen.runtime import JACOBIAN_PER_STEP
     from chaingen.simulation import build_solver
 
     def iterations(scene, dt, n_steps, warm):
         solver = build_solver(scene, "es", 3, sensitivities=False)
         run = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
-                              n_steps=n_steps, every=n_steps, options={"warm_start": warm})
+                              n_steps=n_steps, every=n_steps,
+                              options={"warm_start": warm, "reuse_jacobian": JACOBIAN_PER_STEP})
         return run.mean_newton_iterations, run.max_newton_iterations
 
     chain = scaling_scene(20)

@@ -1,5 +1,5 @@
 """The Newton knobs of the generated step: warm start, simplified Newton (the Jacobian kept
-across steps) and Newton-chord (evaluated once a step).
+across steps) and Newton-chord (evaluated once a step, or kept across chained steps).
 
 Both change how a step reaches its solution, never which equations it solves: every variant
 must agree with full Newton from the scheme's predictor within the Newton tolerances, and fail
@@ -12,6 +12,7 @@ import pytest
 
 from chaingen.runtime import (
     JACOBIAN_ACROSS_STEPS,
+    JACOBIAN_CHORD_ACROSS_STEPS,
     JACOBIAN_EVERY_ITERATE,
     JACOBIAN_PER_STEP,
     NewtonError,
@@ -26,7 +27,9 @@ COLD = NewtonOptions(warm_start=False, reuse_jacobian=JACOBIAN_EVERY_ITERATE)
 WARM = NewtonOptions(warm_start=True, reuse_jacobian=JACOBIAN_EVERY_ITERATE)
 SIMPLIFIED = NewtonOptions(warm_start=True, reuse_jacobian=JACOBIAN_ACROSS_STEPS)
 CHORD = NewtonOptions(warm_start=True, reuse_jacobian=JACOBIAN_PER_STEP)
-KEPT = pytest.mark.parametrize("kept", [SIMPLIFIED, CHORD], ids=["simplified", "chord"])
+KEPT_CHORD = NewtonOptions(warm_start=True, reuse_jacobian=JACOBIAN_CHORD_ACROSS_STEPS)
+KEPT = pytest.mark.parametrize("kept", [SIMPLIFIED, CHORD, KEPT_CHORD],
+                               ids=["simplified", "chord", "kept chord"])
 METHODS = ("es", "vi", "midpoint")
 
 
@@ -113,7 +116,8 @@ def test_kept_jacobian_survives_a_change_of_dt(method, kept):
         assert np.abs(result.x1 - expected).max() < 1e-8
 
 
-@pytest.mark.parametrize("reuse", [JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP])
+@pytest.mark.parametrize("reuse", [JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP,
+                                   JACOBIAN_CHORD_ACROSS_STEPS])
 def test_kept_jacobian_reports_failure_instead_of_garbage(reuse):
     solver = solver_for("three_link_mono", "es")
     x0 = initial(solver)
@@ -122,14 +126,14 @@ def test_kept_jacobian_reports_failure_instead_of_garbage(reuse):
         solver.step(x0, dt=0.01, options=NewtonOptions(reuse_jacobian=reuse, max_iterations=1))
 
 
-@pytest.mark.parametrize("reuse", [-1, 3, 1.5, "chord"])
+@pytest.mark.parametrize("reuse", [-1, 4, 1.5, "chord"])
 def test_an_unknown_jacobian_mode_is_refused(reuse):
     with pytest.raises(ValueError, match="reuse_jacobian: must be one of"):
         NewtonOptions(reuse_jacobian=reuse)
 
 
-@pytest.mark.parametrize("options", [COLD, WARM, SIMPLIFIED, CHORD],
-                         ids=["cold", "warm", "simplified", "chord"])
+@pytest.mark.parametrize("options", [COLD, WARM, SIMPLIFIED, CHORD, KEPT_CHORD],
+                         ids=["cold", "warm", "simplified", "chord", "kept chord"])
 def test_simulate_does_not_depend_on_the_workspace_history(options):
     solver = solver_for("three_link_gravity", "es")
     scene = load("three_link_gravity")
@@ -176,7 +180,9 @@ def test_newton_chord_keeps_es_energy_at_full_newton_level(name):
     scene = load(name)
     run = lambda options: solver.simulate(scene.initial_angles, scene.initial_velocities,  # noqa: E731
                                           dt=0.01, n_steps=5000, options=options)
-    full, chord = run(WARM), run(CHORD)
+    full = run(WARM)
     full_error = np.abs(full.energy_error).max()
-    assert np.abs(chord.energy_error).max() <= max(10 * full_error, 1e-12)
-    assert chord.mean_newton_iterations <= full.mean_newton_iterations + 0.05
+    for options in (CHORD, KEPT_CHORD):
+        chord = run(options)
+        assert np.abs(chord.energy_error).max() <= max(10 * full_error, 1e-12)
+        assert chord.mean_newton_iterations <= full.mean_newton_iterations + 0.05

@@ -15,7 +15,13 @@ import pytest
 
 import chaingen.generate.package as package_module
 from chaingen.generate.package import generate_package, write_package
-from chaingen.runtime import JACOBIAN_ACROSS_STEPS, JACOBIAN_PER_STEP, NewtonOptions, Solver
+from chaingen.runtime import (
+    JACOBIAN_ACROSS_STEPS,
+    JACOBIAN_CHORD_ACROSS_STEPS,
+    JACOBIAN_PER_STEP,
+    NewtonOptions,
+    Solver,
+)
 from chaingen.studies.bench.knobs import KnobRow, knob_table, with_source_flags
 
 from helpers import load
@@ -58,7 +64,7 @@ def test_a_large_model_is_compiled_with_o1(monkeypatch, tmp_path):
 
 
 @pytest.mark.compile
-@pytest.mark.parametrize("method, reuse", [("es", JACOBIAN_PER_STEP),
+@pytest.mark.parametrize("method, reuse", [("es", JACOBIAN_CHORD_ACROSS_STEPS),
                                            ("vi", JACOBIAN_ACROSS_STEPS),
                                            ("midpoint", JACOBIAN_PER_STEP)])
 def test_newton_defaults_per_scheme(method, reuse):

@@ -39,6 +39,7 @@
 #define CHAINGEN_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
 #define CHAINGEN_JACOBIAN_ACROSS_STEPS 1   /* simplified Newton */
 #define CHAINGEN_JACOBIAN_PER_STEP 2       /* Newton-chord: once a step */
+#define CHAINGEN_JACOBIAN_CHORD_ACROSS_STEPS 3 /* Newton-chord, kept across chained steps */
 
 /* Newton options (each package's defaults: <prefix>_default_options). */
 typedef struct {

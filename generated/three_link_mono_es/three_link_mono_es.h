@@ -122,6 +122,7 @@ extern "C" {
 #define THREE_LINK_MONO_ES_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
 #define THREE_LINK_MONO_ES_JACOBIAN_ACROSS_STEPS 1   /* simplified Newton */
 #define THREE_LINK_MONO_ES_JACOBIAN_PER_STEP 2       /* Newton-chord: once a step */
+#define THREE_LINK_MONO_ES_JACOBIAN_CHORD_ACROSS_STEPS 3 /* Newton-chord, kept across chained steps */
 
 /* The sizes three_link_mono_es_dimension(which) answers. */
 #define THREE_LINK_MONO_ES_DIMENSION_N_JOINTS 0      /* links and revolute joints */
@@ -182,7 +183,7 @@ extern "C" {
  * THREE_LINK_MONO_ES_ENERGY_JUMP, and step() and simulate() split it like a step Newton failed.
  * The defaults of this package:
  * max_iterations 20, update_rtol 1e-10, update_atol 1e-13, residual_tol 1e-8, warm_start 1,
- * reuse_jacobian 2, energy_tol 0.01, rtol 0.0, atol 0.0. */
+ * reuse_jacobian 3, energy_tol 0.01, rtol 0.0, atol 0.0. */
 typedef chaingen_options three_link_mono_es_options;
 
 /* Counters of one simulate call (chaingen_contract.h). */

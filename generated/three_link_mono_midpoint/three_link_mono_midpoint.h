@@ -112,6 +112,7 @@ extern "C" {
 #define THREE_LINK_MONO_MIDPOINT_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
 #define THREE_LINK_MONO_MIDPOINT_JACOBIAN_ACROSS_STEPS 1   /* simplified Newton */
 #define THREE_LINK_MONO_MIDPOINT_JACOBIAN_PER_STEP 2       /* Newton-chord: once a step */
+#define THREE_LINK_MONO_MIDPOINT_JACOBIAN_CHORD_ACROSS_STEPS 3 /* Newton-chord, kept across chained steps */
 
 /* The sizes three_link_mono_midpoint_dimension(which) answers. */
 #define THREE_LINK_MONO_MIDPOINT_DIMENSION_N_JOINTS 0      /* links and revolute joints */

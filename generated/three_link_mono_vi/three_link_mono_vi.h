@@ -113,6 +113,7 @@ extern "C" {
 #define THREE_LINK_MONO_VI_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
 #define THREE_LINK_MONO_VI_JACOBIAN_ACROSS_STEPS 1   /* simplified Newton */
 #define THREE_LINK_MONO_VI_JACOBIAN_PER_STEP 2       /* Newton-chord: once a step */
+#define THREE_LINK_MONO_VI_JACOBIAN_CHORD_ACROSS_STEPS 3 /* Newton-chord, kept across chained steps */
 
 /* The sizes three_link_mono_vi_dimension(which) answers. */
 #define THREE_LINK_MONO_VI_DIMENSION_N_JOINTS 0      /* links and revolute joints */

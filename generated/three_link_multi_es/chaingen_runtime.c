@@ -879,7 +879,14 @@ static double cg_residual_norm(const chaingen_model *table, const cg_solver *c)
  * that Jacobian is kept for this test). There is then no root within Newton's reach (on a long
  * chain at dt = 0.01 s, the root of a step ends in a fold at a shorter dt: vi's discrete
  * Legendre transform is no longer invertible), and the step is split at once. Full Newton,
- * Newton-chord and es's and midpoint's simplified Newton never give up early. */
+ * Newton-chord and es's and midpoint's simplified Newton never give up early.
+ *
+ * Newton-chord evaluates the Jacobian at the first guess and again only when the updates shrink
+ * by less than CHAINGEN_REFRESH_RATE; it stops at CHAINGEN_CHORD_MARGIN. Kept across chained
+ * steps (CHAINGEN_JACOBIAN_CHORD_ACROSS_STEPS, es's default), a step that continues the last
+ * (the same dt, its start the last end) starts with the last step's Jacobian when the last
+ * step had to replace the one of its first guess (refresh_first clear): there the first guess
+ * is far from the root, and its Jacobian serves the chord no better than the last one. */
 static int cg_newton(const chaingen_model *table, const cg_solver *c, const double *x0,
                      const double *u, const double *p, double dt, const chaingen_options *options,
                      int warm, int *iterations, int *diverged)
@@ -888,6 +895,8 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     chaingen_workspace_scalars *s = c->s;
     const int nz = model->nz;
     const int simplified = options->reuse_jacobian == CHAINGEN_JACOBIAN_ACROSS_STEPS;
+    const int chord = options->reuse_jacobian == CHAINGEN_JACOBIAN_PER_STEP
+                      || options->reuse_jacobian == CHAINGEN_JACOBIAN_CHORD_ACROSS_STEPS;
     /* Only the scheme whose own Newton is simplified (vi) gives up early: es and midpoint keep
      * their ladder under every option. */
     const int gives_up = simplified
@@ -898,14 +907,20 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     int i, iteration = 0, status, fresh = 0;   /* fresh: dF/dz evaluated within this call */
     int evaluated_at = 0;   /* the iteration at whose iterate dF/dz was last evaluated (0: none) */
     int evaluations = 0;    /* of dF/dz within this call */
+    int refreshed = 0;      /* dF/dz evaluated at an iterate after the first guess */
     z = c->z;
     dz = c->dz;
     residual = c->residual;
     *diverged = 0;
-    if (!simplified || s->factors_dt != dt || s->refresh_first) {
+    status = cg_first_guess(model, c, x0, dt, warm);
+    /* The Jacobian kept from the last solve: simplified Newton's, unless dt changed or the last
+     * solve replaced one within it; the chord's across steps, when this step continues the last
+     * (chained: its start is the last end, the same dt). */
+    if (simplified ? s->factors_dt != dt || s->refresh_first
+                   : options->reuse_jacobian != CHAINGEN_JACOBIAN_CHORD_ACROSS_STEPS
+                         || !s->chained || s->factors_dt != dt || s->refresh_first) {
         s->factors_valid = 0;
     }
-    status = cg_first_guess(model, c, x0, dt, warm);
     if (status == CHAINGEN_OK) {
         status = CHAINGEN_NOT_CONVERGED;
     }
@@ -951,6 +966,7 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
             s->factors_valid = 1;
             s->factors_dt = dt;
             fresh = 1;
+            refreshed |= iteration > 1;
             evaluated_at = iteration;
             ++evaluations;
             if (options->reuse_jacobian != CHAINGEN_JACOBIAN_EVERY_ITERATE) {
@@ -995,8 +1011,7 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
              * (the error is then below it while theta <= 1/2). */
             int measured = previous_update > 0.0;
             double rate = measured ? update_norm / previous_update : 1.0;
-            double margin = options->reuse_jacobian == CHAINGEN_JACOBIAN_PER_STEP
-                                ? CHAINGEN_CHORD_MARGIN : CHAINGEN_SIMPLIFIED_MARGIN;
+            double margin = chord ? CHAINGEN_CHORD_MARGIN : CHAINGEN_SIMPLIFIED_MARGIN;
             int contracted = measured ? rate < 1.0 && rate / (1.0 - rate) * update_norm <= margin
                                       : update_norm <= margin;
             /* A Jacobian evaluated within this step that no longer contracts an update already
@@ -1025,6 +1040,12 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     }
     if (simplified) {
         s->refresh_first = evaluations > 1;
+    } else if (options->reuse_jacobian == CHAINGEN_JACOBIAN_CHORD_ACROSS_STEPS) {
+        /* The chord's Jacobian goes into the next step only when the one of this step's first
+         * guess had to be replaced within it: a guess far from the root (a long chain's fast
+         * tail) has a Jacobian no better than the last step's. From a guess near the root, a
+         * fresh Jacobian there lands at round-off in one update. */
+        s->refresh_first = !refreshed;
     }
     if (status == CHAINGEN_OK) {
         status = cg_choose_warm_start(model, c, x0, dt, options);
@@ -1053,7 +1074,8 @@ static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const 
         options = &defaults;
     }
     if (options->reuse_jacobian < CHAINGEN_JACOBIAN_EVERY_ITERATE
-        || options->reuse_jacobian > CHAINGEN_JACOBIAN_PER_STEP || !(options->energy_tol >= 0.0)) {
+        || options->reuse_jacobian > CHAINGEN_JACOBIAN_CHORD_ACROSS_STEPS
+        || !(options->energy_tol >= 0.0)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     status = cg_newton(model, c, x0, u, p, dt, options, options->warm_start, &spent, &diverged);

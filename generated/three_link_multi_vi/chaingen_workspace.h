@@ -39,8 +39,9 @@ typedef struct {
                              * previous_z, 1 the scheme's predictor, d + 1 from the last d */
     int chained;            /* this step continues the previous one */
     int factors_valid;      /* the Jacobian's factors in the workspace are usable */
-    int refresh_first;      /* simplified Newton: the next solve evaluates the Jacobian at its
-                             * first guess (the last replaced one evaluated within it) */
+    int refresh_first;      /* the next solve evaluates the Jacobian at its first guess:
+                             * simplified Newton, when the last replaced one evaluated within
+                             * it; the chord kept across steps, when the last did not */
     int energy_valid;       /* energy_ends belong to energy_x */
     int q_valid;            /* q = Q(p) belongs to q_of */
     int composed_valid;     /* composed_x1 and the stages' records are usable */

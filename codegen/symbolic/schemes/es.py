@@ -17,7 +17,7 @@ from __future__ import annotations
 import sympy as sp
 from sympy import ImmutableMatrix
 
-from ...runtime.contract import JACOBIAN_PER_STEP
+from ...runtime.contract import JACOBIAN_CHORD_ACROSS_STEPS, JACOBIAN_PER_STEP
 from ...scene import Scene, quadrature_used
 from ...scene.solver_rules import gradient_used, require
 from ..com_model import com_frame_map, coordinates, number
@@ -155,8 +155,12 @@ def build(scene: Scene, quadrature: int, order: int = 2,
         flow_description=FLOWS if has_energy_flows(scene) else None,
         # Newton-chord: from the warm start the chord update is already at round-off, so a step
         # costs one Jacobian, one factorisation and two residuals, with the energy balance of
-        # full Newton (docs/benchmarks.md, speed knobs).
-        jacobian_reuse=JACOBIAN_PER_STEP, state_from_joint_space=False,
+        # full Newton (docs/benchmarks.md, speed knobs). The order-2 step keeps the chord's
+        # Jacobian across chained steps while it contracts (docs/model.md, section 13): on a
+        # long chain the first guess is far from the root, and the last step's Jacobian serves
+        # its chord as well as one evaluated at the guess.
+        jacobian_reuse=JACOBIAN_CHORD_ACROSS_STEPS if order == 2 else JACOBIAN_PER_STEP,
+        state_from_joint_space=False,
         newton_overrides=(("update_rtol", COMPOSED_UPDATE_RTOL),) if order > 2 else (),
         arm_space=arm_space,
         **common_fields(scene, phi),

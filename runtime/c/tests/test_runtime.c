@@ -512,7 +512,7 @@ static void test_bad_argument(void)
     STATUS(chaingen_step(&model, x0, u, 1, p, 1, 0.01, x1, NULL, NULL, &nothing, NULL),
            CHAINGEN_BAD_ARGUMENT);
     chaingen_default_options(&model, &options);
-    options.reuse_jacobian = 3;
+    options.reuse_jacobian = CHAINGEN_JACOBIAN_CHORD_ACROSS_STEPS + 1;
     STATUS(chaingen_step(&model, x0, u, 1, p, 1, 0.01, x1, NULL, &options, &ws, NULL),
            CHAINGEN_BAD_ARGUMENT);
     options.reuse_jacobian = -1;
