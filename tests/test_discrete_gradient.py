@@ -68,9 +68,9 @@ def mismatch(d, dd, k, s0, segments, quadrature, gradient):
     """|sum_j G_j . dd_j - dV| in units of what round-off allows: 1e-13 of the work's terms,
     k (L + S0 + |dd|) sum_j |dd_j| (a force k (L - S0) is a difference of terms of size k L and
     k S0, whose round-off no gradient can avoid), plus 64 eps of the energy's scale
-    k (L + S0 + |dd|)^2 (below the step delta = c_K (L_0 + L_1) / 2 the correction fades out,
-    leaving the quadrature's error, which is there below the round-off of the energy itself).
-    A value <= 1 is exact."""
+    k (L + S0 + |dd|)^2 (below the step delta = c_K min_j (s_j(0) + s_j(1)) / 2 the correction
+    fades out, leaving the quadrature's error, which is there below the round-off of the energy
+    itself). A value <= 1 is exact."""
     G = FUNCTIONS[segments, quadrature, gradient](d, dd, k, s0)
     work = sum(mpmath.mpf(float(g)) * mpmath.mpf(float(c)) for g, c in zip(G.ravel(),
                                                                             dd.ravel()))

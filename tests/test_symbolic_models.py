@@ -218,6 +218,16 @@ def test_translation_of_powers_and_functions():
         assert float(f(a, b)) == pytest.approx(float(expr.subs({x: a, y: b})), rel=1e-14)
 
 
+def test_translation_of_n_argument_max_and_min():
+    x, y, z = sp.symbols("x y z")
+    X, Y, Z = ca.SX.sym("x"), ca.SX.sym("y"), ca.SX.sym("z")
+    translate = SympyToCasadi({x: X, y: Y, z: Z})
+    f = ca.Function("f", [X, Y, Z], [translate(sp.Max(x, y, z)), translate(sp.Min(x, y, z))])
+    for values in [(0.7, 1.3, -2.0), (2.0, 0.2, 1.0), (-1.0, 3.0, 5.0)]:
+        largest, smallest = f(*values)
+        assert (float(largest), float(smallest)) == (max(values), min(values))
+
+
 def test_unbound_symbol_is_an_error():
     from chaingen.generate.casadi_functions import MissingInputError, check_free_symbols
     x, y = sp.symbols("x y")

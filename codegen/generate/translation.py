@@ -113,11 +113,12 @@ class SympyToCasadi:
             if e.is_Integer and e > 0:
                 return ca.constpow(base, exponent)
             return ca.power(base, exponent)
-        if isinstance(node, sp.Max):     # n arguments, CasADi's fmax takes two
-            largest = args[0]
+        if isinstance(node, (sp.Max, sp.Min)):     # n arguments, CasADi's fmax takes two
+            pair = ca.fmax if isinstance(node, sp.Max) else ca.fmin
+            extreme = args[0]
             for arg in args[1:]:
-                largest = ca.fmax(largest, arg)
-            return largest
+                extreme = pair(extreme, arg)
+            return extreme
         for sympy_function, casadi_function in _FUNCTIONS.items():
             if isinstance(node, sympy_function):
                 return casadi_function(*args)

@@ -231,14 +231,17 @@ def exact_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
         G_j + r / max(sum_j |dd_j|^2, delta^2) dd_j,     r = V(1) - V(0) - sum_j G_j . dd_j,
 
     so that sum_j G_j . dd_j = V(1) - V(0) holds identically for every step larger than delta.
-    r is the quadrature's error, O(k L^2 (|dd| / L)^(2K+1)): the correction is of its size and
-    the trajectory that of the K-point rule. delta = c_K (L_0 + L_1) / 2 with
-    c_K = eps^(1/(2K+1)) is the step below which the quadrature is exact to round-off of the
-    energy anyway; there the correction fades out as |dd|, smoothly, with derivatives of the
-    K-point average's size (at rest, the Jacobians a controller takes of the step would
-    otherwise be round-off divided by |dd|^2). V(1) - V(0) is taken without cancellation,
-    k/2 (L_0 + L_1 - 2 S_0) (L_1 - L_0) with s_j(1) - s_j(0) = (2 d_j(0) + dd_j) . dd_j /
-    (s_j(0) + s_j(1)): its round-off is eps |G| |dd|, not eps V. One (x, y) per segment."""
+    r is the quadrature's error, O(k L s (|dd| / s)^(2K+1)) with s the shortest segment's
+    length (the segment lengths' derivatives along the step scale like |dd|^m / s^(m-1)): the
+    correction is of its size and the trajectory that of the K-point rule.
+    delta = c_K min_j (s_j(0) + s_j(1)) / 2 with c_K = eps^(1/(2K+1)) is the step below which
+    every segment moves by less than c_K of its length, so that the quadrature is exact to
+    round-off of the energy anyway; there the correction fades out as |dd|, smoothly, with
+    derivatives of the K-point average's size (at rest, the Jacobians a controller takes of the
+    step would otherwise be round-off divided by |dd|^2). V(1) - V(0) is taken without
+    cancellation, k/2 (L_0 + L_1 - 2 S_0) (L_1 - L_0) with
+    s_j(1) - s_j(0) = (2 d_j(0) + dd_j) . dd_j / (s_j(0) + s_j(1)): its round-off is
+    eps |G| |dd|, not eps V. One (x, y) per segment."""
     totals = averaged_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
     sums, increments, projected, squared = [], [], [], []
     for j, start, change, total in zip(js, starts, changes, totals):
@@ -254,9 +257,10 @@ def exact_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
     energy_change = defs.define(
         f"spring{i}_dV", number(spring.stiffness) / 2
         * (length_sum - 2 * number(spring.rest_length)) * sp.Add(*increments))
+    shortest = sp.Min(*sums) if len(sums) > 1 else sums[0]
     smallest = sp.Float(exact_gradient_scale(quadrature) ** 2 / 4)
     ratio = defs.define(f"spring{i}_correction", (energy_change - sp.Add(*projected))
-                        / sp.Max(sp.Add(*squared), smallest * length_sum ** 2))
+                        / sp.Max(sp.Add(*squared), smallest * shortest ** 2))
     return [add(total, scale(ratio, change)) for total, change in zip(totals, changes)]
 
 

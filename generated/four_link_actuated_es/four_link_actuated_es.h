@@ -219,7 +219,7 @@ typedef struct {
     const double *arg[4];
     double *res[4];
     long long int iw[1];
-    double w[477];
+    double w[479];
     int ints[CHAINGEN_WORKSPACE_INTS(FOUR_LINK_ACTUATED_ES_NZ, 0)];
     double doubles[CHAINGEN_WORKSPACE_DOUBLES(FOUR_LINK_ACTUATED_ES_N_JOINTS, FOUR_LINK_ACTUATED_ES_NX, FOUR_LINK_ACTUATED_ES_NZ,
                                               FOUR_LINK_ACTUATED_ES_NU, FOUR_LINK_ACTUATED_ES_NP, 0, 0, 40, 1, 0, 3, 4)];

@@ -202,7 +202,7 @@ typedef struct {
     const double *arg[3];
     double *res[4];
     long long int iw[1];
-    double w[329];
+    double w[333];
     int ints[CHAINGEN_WORKSPACE_INTS(THREE_LINK_MULTI_ES_NZ, 0)];
     double doubles[CHAINGEN_WORKSPACE_DOUBLES(THREE_LINK_MULTI_ES_N_JOINTS, THREE_LINK_MULTI_ES_NX, THREE_LINK_MULTI_ES_NZ,
                                               THREE_LINK_MULTI_ES_NU, THREE_LINK_MULTI_ES_NP, 0, 0, 0, 1, 0, 3, 3)];
