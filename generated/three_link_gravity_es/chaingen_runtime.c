@@ -889,7 +889,7 @@ static double cg_residual_norm(const chaingen_model *table, const cg_solver *c)
  * is far from the root, and its Jacobian serves the chord no better than the last one. */
 static int cg_newton(const chaingen_model *table, const cg_solver *c, const double *x0,
                      const double *u, const double *p, double dt, const chaingen_options *options,
-                     int warm, int *iterations, int *diverged)
+                     int warm, int *iterations, int *diverged, int *cold)
 {
     const chaingen_model *const model = CG_MODEL(table);
     chaingen_workspace_scalars *s = c->s;
@@ -912,6 +912,7 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     dz = c->dz;
     residual = c->residual;
     *diverged = 0;
+    *cold = 0;
     status = cg_first_guess(model, c, x0, dt, warm);
     /* The Jacobian kept from the last solve: simplified Newton's, unless dt changed or the last
      * solve replaced one within it; the chord's across steps, when this step continues the last
@@ -928,6 +929,11 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
         double residual_norm, update_norm = 0.0;
         int here = !s->factors_valid;   /* dF/dz evaluated at this iterate */
         ++iteration;
+        if (iteration == 1) {
+            /* The first guess is the predictor and dF/dz is evaluated there: a retry from the
+             * predictor with a fresh Jacobian would repeat this solve. */
+            *cold = here && !(s->chained && s->warm_choice != 1);
+        }
         if (cg_newton_evaluate(model, c, x0, u, p, dt, here)) {
             status = CHAINGEN_EVALUATION_FAILED;
             break;
@@ -1056,7 +1062,7 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
 
 /* Newton from the first guess; a warm start that fails is retried once from the scheme's
  * predictor with a fresh Jacobian (an extrapolated guess can be poor where the motion changes
- * abruptly), and a kept Jacobian that fails is replaced by full Newton from the predictor
+ * abruptly; not when the first solve was that one already), and a kept Jacobian that fails is replaced by full Newton from the predictor
  * (unless simplified Newton gave up on a diverging Newton step, newton()): a step does at most
  * 3 max_iterations linear solves. options NULL: the model's defaults. */
 static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const double *x0,
@@ -1065,7 +1071,7 @@ static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const 
 {
     const chaingen_model *const model = CG_MODEL(table);
     chaingen_options defaults;
-    int status, spent = 0, retried = 0, diverged = 0;
+    int status, spent = 0, retried = 0, diverged = 0, cold = 0;
     if (!x0 || (!u && model->nu > 0) || (!p && model->np > 0) || !(dt != 0.0) || !isfinite(dt)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
@@ -1078,10 +1084,13 @@ static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const 
         || !(options->energy_tol >= 0.0)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
-    status = cg_newton(model, c, x0, u, p, dt, options, options->warm_start, &spent, &diverged);
-    if (status != CHAINGEN_OK && c->s->chained) {
+    status = cg_newton(model, c, x0, u, p, dt, options, options->warm_start, &spent, &diverged,
+                       &cold);
+    /* A continuation step whose first solve started from the predictor with a Jacobian there
+     * is not retried: the retry would repeat it, iterate for iterate. */
+    if (status != CHAINGEN_OK && c->s->chained && !cold) {
         c->s->factors_valid = 0;
-        status = cg_newton(model, c, x0, u, p, dt, options, 0, &retried, &diverged);
+        status = cg_newton(model, c, x0, u, p, dt, options, 0, &retried, &diverged, &cold);
         spent += retried;
     }
     /* Simplified Newton that diverged took Newton steps already (newton()): full Newton from
@@ -1091,7 +1100,7 @@ static int cg_solve_step(const chaingen_model *table, const cg_solver *c, const 
         chaingen_options full = *options;
         full.reuse_jacobian = CHAINGEN_JACOBIAN_EVERY_ITERATE;
         c->s->factors_valid = 0;
-        status = cg_newton(model, c, x0, u, p, dt, &full, 0, &retried, &diverged);
+        status = cg_newton(model, c, x0, u, p, dt, &full, 0, &retried, &diverged, &cold);
         spent += retried;
         if (status == CHAINGEN_OK) {
             ++c->s->step_fallbacks;
