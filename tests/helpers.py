@@ -86,3 +86,18 @@ def require_tools(*tools: str) -> None:
     if os.environ.get("CHAINGEN_REQUIRE_TOOLS") == "1":
         pytest.fail(f"{message} (CHAINGEN_REQUIRE_TOOLS=1)", pytrace=False)
     pytest.skip(message)
+
+
+def require_module(module: str, extra: str):
+    """The imported module, or skip the calling test where it is missing; fail instead when
+    CHAINGEN_REQUIRE_TOOLS=1 (as .ci/run sets it, installing the extra), so CI cannot pass by
+    skipping."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        message = f"{module} is not installed (the `{extra}` extra: pip install -e '.[{extra}]')"
+        if os.environ.get("CHAINGEN_REQUIRE_TOOLS") == "1":
+            pytest.fail(f"{message} (CHAINGEN_REQUIRE_TOOLS=1)", pytrace=False)
+        pytest.skip(message)

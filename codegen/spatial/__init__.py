@@ -1,0 +1,10 @@
+"""Spatial scenes (issue 33, in progress): serial chains of revolute joints in 3D with URDF's
+conventions, their numeric kinematics and dynamics (the reference of the spatial schemes), and
+the import of robots from URDF files.
+
+- values: the frozen SpatialScene, SpatialLink, SpatialJoint, SpatialSpring and RoutePoint;
+- dynamics: numpy poses, mass matrix, generalized gravity and spring forces, energies.
+"""
+from .values import RoutePoint, SpatialJoint, SpatialLink, SpatialScene, SpatialSpring
+
+__all__ = ["RoutePoint", "SpatialJoint", "SpatialLink", "SpatialScene", "SpatialSpring"]

@@ -1,0 +1,86 @@
+"""The values of a spatial scene: frozen dataclasses of validated numbers.
+
+A spatial scene is a serial chain of n rigid links on revolute joints in 3D, described with
+URDF's conventions (docs/scene-format.md, "Spatial scenes"): joint i carries link i on link
+i - 1 (link 0 is the base, fixed in the world); its origin `xyz`, `rpy` is in link i - 1's
+frame, its unit `axis` in its own frame, and link i's frame is the joint frame turned by the
+joint angle q_i about that axis. Each link has its mass, its centre of mass `com` and its
+inertia tensor about the centre of mass, both in its own frame. Springs are linear elastic
+elements routed through points fixed on links (MuJoCo's spatial tendons through sites); the
+length of a spring is the sum of its straight segments.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+Vector = tuple[float, float, float]
+
+#: The order of a link's inertia entries in a scene file: URDF's ixx iyy izz ixy ixz iyz.
+INERTIA_KEYS = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
+
+
+@dataclass(frozen=True)
+class SpatialJoint:
+    """Revolute joint i: its origin in link i - 1's frame and its unit axis in its own frame."""
+
+    xyz: Vector               # m, origin of the joint frame in the parent's frame
+    rpy: Vector               # rad, roll, pitch, yaw (fixed axes x, y, z: R = Rz Ry Rx)
+    axis: Vector              # unit vector, in the joint frame
+
+
+@dataclass(frozen=True)
+class SpatialLink:
+    """Link i (1-based) and the joint i that carries it (SI units)."""
+
+    mass: float               # kg, > 0
+    com: Vector               # m, centre of mass in the link's frame
+    inertia: tuple[float, float, float, float, float, float]   # kg m^2, INERTIA_KEYS' order,
+    #                           about the centre of mass, link frame; positive semi-definite
+    joint: SpatialJoint
+    damping: float = 0.0      # N m s/rad, viscous damping of joint i, >= 0
+
+    def inertia_matrix(self) -> tuple[Vector, Vector, Vector]:
+        """The symmetric 3 x 3 inertia tensor about the centre of mass, link frame."""
+        ixx, iyy, izz, ixy, ixz, iyz = self.inertia
+        return ((ixx, ixy, ixz), (ixy, iyy, iyz), (ixz, iyz, izz))
+
+
+@dataclass(frozen=True)
+class RoutePoint:
+    """A point a spring passes through: fixed on `link` (0 = the base), `point` in its frame."""
+
+    link: int
+    point: Vector
+
+
+@dataclass(frozen=True)
+class SpatialSpring:
+    """A linear spring through two or more route points: one elastic element whose length is
+    the sum of the straight segments between consecutive points."""
+
+    route: tuple[RoutePoint, ...]
+    stiffness: float          # N/m, >= 0
+    rest_length: float        # m, >= 0
+
+    @property
+    def joints(self) -> tuple[int, ...]:
+        """The joints (1-based) the spring spans: those between its lowest and highest link."""
+        links = [point.link for point in self.route]
+        return tuple(range(min(links) + 1, max(links) + 1))
+
+
+@dataclass(frozen=True)
+class SpatialScene:
+    """A spatial chain: what the spatial reader makes of a scene file with joint tables."""
+
+    name: str
+    gravity: Vector                           # m/s^2, in the world (base) frame
+    links: tuple[SpatialLink, ...]
+    springs: tuple[SpatialSpring, ...]
+    initial_angles: tuple[float, ...]         # rad, one per joint
+    initial_velocities: tuple[float, ...]     # rad/s, one per joint
+    actuated: tuple[int, ...] = ()            # 1-based joints with a torque input, ascending
+
+    @property
+    def n(self) -> int:
+        return len(self.links)
