@@ -46,8 +46,10 @@ def test_the_test_extra_installs_no_compiled_peer():
 
 
 def test_ci_installs_and_requires_the_peers():
+    """CI installs the compiled peers and the robots extra (Pinocchio and example-robot-data,
+    whose tests fail there rather than skip)."""
     ci = (ROOT / ".ci" / "run").read_text()
-    assert "pip install --quiet -e '.[test,peers]'" in ci
+    assert "pip install --quiet -e '.[test,peers,robots]'" in ci
     assert "export CHAINGEN_REQUIRE_TOOLS=1" in ci
     assert re.search(r"apt-get install [^\n]*gfortran", ci)
 
