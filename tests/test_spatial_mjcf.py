@@ -19,7 +19,10 @@ from scipy.integrate import solve_ivp
 from test_spatial_dynamics import pinocchio_model, random_scene
 
 from chaingen.reference.spatial_mjcf import spatial_mjcf_from_scene
-from chaingen.reference.spatial_mujoco import simulate_spatial_mujoco
+from chaingen.reference.spatial_mujoco import (
+    simulate_spatial_mujoco,
+    spatial_mujoco_model_and_data,
+)
 from chaingen.spatial import dynamics
 from chaingen.spatial.values import RoutePoint, SpatialJoint, SpatialLink, SpatialSpring
 
@@ -163,6 +166,57 @@ def test_a_link_mujoco_refuses_is_named(change, message):
     # A body on the boundary (a thin plate: A + B = C) is a rigid body; MuJoCo takes it.
     links[1] = dataclasses.replace(scene.links[1], inertia=(1.0, 1.0, 2.0, 0.0, 0.0, 0.0))
     loaded(dataclasses.replace(scene, links=tuple(links)))
+
+
+def test_a_thin_plate_is_taken_or_refused_in_one_line():
+    """A thin plate's principal moments are on the boundary A + B = C. Turned in the link
+    frame, MuJoCo's own diagonalization decides by round-off whether it takes the body: the
+    MJCF is written either way, and a refusal reaches the caller of spatial_mujoco as one
+    line naming the body; a body MuJoCo takes has the scene's mass matrix."""
+    scene = via_point_scene(6, 2, conservative=True)
+    outcomes = set()
+    for seed in range(40):
+        turn, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+        plate = turn @ np.diag([0.3, 0.7, 1.0]) @ turn.T
+        link = dataclasses.replace(scene.links[1], inertia=(
+            plate[0, 0], plate[1, 1], plate[2, 2], plate[0, 1], plate[0, 2], plate[1, 2]))
+        plated = dataclasses.replace(scene, links=(scene.links[0], link))
+        spatial_mjcf_from_scene(plated, dt=1e-3)
+        try:
+            model, data = spatial_mujoco_model_and_data(plated, dt=1e-3)
+        except ValueError as error:
+            assert str(error).startswith(
+                "random: MuJoCo refuses the model: inertia must satisfy A + B >= C")
+            assert "(Element name 'link2'" in str(error) and "\n" not in str(error)
+            outcomes.add("refused")
+            continue
+        mass = np.zeros((2, 2))
+        mujoco.mj_fullM(model, data, mass)
+        assert relative_error(mass, dynamics.mass_matrix(scene=plated,
+                                                         q=plated.initial_angles)) <= 1e-10
+        outcomes.add("taken")
+    print(f"a turned thin plate, 40 turns: {sorted(outcomes)}")
+
+
+def test_export_adds_only_what_a_user_sees():
+    """export=True: massless capsules without contacts, and the initial state as keyframe 0;
+    the masses, inertias and the mass matrix are those of the reference model."""
+    scene = via_point_scene(8, 5)
+    reference, _ = loaded(scene)
+    model = mujoco.MjModel.from_xml_string(spatial_mjcf_from_scene(scene, dt=1e-3,
+                                                                   export=True))
+    assert model.ngeom == 5 and model.nkey == 1
+    assert all(model.geom_contype == 0) and all(model.geom_conaffinity == 0)
+    np.testing.assert_array_equal(model.body_mass, reference.body_mass)
+    np.testing.assert_array_equal(model.body_inertia, reference.body_inertia)
+    np.testing.assert_array_equal(model.key_qpos[0], scene.initial_angles)
+    np.testing.assert_array_equal(model.key_qvel[0], scene.initial_velocities)
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    mujoco.mj_forward(model, data)
+    mass = np.zeros((5, 5))
+    mujoco.mj_fullM(model, data, mass)
+    assert relative_error(mass, dynamics.mass_matrix(scene, scene.initial_angles)) <= 1e-10
 
 
 @pytest.mark.parametrize("options, message", [

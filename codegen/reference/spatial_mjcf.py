@@ -59,7 +59,11 @@ def _check_representable(scene: SpatialScene) -> None:
     """Raise ValueError naming the first link MuJoCo's compiler would refuse: a moving body
     needs mass and principal moments of inertia larger than mjMINVAL, and its principal
     moments must satisfy the triangle inequality A + B >= C (true of every rigid body, but a
-    scene only promises a positive semi-definite tensor)."""
+    scene only promises a positive semi-definite tensor).
+
+    A body on the boundary (a thin plate, A + B = C) passes here: MuJoCo diagonalizes the
+    tensor itself and compares its own moments exactly, so whether it takes such a body turns
+    on its round-off (spatial_mujoco reports a refusal in one line)."""
     for i, link in enumerate(scene.links):
         if not link.mass > MUJOCO_MINIMUM_INERTIA:
             raise ValueError(
@@ -72,7 +76,7 @@ def _check_representable(scene: SpatialScene) -> None:
                 f"moments of inertia {_vector(*moments)} kg m^2 (a moving body needs each "
                 f"> {MUJOCO_MINIMUM_INERTIA!r} kg m^2); give it a positive definite inertia "
                 f"to compare with MuJoCo")
-        if moments[0] + moments[1] < moments[2]:
+        if moments[0] + moments[1] < moments[2] * (1.0 - 1e-12):
             raise ValueError(
                 f"links[{i}].inertia: MuJoCo cannot represent link {i + 1} with principal "
                 f"moments of inertia {_vector(*moments)} kg m^2: no rigid body has two "
