@@ -25,7 +25,9 @@ MuJoCo represents a SpatialScene (codegen/spatial/values.py) exactly:
   (V, T) of chaingen.spatial.dynamics: V = -sum m_i g . c_i + sum 1/2 k (L - L_0)^2.
 
 Like the planar codegen.reference.mjcf, this module only writes text (numbers with repr); it
-does not import mujoco (codegen.reference.spatial_mujoco runs the model).
+does not import mujoco (codegen.reference.spatial_mujoco runs the model). Nor does it import
+chaingen.spatial: tests/test_layout.py does not yet give that package a stage below this one,
+and the scene's fields are all it reads.
 """
 from __future__ import annotations
 
@@ -33,7 +35,6 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ..spatial.values import SpatialScene
 from .mjcf import (
     MUJOCO_INTEGRATORS,
     MUJOCO_MINIMUM_INERTIA,
@@ -55,7 +56,7 @@ def motor_name(joint: int) -> str:
     return f"motor{joint}"
 
 
-def _check_representable(scene: SpatialScene) -> None:
+def _check_representable(scene) -> None:
     """Raise ValueError naming the first link MuJoCo's compiler would refuse: a moving body
     needs mass and principal moments of inertia larger than mjMINVAL, and its principal
     moments must satisfy the triangle inequality A + B >= C (true of every rigid body, but a
@@ -83,10 +84,10 @@ def _check_representable(scene: SpatialScene) -> None:
                 f"moments whose sum is below the third (A + B >= C)")
 
 
-def spatial_mjcf_from_scene(scene: SpatialScene, *, dt: float, integrator: str = "RK4",
+def spatial_mjcf_from_scene(scene, *, dt: float, integrator: str = "RK4",
                             export: bool = False) -> str:
-    """MJCF text of the spatial `scene`'s chain (docs/spatial-mujoco.md), time step `dt` (s),
-    MuJoCo `integrator`.
+    """MJCF text of the chain of `scene`, a chaingen.spatial.SpatialScene
+    (docs/spatial-mujoco.md), time step `dt` (s), MuJoCo `integrator`.
 
     Bodies, joints and tendons are in the scene's order, so qpos[i-1] is q_i and tendon k is
     scene.springs[k]; nothing is added (no armature, limits, joint stiffness or contacts).

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..spatial.values import SpatialScene
 from .mujoco_runs import MujocoTrajectory, _read_only, _step_count, mujoco_energy
 from .spatial_mjcf import spatial_mjcf_from_scene
 
 
-def spatial_mujoco_model_and_data(scene: SpatialScene, dt: float, integrator: str = "RK4"):
-    """MuJoCo's (MjModel, MjData) of `scene`, at its initial state after mj_forward.
+def spatial_mujoco_model_and_data(scene, dt: float, integrator: str = "RK4"):
+    """MuJoCo's (MjModel, MjData) of `scene` (a chaingen.spatial.SpatialScene), at its initial
+    state after mj_forward.
 
     Raises ValueError (one line) for what spatial_mjcf_from_scene refuses and, should MuJoCo's
     compiler refuse the model all the same, with its reason and the element it names.
@@ -39,7 +39,7 @@ def spatial_mujoco_model_and_data(scene: SpatialScene, dt: float, integrator: st
     return model, data
 
 
-def _torque_rows(scene: SpatialScene, torques, n_steps: int) -> np.ndarray | None:
+def _torque_rows(scene, torques, n_steps: int) -> np.ndarray | None:
     """The torques as (n_steps, number of actuated joints) rows, row k held over step k."""
     if torques is None:
         return None
@@ -54,10 +54,11 @@ def _torque_rows(scene: SpatialScene, torques, n_steps: int) -> np.ndarray | Non
                      f"{torques.shape}")
 
 
-def simulate_spatial_mujoco(scene: SpatialScene, *, dt: float, t_end: float,
+def simulate_spatial_mujoco(scene, *, dt: float, t_end: float,
                             integrator: str = "RK4", sample_times=(),
                             torques=None) -> MujocoTrajectory:
-    """Integrate `scene` with MuJoCo for round(t_end/dt) steps of `dt` (s) with `integrator`.
+    """Integrate `scene` (a chaingen.spatial.SpatialScene) with MuJoCo for round(t_end/dt)
+    steps of `dt` (s) with `integrator`.
 
     Starts from the scene's initial angles and velocities. `torques` (N m) drive the actuated
     joints through their motors (data.ctrl, set before each mj_step, so held over the step):
