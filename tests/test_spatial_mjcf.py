@@ -373,6 +373,7 @@ def test_real_arms_have_pinocchios_dynamics_in_mujoco(urdf_name, n):
 
 
 @pytest.mark.parametrize("options, message", [
+    ({"t_end": 0.01, "dt": 0.0}, "dt: must be > 0 and finite, got 0.0"),
     ({"t_end": 0.0105}, "t_end: 0.0105 s is not a whole number of steps of dt = 0.001 s"),
     ({"t_end": 0.01, "sample_times": (0.02,)}, "sample_times[0]: 0.02 s is after t_end"),
     ({"t_end": 0.01, "torques": [1.0, 2.0, 3.0]},
@@ -382,5 +383,5 @@ def test_real_arms_have_pinocchios_dynamics_in_mujoco(urdf_name, n):
 def test_bad_run_settings_are_refused_in_one_line(options, message):
     scene = dataclasses.replace(via_point_scene(1, 3), actuated=(1, 3))
     with pytest.raises(ValueError) as error:
-        simulate_spatial_mujoco(scene, dt=1e-3, **options)
+        simulate_spatial_mujoco(scene, **{"dt": 1e-3, **options})
     assert str(error.value).startswith(message) and "\n" not in str(error.value)

@@ -35,15 +35,17 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .mjcf import (
-    MUJOCO_INTEGRATORS,
-    MUJOCO_MINIMUM_INERTIA,
-    _number,
-    _vector,
-    body_name,
-    joint_name,
-    tendon_name,
-)
+from .mjcf import MUJOCO_INTEGRATORS, MUJOCO_MINIMUM_INERTIA, body_name, joint_name, tendon_name
+
+
+def _number(x: float) -> str:
+    """A float as the shortest text that round-trips (repr), never rounded (as the planar
+    module writes its numbers)."""
+    return repr(float(x))
+
+
+def _vector(*xs: float) -> str:
+    return " ".join(_number(x) for x in xs)
 
 
 def route_site(spring_index: int, point_index: int) -> str:

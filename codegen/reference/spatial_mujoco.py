@@ -11,8 +11,25 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mujoco_runs import MujocoTrajectory, _read_only, _step_count, mujoco_energy
+from .mujoco_runs import MujocoTrajectory, mujoco_energy
 from .spatial_mjcf import spatial_mjcf_from_scene
+
+
+def _step_count(t: float, dt: float, what: str) -> int:
+    """round(t/dt), refusing a t that is not a whole number of steps (to 1e-6 of a step), as
+    the planar reference does."""
+    if not (t >= 0.0 and t < float("inf")):
+        raise ValueError(f"{what}: must be >= 0 and finite, got {t!r}")
+    steps = round(t / dt)
+    if abs(steps * dt - t) > 1e-6 * dt:
+        raise ValueError(f"{what}: {t!r} s is not a whole number of steps of dt = {dt!r} s")
+    return steps
+
+
+def _read_only(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
 
 
 def spatial_mujoco_model_and_data(scene, dt: float, integrator: str = "RK4"):
@@ -70,6 +87,8 @@ def simulate_spatial_mujoco(scene, *, dt: float, t_end: float,
     """
     import mujoco
 
+    if not (dt > 0.0 and dt < float("inf")):
+        raise ValueError(f"dt: must be > 0 and finite, got {dt!r}")
     n_steps = _step_count(t_end, dt, "t_end")
     sample_times = tuple(float(t) for t in sample_times)
     steps = tuple(_step_count(t, dt, f"sample_times[{k}]") for k, t in enumerate(sample_times))
