@@ -77,6 +77,17 @@ def loaded(scene, dt: float = 1e-3, integrator: str = "RK4"):
     return model, mujoco.MjData(model)
 
 
+def full_mass_matrix(model, data) -> np.ndarray:
+    """MuJoCo's M(q) after mj_forward, dense. mj_fullM takes (model, data, M) since MuJoCo 4
+    and (model, M, qM) before (pyproject admits mujoco >= 3.1)."""
+    mass = np.zeros((model.nv, model.nv))
+    try:
+        mujoco.mj_fullM(model, data, mass)
+    except TypeError:
+        mujoco.mj_fullM(model, mass, data.qM)
+    return mass
+
+
 def relative_error(ours, theirs) -> float:
     ours, theirs = np.asarray(ours, dtype=float), np.asarray(theirs, dtype=float)
     return float(np.abs(ours - theirs).max() / max(np.abs(theirs).max(), 1e-300))
@@ -103,8 +114,7 @@ def test_mujoco_has_the_dynamics_of_the_scene(seed, n):
              for j in range(len(s.route))]
     assert np.abs(np.array([data.site(name).xpos for name in names]) - sites).max() <= 1e-12
 
-    mass = np.zeros((n, n))
-    mujoco.mj_fullM(model, data, mass)
+    mass = full_mass_matrix(model, data)
     assert relative_error(mass, dynamics.mass_matrix(scene, q)) <= 1e-10
     assert relative_error(data.qfrc_bias, dynamics.gravity_torques(scene, q)) <= 1e-10
     assert relative_error(data.ten_length, dynamics.spring_lengths(scene, q)) <= 1e-10
@@ -190,8 +200,7 @@ def test_a_thin_plate_is_taken_or_refused_in_one_line():
             assert "(Element name 'link2'" in str(error) and "\n" not in str(error)
             outcomes.add("refused")
             continue
-        mass = np.zeros((2, 2))
-        mujoco.mj_fullM(model, data, mass)
+        mass = full_mass_matrix(model, data)
         assert relative_error(mass, dynamics.mass_matrix(scene=plated,
                                                          q=plated.initial_angles)) <= 1e-10
         outcomes.add("taken")
@@ -214,8 +223,7 @@ def test_export_adds_only_what_a_user_sees():
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)
     mujoco.mj_forward(model, data)
-    mass = np.zeros((5, 5))
-    mujoco.mj_fullM(model, data, mass)
+    mass = full_mass_matrix(model, data)
     assert relative_error(mass, dynamics.mass_matrix(scene, scene.initial_angles)) <= 1e-10
 
 
@@ -363,8 +371,7 @@ def test_real_arms_have_pinocchios_dynamics_in_mujoco(urdf_name, n):
         q = rng.uniform(-np.pi, np.pi, n)
         data.qpos[:] = q
         mujoco.mj_forward(mujoco_model, data)
-        mass = np.zeros((n, n))
-        mujoco.mj_fullM(mujoco_model, data, mass)
+        mass = full_mass_matrix(mujoco_model, data)
         expected = pin.crba(model, pin_data, q)
         expected = np.triu(expected) + np.triu(expected, 1).T
         assert relative_error(mass, expected) <= 1e-10
