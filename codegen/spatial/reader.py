@@ -150,9 +150,10 @@ class SpatialSceneReader(SceneReader):
                   f"{', '.join(allowed)})", value)
 
     # -- value checks ---------------------------------------------------------------------
-    def vector(self, path: str, value: Any, meaning: str) -> tuple[float, float, float]:
-        """Three finite numbers (x, y, z)."""
-        x, y, z = self.number_list(path, value, meaning, 3, "x, y, z")
+    def vector(self, path: str, value: Any, meaning: str,
+               parts: str = "x, y, z") -> tuple[float, float, float]:
+        """Three finite numbers (`parts` names them in a message)."""
+        x, y, z = self.number_list(path, value, meaning, 3, parts)
         return x, y, z
 
     def inertia(self, path: str, value: Any, meaning: str) -> tuple[float, ...]:
@@ -169,7 +170,7 @@ class SpatialSceneReader(SceneReader):
         tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]) / scale
         moments = np.linalg.eigvalsh(tensor)
         tolerance = INERTIA_RELATIVE_TOLERANCE
-        shown = ", ".join(f"{moment * scale:.6g}" for moment in moments)
+        shown = ", ".join(f"{float(moment) * scale:.6g}" for moment in moments)
         if moments[0] < -tolerance:
             self.fail(path, f"must be a physically valid inertia tensor ({meaning}): its "
                             f"principal moments ({shown}) must be >= 0", value)
@@ -217,7 +218,8 @@ class SpatialSceneReader(SceneReader):
                                                f"{'the base' if i == 1 else f'link {i - 1}'}"
                                                "'s frame")
             elif key == "rpy":
-                rpy = self.vector(where, item, f"roll, pitch, yaw in rad of joint {i}'s frame")
+                rpy = self.vector(where, item, f"rad, joint {i}'s frame turned about the fixed "
+                                               "x, y, z axes", "roll, pitch, yaw")
             elif key == "axis":
                 axis = self.axis(where, item, f"axis of joint {i}, in its frame")
             else:
