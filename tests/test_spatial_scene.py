@@ -153,6 +153,14 @@ def test_defaults_apply():
     assert scene.initial_angles == (0.0,) and scene.initial_velocities == (0.0,)
 
 
+def test_a_joint_may_be_its_own_table():
+    """[links.joint] below a [[links]] table is the same joint as the inline table."""
+    text = MINIMAL.replace("joint = { axis = [0, 0, 1] }\n", "") + \
+        "[links.joint]\naxis = [0, 0, 1]\nxyz = [0, 0, 0]\n"
+    assert parse_spatial_scene(text, "one_link.toml") == parse_spatial_scene(MINIMAL,
+                                                                            "one_link.toml")
+
+
 def test_load_spatial_scene_uses_the_file_stem_and_finds_shipped_scenes(tmp_path):
     path = tmp_path / "arm_1.toml"
     path.write_text(MINIMAL, encoding="utf-8")

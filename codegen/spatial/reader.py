@@ -83,7 +83,9 @@ def _plural(count: int, word: str) -> str:
 class SpatialSceneReader(SceneReader):
     """Validates one parsed spatial scene document; `fail` raises the one-line SceneError."""
 
-    def read(self, document: dict[str, Any]) -> SpatialScene:  # type: ignore[override]
+    def read(self, document: dict[str, Any]) -> SpatialScene:
+        """The SpatialScene of a parsed document; the first violation in the file's order of
+        keys fails (a planar file as a whole, first)."""
         self.refuse_planar(document)
         links_value = document.get("links")
         if isinstance(links_value, list):
@@ -181,7 +183,7 @@ class SpatialSceneReader(SceneReader):
         return entries
 
     # -- sections -------------------------------------------------------------------------
-    def link(self, index: int, table: dict[str, Any]) -> SpatialLink:  # type: ignore[override]
+    def link(self, index: int, table: dict[str, Any]) -> SpatialLink:
         path = f"links[{index}]"
         i = index + 1
         fields: dict[str, Any] = {"damping": 0.0}
@@ -235,7 +237,7 @@ class SpatialSceneReader(SceneReader):
             self.fail(path, f"must not be zero ({meaning})", value)
         return x / norm, y / norm, z / norm
 
-    def spring(self, index: int, table: dict[str, Any]) -> SpatialSpring:  # type: ignore[override]
+    def spring(self, index: int, table: dict[str, Any]) -> SpatialSpring:
         path = f"springs[{index}]"
         found: dict[str, Any] = {}
         for key, item in table.items():
@@ -296,7 +298,7 @@ class SpatialSceneReader(SceneReader):
                 self.unknown_key("initial", key, item, _INITIAL_KEYS)
         return angles, velocities
 
-    def refuse_zero_length_segments(self, scene: SpatialScene) -> None:  # type: ignore[override]
+    def refuse_zero_length_segments(self, scene: SpatialScene) -> None:
         """Refuse a spring segment of (numerically) zero length at the initial angles, where
         the gradient of its length is undefined (as the planar reader does), and a route whose
         length is beyond a double's range there.
