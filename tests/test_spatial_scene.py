@@ -196,10 +196,10 @@ def test_spatial_three_link_has_what_it_ships_for():
 REFUSALS = [
     ('mass zero', 'mass = 2.0',
      'mass = 0.0',
-     'links[0].mass: must be > 0 (kg, link 1), got 0.0'),
+     'links[0].mass: must be > 0 (mass in kg, link 1), got 0.0'),
     ('mass not a number', 'mass = 1.5',
      'mass = "heavy"',
-     'links[1].mass: must be a number (kg, link 2), not a string, got "heavy"'),
+     'links[1].mass: must be a number (mass in kg, link 2), not a string, got "heavy"'),
     ('com length', 'com = [0.12, 0.0, -0.01]',
      'com = [0.12, 0.0]',
      'links[1].com: must have 3 entries (x, y, z), not 2, got [0.12, 0.0]'),
@@ -262,7 +262,7 @@ REFUSALS = [
      ' damping), got 0.3'),
     ('damping negative', 'damping = 0.1',
      'damping = -0.1',
-     'links[0].damping: must be >= 0 (N m s/rad, joint 1), got -0.1'),
+     'links[0].damping: must be >= 0 (damping in N m s/rad, joint 1), got -0.1'),
     ('gravity length', 'gravity = [0.5, 0.0, -9.81]',
      'gravity = [0.5, -9.81]',
      'gravity: must have 3 entries (x, y, z), not 2, got [0.5, -9.81]'),
@@ -322,7 +322,7 @@ REFUSALS = [
      'springs[0].stiffness: must be > 0 (k in N/m), got 0.0'),
     ('rest length negative', 'rest_length = 0.1',
      'rest_length = -0.1',
-     'springs[0].rest_length: must be >= 0 (in m, over all segments), got -0.1'),
+     'springs[0].rest_length: must be >= 0 (L_0 in m, over all segments), got -0.1'),
     ('spring missing route', 'route = [[0, 0.05, 0.0, 0.05], [1, 0.05, 0.0, 0.2]]\n',
      '',
      'springs[0].route: missing: required for every spring'),
@@ -380,7 +380,7 @@ def test_links_missing_or_empty():
 @pytest.mark.parametrize("literal", ["nan", "inf", "-inf"])
 def test_non_finite_numbers_are_refused(literal):
     message = spatial_error(edited("mass = 1.5", f"mass = {literal}"))
-    assert message == f"{SOURCE}: links[1].mass: must be finite (kg, link 2), got {literal}"
+    assert message == f"{SOURCE}: links[1].mass: must be finite (mass in kg, link 2), got {literal}"
 
 
 def test_a_number_beyond_a_double_is_refused():

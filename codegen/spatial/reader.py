@@ -190,7 +190,7 @@ class SpatialSceneReader(SceneReader):
         for key, item in table.items():
             where = f"{path}.{key}"
             if key == "mass":
-                fields[key] = self.bounded(where, item, f"kg, link {i}")
+                fields[key] = self.bounded(where, item, f"mass in kg, link {i}")
             elif key == "com":
                 fields[key] = self.vector(where, item, f"centre of mass in m, link {i}'s frame")
             elif key == "inertia":
@@ -199,7 +199,7 @@ class SpatialSceneReader(SceneReader):
             elif key == "joint":
                 fields[key] = self.joint(where, item, i)
             elif key == "damping":
-                fields[key] = self.bounded(where, item, f"N m s/rad, joint {i}")
+                fields[key] = self.bounded(where, item, f"damping in N m s/rad, joint {i}")
             else:
                 self.unknown_key(path, key, item, _LINK_KEYS)
         for key in _LINK_REQUIRED:
@@ -247,7 +247,7 @@ class SpatialSceneReader(SceneReader):
             elif key == "stiffness":
                 found[key] = self.bounded(where, item, "k in N/m")
             elif key == "rest_length":
-                found[key] = self.bounded(where, item, "in m, over all segments")
+                found[key] = self.bounded(where, item, "L_0 in m, over all segments")
             else:
                 self.unknown_key(path, key, item, _SPRING_KEYS)
         for key in _SPRING_KEYS:
