@@ -5,6 +5,7 @@ against the planar model. Fast: no compiler."""
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import replace
 from functools import cache
@@ -682,3 +683,40 @@ def test_mutations_load_or_raise_a_scene_error_naming_a_key_path(seed, data):
         return
     event("loaded")
     check_invariants(scene)
+
+
+# -- docs/scene-format.md, section 13 -----------------------------------------------------------
+
+DOC_VARIANTS = [   # the edits of scenes/spatial_three_link.toml behind section 13.5's examples
+    ("mass = 1.8", "mass = -1.8"),
+    ("axis = [0.0, 1.0, 0.2]", "axis = [0.0, 0.0, 0.0]"),
+    ("inertia = [0.00311114, 0.012999, 0.0134399, 0.0033765, 0.00296193, -0.000935878]",
+     "inertia = [0.003, 0.013, 0.018, 0.0, 0.0, 0.0]"),
+    ("[2, 0.15, 0.05, 0.04]", "[1, 0.15, 0.05, 0.04]"),
+    ("[3, 0.02, 0.15, 0.03]", "[4, 0.02, 0.15, 0.03]"),
+    ("damping = 0.05", "length = 0.3"),
+    ("route = [[0, 0.08, 0.0, 0.05], [1, 0.06, 0.04, 0.25]]",
+     "route = [[0, 0.0, 0.0, 0.2], [1, 0.0, 0.0, 0.1]]"),
+]
+
+
+def test_the_docs_show_the_spatial_scene_and_the_messages_the_reader_prints():
+    section = (ROOT / "docs" / "scene-format.md").read_text(encoding="utf-8") \
+        .split("## 13. Spatial scenes")[1]
+    shipped = (SCENES / "spatial_three_link.toml").read_text(encoding="utf-8")
+    assert section.split("```toml\n")[1].split("```")[0] == shipped[shipped.index("name = "):]
+    shown = [" ".join(block.split("\n")).strip() for block in
+             re.findall(r"```\n((?:arm|three_link_mono)\.toml: .*?)```", section, re.DOTALL)]
+    printed = []
+    for old, new in DOC_VARIANTS:
+        with pytest.raises(SceneError) as caught:
+            parse_spatial_scene(edited(old, new, shipped), "arm.toml")
+        printed.append(str(caught.value))
+    with pytest.raises(SceneError) as caught:
+        parse_spatial_scene((SCENES / "three_link_mono.toml").read_text(encoding="utf-8"),
+                            "three_link_mono.toml")
+    printed.append(str(caught.value))
+    with pytest.raises(SceneError) as caught:
+        parse_scene(shipped, "arm.toml", "arm")
+    printed.append(str(caught.value))
+    assert shown == printed
