@@ -390,12 +390,12 @@ def test_a_number_beyond_a_double_is_refused():
                               "of the range of a double, got 999")
 
 
-def test_route_points_beyond_a_double_are_refused():
+def test_a_segment_beyond_a_double_is_refused():
     text = edited("route = [[0, 0.05, 0.0, 0.05], [1, 0.05, 0.0, 0.2]]",
                   "route = [[0, 1e308, 0.0, 0.0], [1, -1e308, 0.0, 0.0]]")
     assert spatial_error(text) == (
-        f"{SOURCE}: springs[0].route: its points at the initial angles are beyond the range of "
-        "a double; write the chain in metres")
+        f"{SOURCE}: springs[0].route: a segment's length at the initial angles is beyond the "
+        "range of a double; write the chain in metres")
 
 
 def test_an_inertia_tensor_at_its_limits_is_accepted():

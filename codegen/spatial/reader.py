@@ -313,8 +313,8 @@ class SpatialSceneReader(SceneReader):
             segments = [np.linalg.norm(np.diff(points, axis=0), axis=1) for points in positions]
         for index, (spring, lengths) in enumerate(zip(scene.springs, segments)):
             if not np.all(np.isfinite(lengths)):
-                self.fail(f"springs[{index}].route", "its points at the initial angles are "
-                          "beyond the range of a double; write the chain in metres")
+                self.fail(f"springs[{index}].route", "a segment's length at the initial angles "
+                          "is beyond the range of a double; write the chain in metres")
             tolerance = ZERO_SEGMENT_RELATIVE_TOLERANCE * min(
                 largest, size + sum(math.hypot(*point.point) for point in spring.route))
             for k, length in enumerate(lengths):
