@@ -34,7 +34,7 @@ from chaingen.spatial import (
 from chaingen.spatial.reader import DEFAULT_GRAVITY
 from chaingen.symbolic.joint_model import angle_directions, joint_space_potential
 
-from helpers import chaingen_in_process
+from helpers import chaingen_in_process, require_module
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
@@ -720,3 +720,47 @@ def test_the_docs_show_the_spatial_scene_and_the_messages_the_reader_prints():
         parse_scene(shipped, "arm.toml", "arm")
     printed.append(str(caught.value))
     assert shown == printed
+
+
+# -- the reader's conventions against URDF's (Pinocchio's URDF parser) -------------------------
+
+def urdf_of(document: dict[str, Any]) -> str:
+    """The chain of a spatial scene document as URDF, written from the file's own numbers (the
+    axis as written, not normalised): what the reader's conventions claim to be."""
+    def triple(values) -> str:
+        return " ".join(repr(float(value)) for value in values)
+
+    parts = ['<robot name="chain">', '<link name="link0"/>']
+    for i, link in enumerate(document["links"], 1):
+        ixx, iyy, izz, ixy, ixz, iyz = (float(value) for value in link["inertia"])
+        joint = link["joint"]
+        parts += [
+            f'<link name="link{i}"><inertial><origin xyz="{triple(link["com"])}" rpy="0 0 0"/>'
+            f'<mass value="{float(link["mass"])!r}"/><inertia ixx="{ixx!r}" iyy="{iyy!r}" '
+            f'izz="{izz!r}" ixy="{ixy!r}" ixz="{ixz!r}" iyz="{iyz!r}"/></inertial></link>',
+            f'<joint name="joint{i}" type="revolute"><parent link="link{i - 1}"/>'
+            f'<child link="link{i}"/><origin xyz="{triple(joint.get("xyz", [0, 0, 0]))}" '
+            f'rpy="{triple(joint.get("rpy", [0, 0, 0]))}"/><axis xyz="{triple(joint["axis"])}"/>'
+            '<limit lower="-10" upper="10" effort="1" velocity="1"/></joint>']
+    return "\n".join(parts + ["</robot>"])
+
+
+@pytest.mark.parametrize("text", [VALID, (SCENES / "spatial_three_link.toml").read_text()],
+                         ids=["VALID", "spatial_three_link"])
+def test_the_reader_reads_a_chain_as_urdf_means_it(text):
+    """M(q) and the gravity torques of the scene the reader makes equal those of Pinocchio's
+    model of the same numbers written as URDF (origin xyz then rpy, axis in the joint frame,
+    inertia ixx iyy izz ixy ixz iyz about the COM in the link frame), at random angles."""
+    pin = require_module("pinocchio", "robots")
+    document = tomllib.loads(text)
+    scene = parse_spatial_scene(text, SOURCE)
+    model = pin.buildModelFromXML(urdf_of(document))
+    model.gravity.linear = np.array(scene.gravity)
+    data = model.createData()
+    rng = np.random.default_rng(33)
+    for q in rng.uniform(-np.pi, np.pi, size=(20, scene.n)):
+        np.testing.assert_allclose(dynamics.mass_matrix(scene, q), pin.crba(model, data, q),
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(dynamics.gravity_torques(scene, q),
+                                   pin.computeGeneralizedGravity(model, data, q),
+                                   rtol=0, atol=1e-11)
