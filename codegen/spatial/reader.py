@@ -2,10 +2,12 @@
 
 A spatial scene file is a scene file whose links carry `joint` tables (URDF's origin `xyz`,
 `rpy` and `axis`) and whose gravity is a vector; chaingen.scene.reader.spatial_marker tells
-the two kinds apart. The planar reader's machinery does the work here too (SceneReader: the
-one-line errors with key paths, numbers, lists, names, unknown keys with their did-you-mean,
-[actuation]), so both kinds of file are read by the same rules and fail in the same words,
-e.g. ``arm.toml: links[2].joint.axis: must not be zero, got [0.0, 0.0, 0.0]``.
+the two kinds apart (a joint table or a gravity vector makes a file spatial). The planar
+reader's machinery does the work here too (SceneReader: the one-line errors with key paths,
+numbers, lists, names, unknown keys with their did-you-mean, [actuation]), so both kinds of
+file are read by the same rules and fail in the same words, e.g.
+``arm.toml: links[1].joint.axis: must not be zero (axis of joint 2, in its frame), got [0.0,
+0.0, 0.0]``.
 """
 from __future__ import annotations
 
