@@ -42,7 +42,7 @@ from chaingen.scene import (
     load_scene,
     parse_scene,
 )
-from chaingen.scene.reader import NAME_PATTERN
+from chaingen.scene.reader import NAME_PATTERN, spatial_marker
 
 from test_scene import ACTUATED, MINIMAL, VALID
 
@@ -65,6 +65,8 @@ SEED_TEXTS: dict[str, str] = {
     str(path.relative_to(ROOT)): path.read_text(encoding="utf-8")
     for folder in (ROOT / "scenes", ROOT / "tests" / "scenes")
     for path in sorted(folder.glob("*.toml"))
+    # Spatial scenes are not Scenes; tests/test_spatial_scene.py mutates them.
+    if spatial_marker(tomllib.loads(path.read_text(encoding="utf-8"))) is None
 }
 SEED_TEXTS.update({
     "test_scene.VALID": VALID,

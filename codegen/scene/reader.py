@@ -15,7 +15,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, NoReturn
 
-from ..errors import SceneError
+from ..errors import SceneError, UnsupportedSceneError
 from ..runtime import contract
 from ..runtime.contract import ADAPTIVE_TOLERANCES
 from . import kinematics
@@ -42,7 +42,15 @@ _MISSING = object()
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
     """Read and validate the scene file at `path` (a bare name of a shipped scene: its file,
-    scene_file); its default name is the file's stem."""
+    scene_file); its default name is the file's stem. A spatial scene file (SPATIAL_MARKERS) is
+    refused with a SpatialSceneFileError: chaingen.spatial.load_spatial_scene reads it."""
+    source, text = read_scene_text(path)
+    return parse_scene(text, source, Path(source).stem)
+
+
+def read_scene_text(path: str | os.PathLike[str]) -> tuple[str, str]:
+    """The file a scene argument names (scene_file) and its text; SceneError for a file that
+    cannot be read or is not UTF-8, naming the file (and the line of the first bad byte)."""
     source = os.fspath(scene_file(path))
     try:
         data = Path(source).read_bytes()
@@ -50,14 +58,13 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
         reason = error.strerror or str(error)
         raise SceneError(f"{source}: cannot read scene file: {reason}") from None
     try:
-        text = data.decode("utf-8")
+        return source, data.decode("utf-8")
     except UnicodeDecodeError as error:
         line = data[: error.start].count(b"\n") + 1
         raise SceneError(
             f"{source}:{line}: TOML syntax error: the file is not UTF-8 text "
             f"(invalid byte 0x{data[error.start]:02x})"
         ) from None
-    return parse_scene(text, source, Path(source).stem)
 
 
 def parse_scene(text: str, source: str, default_name: str) -> Scene:
@@ -67,9 +74,23 @@ def parse_scene(text: str, source: str, default_name: str) -> Scene:
     keys, raises a one-line SceneError ``<source>: <key path>: <what is wrong>, got <value>``
     (``<source>:<line>: TOML syntax error: ...`` when the text is not TOML). List indices in
     key paths are 0-based, as in the file's arrays: ``links[0]`` is link 1 of model.md.
+    A spatial scene (a `joint` table in a link, or a gravity vector) is no Scene: it raises a
+    SpatialSceneFileError that names the key that makes it spatial.
     """
+    document = parse_toml(text, source)
+    marker = spatial_marker(document)
+    if marker is not None:
+        raise SpatialSceneFileError(
+            f"{source}: {marker}: a spatial scene (scene-format.md, \"Spatial scenes\"), which "
+            "no scheme takes yet; read it with chaingen.spatial.load_spatial_scene")
+    return SceneReader(source, default_name).read(document)
+
+
+def parse_toml(text: str, source: str) -> dict[str, Any]:
+    """The TOML document of a scene file's `text`; a one-line SceneError naming `source` and
+    the line where it is not TOML."""
     try:
-        document = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         message = str(error)
         match = re.search(r"\(at line (\d+), column \d+\)", message)
@@ -85,7 +106,26 @@ def parse_scene(text: str, source: str, default_name: str) -> Scene:
     except RecursionError:
         raise SceneError(f"{source}: TOML nested too deeply for a scene file (arrays or inline "
                          "tables within each other hundreds of levels deep)") from None
-    return SceneReader(source, default_name).read(document)
+
+
+class SpatialSceneFileError(UnsupportedSceneError, SceneError):
+    """A spatial scene file given to the planar reader: a scene the schemes cannot take yet
+    (UnsupportedSceneError) and a file this reader cannot use (SceneError, naming the file and
+    the key that makes it spatial)."""
+
+
+def spatial_marker(document: dict[str, Any]) -> str | None:
+    """The key path that makes a parsed scene file spatial, the first in the file's order: a
+    `joint` table in a [[links]] table (`links[2].joint`) or a gravity vector (`gravity`).
+    None for a planar file, whose gravity is a number and whose links have no joints."""
+    for key, value in document.items():
+        if key == "gravity" and isinstance(value, list):
+            return "gravity"
+        if key == "links" and isinstance(value, list):
+            for index, link in enumerate(value):
+                if isinstance(link, dict) and "joint" in link:
+                    return f"links[{index}].joint"
+    return None
 
 
 def _key(key: str) -> str:

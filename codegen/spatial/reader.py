@@ -1,0 +1,329 @@
+"""Reading and validating spatial scene files (docs/scene-format.md, "Spatial scenes").
+
+A spatial scene file is a scene file whose links carry `joint` tables (URDF's origin `xyz`,
+`rpy` and `axis`) and whose gravity is a vector; chaingen.scene.reader.spatial_marker tells
+the two kinds apart (a joint table or a gravity vector makes a file spatial). The planar
+reader's machinery does the work here too (SceneReader: the one-line errors with key paths,
+numbers, lists, names, unknown keys with their did-you-mean, [actuation]), so both kinds of
+file are read by the same rules and fail in the same words, e.g.
+``arm.toml: links[1].joint.axis: must not be zero (axis of joint 2, in its frame), got [0.0,
+0.0, 0.0]``.
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..scene.kinematics import ZERO_SEGMENT_RELATIVE_TOLERANCE
+from ..scene.reader import SceneReader, parse_toml, read_scene_text, spatial_marker
+from . import dynamics
+from .values import (
+    INERTIA_KEYS,
+    RoutePoint,
+    SpatialJoint,
+    SpatialLink,
+    SpatialScene,
+    SpatialSpring,
+)
+
+#: Gravity when a spatial scene does not set it: 9.81 m/s^2 along the world's -z (URDF's up is z).
+DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
+
+#: A principal moment of inertia may miss its rules (>= 0, at most the sum of the other two)
+#: by this times the tensor's largest entry: the round-off of a tensor written in decimals.
+INERTIA_RELATIVE_TOLERANCE = 1e-12
+
+_TOP_KEYS = ("name", "gravity", "links", "springs", "actuation", "initial")
+_LINK_KEYS = ("mass", "com", "inertia", "joint", "damping")
+_LINK_REQUIRED = ("mass", "com", "inertia", "joint")
+_JOINT_KEYS = ("xyz", "rpy", "axis")
+_SPRING_KEYS = ("route", "stiffness", "rest_length")
+_INITIAL_KEYS = ("angles", "velocities")
+
+# Keys of the planar format (by section: "" the top level) that a spatial scene says
+# otherwise: the refusal says how.
+_PLANAR_KEYS = {
+    ("", "base"): "a spring is fastened to the base by a route point on link 0",
+    ("", "simulation"): "no scheme runs a spatial scene yet, so it has no [simulation] "
+                        "defaults; remove the table",
+    ("links", "length"): "the next link's joint.xyz places joint i + 1 on link i",
+    ("links", "com_normal"): "com is the centre of mass's 3-vector in the link's frame",
+    ("links", "fastening"): "a spring's route gives the points it passes through",
+    ("springs", "joints"): "a spring's route gives the links it passes",
+    ("springs", "offsets"): "a spring's route gives the points it passes through",
+}
+
+
+def load_spatial_scene(path: str | os.PathLike[str]) -> SpatialScene:
+    """Read and validate the spatial scene file at `path` (a bare name of a shipped scene: its
+    file); its default name is the file's stem. A planar scene file is refused, one line."""
+    source, text = read_scene_text(path)
+    return parse_spatial_scene(text, source, Path(source).stem)
+
+
+def parse_spatial_scene(text: str, source: str = "<scene>",
+                        default_name: str | None = None) -> SpatialScene:
+    """Parse and validate spatial scene TOML `text`; errors name `source`, the key path, the
+    value and, for text that is not TOML, the line (one line each, as the planar reader's).
+
+    `default_name` (the scene's name when the file sets none) defaults to the stem of `source`.
+    """
+    document = parse_toml(text, source)
+    if default_name is None:
+        default_name = Path(source).stem
+    return SpatialSceneReader(source, default_name).read(document)
+
+
+def _plural(count: int, word: str) -> str:
+    return f"{count} {word}" if count == 1 else f"{count} {word}s"
+
+
+class SpatialSceneReader(SceneReader):
+    """Validates one parsed spatial scene document; `fail` raises the one-line SceneError."""
+
+    def read(self, document: dict[str, Any]) -> SpatialScene:
+        """The SpatialScene of a parsed document; the first violation in the file's order of
+        keys fails (a planar file as a whole, first)."""
+        self.refuse_planar(document)
+        links_value = document.get("links")
+        if isinstance(links_value, list):
+            self.n = len(links_value)
+
+        name: str | None = None
+        gravity = DEFAULT_GRAVITY
+        links: tuple[SpatialLink, ...] | None = None
+        springs: tuple[SpatialSpring, ...] = ()
+        angles: tuple[float, ...] | None = None
+        velocities: tuple[float, ...] | None = None
+        actuated: tuple[int, ...] = ()
+
+        for key, value in document.items():
+            if key == "name":
+                name = self.name(value)
+            elif key == "gravity":
+                gravity = self.vector("gravity", value,
+                                      "acceleration of gravity in m/s^2, world frame")
+            elif key == "links":
+                links = self.links(value)
+            elif key == "springs":
+                springs = self.springs(value)
+            elif key == "actuation":
+                actuated = self.actuation(value)
+            elif key == "initial":
+                angles, velocities = self.initial(value)
+            else:
+                self.unknown_key("", key, value, _TOP_KEYS)
+
+        if name is None:
+            name = self.default_scene_name()
+        if links is None:
+            self.fail("links", "missing: at least one [[links]] table is required")
+        n = len(links)
+        scene = SpatialScene(
+            name=name,
+            gravity=gravity,
+            links=links,
+            springs=springs,
+            initial_angles=angles if angles is not None else (0.0,) * n,
+            initial_velocities=velocities if velocities is not None else (0.0,) * n,
+            actuated=actuated,
+        )
+        self.refuse_zero_length_segments(scene)
+        return scene
+
+    def refuse_planar(self, document: dict[str, Any]) -> None:
+        """A planar scene file (links without joints, a scalar gravity) is refused whole: its
+        links would fail one by one for keys it rightly has."""
+        links = document.get("links")
+        if (spatial_marker(document) is None and isinstance(links, list) and links
+                and all(isinstance(link, dict) for link in links)):
+            self.fail("links[0].joint", "missing, and no link has a joint: a planar scene "
+                      "(or spatial links without their joints); chaingen.scene.load_scene "
+                      "reads a planar scene")
+
+    def unknown_key(self, path: str, key: str, value: Any, allowed: tuple[str, ...]):
+        hint = _PLANAR_KEYS.get((path.split("[", 1)[0], key))
+        if hint is None:
+            super().unknown_key(path, key, value, allowed)
+        self.fail(key if not path else f"{path}.{key}",
+                  f"a key of planar scenes, not of spatial ones: {hint} (allowed here: "
+                  f"{', '.join(allowed)})", value)
+
+    # -- value checks ---------------------------------------------------------------------
+    def vector(self, path: str, value: Any, meaning: str,
+               parts: str = "x, y, z") -> tuple[float, float, float]:
+        """Three finite numbers (`parts` names them in a message)."""
+        x, y, z = self.number_list(path, value, meaning, 3, parts)
+        return x, y, z
+
+    def inertia(self, path: str, value: Any, meaning: str) -> tuple[float, ...]:
+        """Six numbers, INERTIA_KEYS' order, of a physically valid inertia tensor: principal
+        moments >= 0, each at most the sum of the other two (the triangle inequality of a
+        body's moments), within INERTIA_RELATIVE_TOLERANCE of the largest entry."""
+        entries = self.number_list(path, value, meaning, len(INERTIA_KEYS),
+                                   " ".join(INERTIA_KEYS))
+        ixx, iyy, izz, ixy, ixz, iyz = entries
+        scale = max(abs(entry) for entry in entries)
+        if scale == 0.0:      # a point mass, as a planar link of inertia 0
+            return entries
+        # Scaled to entries of at most 1, so that no tensor within a double's range overflows.
+        tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]) / scale
+        moments = np.linalg.eigvalsh(tensor)
+        tolerance = INERTIA_RELATIVE_TOLERANCE
+        shown = ", ".join(f"{float(moment) * scale:.6g}" for moment in moments)
+        if moments[0] < -tolerance:
+            self.fail(path, f"must be a physically valid inertia tensor ({meaning}): its "
+                            f"principal moments ({shown}) must be >= 0", value)
+        if moments[2] > moments[0] + moments[1] + tolerance:
+            self.fail(path, f"must be a physically valid inertia tensor ({meaning}): its "
+                            f"largest principal moment must be at most the sum of the other "
+                            f"two (principal moments {shown})", value)
+        return entries
+
+    # -- sections -------------------------------------------------------------------------
+    def link(self, index: int, table: dict[str, Any]) -> SpatialLink:
+        path = f"links[{index}]"
+        i = index + 1
+        fields: dict[str, Any] = {"damping": 0.0}
+        for key, item in table.items():
+            where = f"{path}.{key}"
+            if key == "mass":
+                fields[key] = self.bounded(where, item, f"mass in kg, link {i}")
+            elif key == "com":
+                fields[key] = self.vector(where, item, f"centre of mass in m, link {i}'s frame")
+            elif key == "inertia":
+                fields[key] = self.inertia(where, item, f"kg m^2 about the centre of mass, "
+                                                        f"link {i}'s frame")
+            elif key == "joint":
+                fields[key] = self.joint(where, item, i)
+            elif key == "damping":
+                fields[key] = self.bounded(where, item, f"damping in N m s/rad, joint {i}")
+            else:
+                self.unknown_key(path, key, item, _LINK_KEYS)
+        for key in _LINK_REQUIRED:
+            if key not in fields:
+                self.fail(f"{path}.{key}", f"missing: required for every link of a spatial "
+                                           f"scene (link {i})")
+        return SpatialLink(**fields)
+
+    def joint(self, path: str, value: Any, i: int) -> SpatialJoint:
+        """joint = {xyz, rpy, axis} of joint i: URDF's origin (in link i - 1's frame, link 0
+        the base) and axis (in the joint's frame, normalised here as URDF's parsers do)."""
+        table = self.table(path, value, "joint = {xyz, rpy, axis}")
+        xyz = rpy = axis = None
+        for key, item in table.items():
+            where = f"{path}.{key}"
+            if key == "xyz":
+                xyz = self.vector(where, item, f"origin of joint {i} in m, "
+                                               f"{'the base' if i == 1 else f'link {i - 1}'}"
+                                               "'s frame")
+            elif key == "rpy":
+                rpy = self.vector(where, item, f"rad, joint {i}'s frame turned about the fixed "
+                                               "x, y, z axes", "roll, pitch, yaw")
+            elif key == "axis":
+                axis = self.axis(where, item, f"axis of joint {i}, in its frame")
+            else:
+                self.unknown_key(path, key, item, _JOINT_KEYS)
+        if axis is None:
+            self.fail(f"{path}.axis", f"missing: every joint needs its axis (joint {i})")
+        return SpatialJoint(xyz=xyz or (0.0, 0.0, 0.0), rpy=rpy or (0.0, 0.0, 0.0), axis=axis)
+
+    def axis(self, path: str, value: Any, meaning: str) -> tuple[float, float, float]:
+        x, y, z = self.vector(path, value, meaning)
+        norm = math.hypot(x, y, z)    # neither overflows nor underflows
+        if norm == 0.0:
+            self.fail(path, f"must not be zero ({meaning})", value)
+        return x / norm, y / norm, z / norm
+
+    def spring(self, index: int, table: dict[str, Any]) -> SpatialSpring:
+        path = f"springs[{index}]"
+        found: dict[str, Any] = {}
+        for key, item in table.items():
+            where = f"{path}.{key}"
+            if key == "route":
+                found[key] = self.route(where, item)
+            elif key == "stiffness":
+                found[key] = self.bounded(where, item, "k in N/m")
+            elif key == "rest_length":
+                found[key] = self.bounded(where, item, "L_0 in m, over all segments")
+            else:
+                self.unknown_key(path, key, item, _SPRING_KEYS)
+        for key in _SPRING_KEYS:
+            if key not in found:
+                self.fail(f"{path}.{key}", "missing: required for every spring")
+        return SpatialSpring(**found)
+
+    def route(self, path: str, value: Any) -> tuple[RoutePoint, ...]:
+        """At least two points [link, x, y, z], no two in a row on one link."""
+        form = "[link, x, y, z]: a point on link `link` (0 = the base) at x, y, z in m in its frame"
+        if not isinstance(value, list):
+            self.fail(path, f"must be an array of points {form}", value)
+        if len(value) < 2:
+            self.fail(path, f"must have at least 2 points {form}, not {len(value)}", value)
+        points = []
+        for index, item in enumerate(value):
+            where = f"{path}[{index}]"
+            if not isinstance(item, list) or len(item) != 4:
+                self.fail(where, f"must be a point {form}", item)
+            link = item[0]
+            if not isinstance(link, int) or isinstance(link, bool):
+                self.fail(f"{where}[0]", "must be an integer (the link the point is on, 0 = "
+                                         "the base)", link)
+            if link < 0 or (self.n is not None and link > self.n):
+                chain = (f"the chain has {_plural(self.n, 'link')} (1..{self.n}) and the base (0)"
+                         if self.n is not None else "links are numbered from 0, the base")
+                self.fail(f"{where}[0]", f"link {link} does not exist: {chain}", link)
+            if points and link == points[-1].link:
+                self.fail(where, f"is on link {link}, as the point before it: a segment "
+                                 "between two points of one link has a fixed length and is no "
+                                 "spring; leave one of them out", item)
+            point = tuple(self.number(f"{where}[{k}]", item[k], f"{axis} in m, link {link}'s "
+                                      "frame") for k, axis in ((1, "x"), (2, "y"), (3, "z")))
+            points.append(RoutePoint(link=link, point=point))
+        return tuple(points)
+
+    def initial(self, value: Any) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
+        table = self.table("initial", value, "[initial]")
+        angles = velocities = None
+        for key, item in table.items():
+            where = f"initial.{key}"
+            if key == "angles":
+                angles = self.number_list(where, item, "q_i in rad", self.n, "one per joint")
+            elif key == "velocities":
+                velocities = self.number_list(where, item, "qdot_i in rad/s", self.n,
+                                              "one per joint")
+            else:
+                self.unknown_key("initial", key, item, _INITIAL_KEYS)
+        return angles, velocities
+
+    def refuse_zero_length_segments(self, scene: SpatialScene) -> None:
+        """Refuse a spring segment of (numerically) zero length at the initial angles, where
+        the gradient of its length is undefined (as the planar reader does), and a route whose
+        length is beyond a double's range there.
+
+        A segment counts as zero when shorter than ZERO_SEGMENT_RELATIVE_TOLERANCE times the
+        size of the geometry: the sum of |xyz| over the joints and of |point| over the route.
+        """
+        largest = np.finfo(float).max    # a size beyond it: no tolerance of inf
+        size = min(largest, sum(math.hypot(*link.joint.xyz) for link in scene.links))
+        with np.errstate(over="ignore", invalid="ignore"):
+            positions = dynamics.route_positions(scene, scene.initial_angles)
+            segments = [np.linalg.norm(np.diff(points, axis=0), axis=1) for points in positions]
+        for index, (spring, lengths) in enumerate(zip(scene.springs, segments)):
+            if not np.all(np.isfinite(lengths)):
+                self.fail(f"springs[{index}].route", "a segment's length at the initial angles "
+                          "is beyond the range of a double; write the chain in metres")
+            tolerance = ZERO_SEGMENT_RELATIVE_TOLERANCE * min(
+                largest, size + sum(math.hypot(*point.point) for point in spring.route))
+            for k, length in enumerate(lengths):
+                if length < tolerance:
+                    self.fail(f"springs[{index}]",
+                              f"segment {k + 1} (route[{k}] to route[{k + 1}]) has zero length at "
+                              "the initial angles (initial.angles), where its direction is "
+                              "undefined; move a route point or change the initial angles "
+                              f"(limit {tolerance:.3g} m)", float(length))
+
