@@ -522,8 +522,6 @@ def test_the_cli_refuses_a_spatial_scene_in_one_line(command, tmp_path):
     assert sorted(item.name for item in tmp_path.iterdir()) == ["arm.toml"]
 
 
-@pytest.mark.xfail(strict=True, reason="chaingen.cli prefixes every UnsupportedSceneError with "
-                   "the scene file; this one names its file already (a fix for cli.py)")
 def test_the_cli_names_the_file_once():
     path = SCENES / "spatial_three_link.toml"
     result = chaingen_in_process("simulate", path, cwd=ROOT)
