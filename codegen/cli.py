@@ -254,9 +254,10 @@ def command_import(args) -> int:
                       link_comments=chain.link_comments())
     with reported_write(args.output, "the scene"):
         write_text(args.output, text)
-    print(f"wrote {args.output}: {chain.scene.name}, {len(chain.joints)} revolute joints "
-          f"({chain.joints[0]} .. {chain.joints[-1]}), {chain.total_mass:.6g} kg of links, "
-          f"from {chain.root} to the tip {chain.tip}"
+    joints = (f"{len(chain.joints)} revolute joints ({chain.joints[0]} .. {chain.joints[-1]})"
+              if len(chain.joints) > 1 else f"1 revolute joint ({chain.joints[0]})")
+    print(f"wrote {args.output}: {chain.scene.name}, {joints}, {chain.total_mass:.6g} kg of "
+          f"links, from {chain.root} to the tip {chain.tip}"
           + (f"; left out beyond the tip: {', '.join(chain.left_out)}" if chain.left_out
              else ""))
     return 0

@@ -48,12 +48,11 @@ REVOLUTE_MODELS = frozenset({
     "JointModelRUBX", "JointModelRUBY", "JointModelRUBZ",
     "JointModelRevoluteUnboundedUnaligned"})
 
-#: What a refused joint is, in URDF's words, by the prefix of Pinocchio's model name.
-_JOINT_KINDS = (("JointModelP", "prismatic"), ("JointModelFreeFlyer", "floating"),
-                ("JointModelPlanar", "planar"), ("JointModelSpherical", "spherical"),
-                ("JointModelMimic", "mimic"), ("JointModelComposite", "composite"),
-                ("JointModelTranslation", "translation"),
-                ("JointModelUniversal", "universal"), ("JointModelHelical", "helical"))
+#: What a refused joint is, in URDF's words, by Pinocchio's joint model.
+_JOINT_KINDS = {"JointModelPX": "prismatic", "JointModelPY": "prismatic",
+                "JointModelPZ": "prismatic", "JointModelPrismaticUnaligned": "prismatic",
+                "JointModelFreeFlyer": "floating", "JointModelPlanar": "planar",
+                "JointModelSpherical": "spherical", "JointModelSphericalZYX": "spherical"}
 
 
 @dataclass(frozen=True)
@@ -230,7 +229,7 @@ def _check_revolute(model, j: int, shown: str, tip: str) -> None:
     kind = model.joints[j].shortname()
     if kind in REVOLUTE_MODELS:
         return
-    what = next((word for prefix, word in _JOINT_KINDS if kind.startswith(prefix)), kind)
+    what = _JOINT_KINDS.get(kind, f"of Pinocchio's kind {kind}")
     raise ChaingenError(f"{shown}: joint {model.names[j]!r} on the chain to {tip!r} is "
                         f"{what}; chaingen imports revolute and continuous joints only "
                         "(choose a --tip before it)")
