@@ -24,6 +24,7 @@ from .errors import ChaingenError, NewtonError, SettingsError, UnsupportedSceneE
 from .runtime.files import check_output_directory, check_output_file, reported_write
 from .scene import load_scene
 from .scene.shipped import scene_file
+from .spatial.urdf import add_import_arguments, command_import
 from .version import VERSION
 
 EXIT_BAD_INPUT = 2
@@ -66,14 +67,7 @@ def parser() -> argparse.ArgumentParser:
     export.add_argument("--integrator", default="RK4",
                         help="MuJoCo's integrator: RK4 (default), Euler, implicit, implicitfast")
 
-    robot = command("import", help="write the scene of a robot's serial chain from its URDF file")
-    robot.add_argument("urdf", type=Path, metavar="ROBOT.urdf", help="the robot's URDF file")
-    robot.add_argument("-o", "--output", type=Path, required=True, metavar="SCENE.toml",
-                       help="the spatial scene to write (docs/importing.md)")
-    robot.add_argument("--tip", metavar="LINK",
-                       help="the chain's last link (default: the single leaf of the tree)")
-    robot.add_argument("--name", help="the scene's name (default: the robot's)")
-
+    add_import_arguments(command("import", help="write the scene of a robot's chain from a URDF"))
     simulate = command("simulate", help="simulate a scene with a generated solver")
     add_scheme_options(simulate)
     add_newton_options(simulate)
@@ -239,27 +233,6 @@ def command_export(args) -> int:
     motors = f", motors on joints {list(scene.actuated_joints)}" if scene.actuated_joints else ""
     print(f"wrote {args.mjcf}: {scene.n} links, {len(scene.springs)} spring tendons{motors}, "
           f"dt {dt:g} s, {args.integrator}")
-    return 0
-
-
-def command_import(args) -> int:
-    # Pinocchio (the robots extra) is imported by chaingen.spatial.urdf, for this command only.
-    from .runtime.files import write_text
-    from .spatial.urdf import import_chain
-    from .spatial.writer import scene_text
-
-    check_output_file(args.output, "-o", [args.urdf])
-    chain = import_chain(args.urdf, tip=args.tip, name=args.name)
-    text = scene_text(chain.scene, comment_lines=chain.comment_lines(),
-                      link_comments=chain.link_comments())
-    with reported_write(args.output, "the scene"):
-        write_text(args.output, text)
-    joints = (f"{len(chain.joints)} revolute joints ({chain.joints[0]} .. {chain.joints[-1]})"
-              if len(chain.joints) > 1 else f"1 revolute joint ({chain.joints[0]})")
-    print(f"wrote {args.output}: {chain.scene.name}, {joints}, {chain.total_mass:.6g} kg of "
-          f"links, from {chain.root} to the tip {chain.tip}"
-          + (f"; left out beyond the tip: {', '.join(chain.left_out)}" if chain.left_out
-             else ""))
     return 0
 
 

@@ -22,6 +22,7 @@ turned by the angle, and the centre of mass and the inertia about it are in the 
 """
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
 import re
@@ -35,8 +36,10 @@ import numpy as np
 
 from ..errors import ChaingenError, install_hint
 from ..runtime.contract import MAX_SCENE_NAME_LENGTH
+from ..runtime.files import check_output_file, reported_write, write_text
 from ..scene.reader import NAME_PATTERN
 from .values import SpatialJoint, SpatialLink, SpatialScene
+from .writer import scene_text
 
 #: The gravity of an imported scene, m/s^2 in the world frame (URDF's z is up).
 GRAVITY = (0.0, 0.0, -9.81)
@@ -90,6 +93,15 @@ class ImportedChain:
         """The URDF's names of each link of the scene and the joint that carries it."""
         return tuple(f"{link} on {joint}" for link, joint in zip(self.links, self.joints))
 
+    def summary(self) -> str:
+        """One line for the command line: the scene, its joints, its mass, what was left out."""
+        joints = (f"{len(self.joints)} revolute joints ({self.joints[0]} .. {self.joints[-1]})"
+                  if len(self.joints) > 1 else f"1 revolute joint ({self.joints[0]})")
+        left_out = f"; left out beyond the tip: {', '.join(self.left_out)}" if self.left_out \
+            else ""
+        return (f"{self.scene.name}, {joints}, {self.total_mass:.6g} kg of links, from "
+                f"{self.root} to the tip {self.tip}{left_out}")
+
 
 def import_urdf(path: str | os.PathLike, tip: str | None = None,
                 name: str | None = None) -> SpatialScene:
@@ -133,6 +145,37 @@ def import_chain(path: str | os.PathLike, tip: str | None = None,
     return ImportedChain(scene=scene, source=shown, robot=model.name, root=root, tip=tip_name,
                          joints=tuple(model.names[j] for j in chain), links=body_names,
                          left_out=left_out)
+
+
+def write_scene(urdf: str | os.PathLike, output: str | os.PathLike, tip: str | None = None,
+                name: str | None = None) -> ImportedChain:
+    """Import the chain of `urdf` and write its scene file to `output`, all or nothing; the
+    output is checked first as every command's (never the URDF itself, a directory, a link)."""
+    check_output_file(output, "-o", [urdf])
+    chain = import_chain(urdf, tip=tip, name=name)
+    text = scene_text(chain.scene, comment_lines=chain.comment_lines(),
+                      link_comments=chain.link_comments())
+    with reported_write(output, "the scene"):
+        write_text(output, text)
+    return chain
+
+
+# -- the command: `chaingen import ROBOT.urdf -o SCENE.toml [--tip LINK] [--name NAME]` ---------
+# Here rather than in cli.py, which test_layout keeps under 500 lines; cli.py registers it.
+
+def add_import_arguments(command: argparse.ArgumentParser) -> None:
+    command.add_argument("urdf", type=Path, metavar="ROBOT.urdf", help="the robot's URDF file")
+    command.add_argument("-o", "--output", type=Path, required=True, metavar="SCENE.toml",
+                         help="the spatial scene to write (docs/importing.md)")
+    command.add_argument("--tip", metavar="LINK",
+                         help="the chain's last link (default: the single leaf of the tree)")
+    command.add_argument("--name", help="the scene's name (default: the robot's)")
+
+
+def command_import(args) -> int:
+    chain = write_scene(args.urdf, args.output, tip=args.tip, name=args.name)
+    print(f"wrote {args.output}: {chain.summary()}")
+    return 0
 
 
 def require_pinocchio():
