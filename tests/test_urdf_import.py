@@ -38,7 +38,7 @@ from chaingen.spatial.values import (
 )
 from chaingen.spatial.writer import scene_text
 
-from helpers import chaingen, chaingen_in_process, require_module
+from helpers import ROOT, chaingen, chaingen_in_process, require_module
 
 #: (file, tip) of the robots of Must show c; None: the single leaf.
 ROBOTS = (("panda_description/urdf/panda.urdf", "panda_link8"),
@@ -552,3 +552,23 @@ def test_the_core_imports_no_pinocchio():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             timeout=120)
     assert result.returncode == 0 and result.stdout.strip() == "[]", result.stderr
+
+
+def test_shipped_panda_springs_is_the_imported_panda_with_its_springs():
+    """scenes/panda_springs.toml: its links are the Panda imported to panda_link8 today, bit
+    for bit; its springs are what its head comment says (two mono-articular, one through a
+    via point across joints 2 to 4, rest lengths 0.9 of their lengths at the initial posture to
+    the millimetre) and none of their segments is short at the initial posture."""
+    require_module("pinocchio", "robots")
+    from chaingen.spatial.urdf import import_chain
+
+    shipped = scene_from_toml((ROOT / "scenes" / "panda_springs.toml").read_text())
+    imported = import_chain(robot_urdf(ROBOTS[0][0]), tip="panda_link8").scene
+    assert same_bits(shipped.links, imported.links) and shipped.name == "panda_springs"
+    assert [spring.joints for spring in shipped.springs] == [(2,), (4,), (2, 3, 4)]
+    assert [len(spring.route) for spring in shipped.springs] == [2, 2, 3]
+    lengths = dynamics.spring_lengths(shipped, shipped.initial_angles)
+    assert [spring.rest_length for spring in shipped.springs] == \
+        [round(0.9 * length, 3) for length in lengths]
+    for points in dynamics.route_positions(shipped, shipped.initial_angles):
+        assert np.linalg.norm(np.diff(points, axis=0), axis=1).min() > 0.05
