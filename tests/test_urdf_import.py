@@ -145,6 +145,7 @@ def test_panda_to_link8_leaves_out_the_hand_and_keeps_the_rest(tmp_path):
     chain = import_chain(urdf, tip="panda_link8")
     full = pin.buildModelFromUrdf(str(urdf))
     assert chain.joints == tuple(f"panda_joint{i}" for i in range(1, 8))
+    assert (chain.root, chain.tip) == ("panda_link0", "panda_link8")
     assert set(chain.left_out) == {"panda_hand", "panda_leftfinger", "panda_rightfinger",
                                    "panda_hand_tcp"}
     hand = full.frames[full.getFrameId("panda_hand_joint")].inertia.mass
@@ -162,6 +163,21 @@ def test_panda_to_link8_leaves_out_the_hand_and_keeps_the_rest(tmp_path):
     assert chain.scene.initial_angles[3] != 0.0     # panda_joint4's limits exclude 0
     assert chain.scene.actuated == tuple(range(1, 8))
     assert chain.scene.gravity == (0.0, 0.0, -9.81) and chain.scene.springs == ()
+
+
+def test_the_ur5_has_two_leaves_and_starts_at_its_base_link():
+    require_module("pinocchio", "robots")
+    from chaingen.errors import ChaingenError
+    from chaingen.spatial.urdf import import_chain
+
+    urdf = robot_urdf(ROBOTS[1][0])
+    with pytest.raises(ChaingenError, match=r"2 leaves \(ee_link, tool0\): choose the chain's "
+                                            "tip with --tip LINK"):
+        import_chain(urdf)
+    chain = import_chain(urdf, tip="tool0")
+    assert (chain.root, chain.joints[0], chain.joints[-1]) == ("base_link", "shoulder_pan_joint",
+                                                               "wrist_3_joint")
+    assert chain.left_out == () and chain.scene.name == "ur5"
 
 
 # -- random chains ----------------------------------------------------------------------------
@@ -298,6 +314,10 @@ REFUSED = {
         small_urdf(("shoulder", "revolute", "base", "a"), ("left", "revolute", "a", "b"),
                    ("right", "revolute", "a", "c"), ("wrist", "revolute", "b", "d")), "d",
         "joint 'right' branches off the chain at joint 'shoulder'"),
+    "a link without mass": (
+        '<robot name="r"><link name="base"/><link name="a"/><joint name="j" type="continuous">'
+        '<parent link="base"/><child link="a"/><axis xyz="0 0 1"/></joint></robot>', None,
+        "link 'a' (joint 'j') has no mass"),
     "tip on the base": (
         small_urdf(("shoulder", "revolute", "base", "a")), "base",
         "no joint between the root and the tip 'base'"),
@@ -315,8 +335,7 @@ def test_refusals_name_what_is_wrong(case, tmp_path):
     urdf.write_text(text)
     with pytest.raises(ChaingenError) as error:
         import_urdf(urdf, tip=tip)
-    assert str(error.value) == f"robot.urdf: {expected}" or \
-        str(error.value).startswith(f"robot.urdf: {expected}"), str(error.value)
+    assert str(error.value).startswith(f"{urdf}: {expected}"), str(error.value)
     assert "\n" not in str(error.value)
 
 

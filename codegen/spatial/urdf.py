@@ -114,11 +114,11 @@ def import_chain(path: str | os.PathLike, tip: str | None = None,
                  name: str | None = None) -> ImportedChain:
     """import_urdf, with the names of the joints and links kept and of the links left out."""
     path = Path(path)
-    pin = require_pinocchio()
-    model = _load_model(pin, path)
-    shown = path.name
     if name is not None:
         _check_name(name)
+    pin = require_pinocchio()
+    model = _load_model(pin, path)
+    shown = str(path)        # errors name the file as the user gave it
     tip_frame = _tip_frame(pin, model, tip, shown)
     tip_name = model.frames[tip_frame].name
     chain = _chain(model, model.frames[tip_frame].parentJoint)
@@ -140,9 +140,8 @@ def import_chain(path: str | os.PathLike, tip: str | None = None,
         actuated=tuple(range(1, len(chain) + 1)))
     left_out = tuple(model.frames[index].name for index in sorted(beyond)
                      if model.frames[index].type == pin.FrameType.BODY)
-    root = next((frame.name for frame in model.frames
-                 if frame.type == pin.FrameType.BODY and frame.parentJoint == 0), "the world")
-    return ImportedChain(scene=scene, source=shown, robot=model.name, root=root, tip=tip_name,
+    root = _root_name(pin, model, chain[0])
+    return ImportedChain(scene=scene, source=path.name, robot=model.name, root=root, tip=tip_name,
                          joints=tuple(model.names[j] for j in chain), links=body_names,
                          left_out=left_out)
 
@@ -248,15 +247,33 @@ def _tip_frame(pin, model, tip: str | None, shown: str) -> int:
         found = [index for index in bodies if model.frames[index].name == tip]
         if not found:
             raise ChaingenError(f"{shown}: --tip: no link {tip!r}; its links: "
-                                f"{', '.join(_link_names(pin, model))}")
+                                f"{_listed(_link_names(pin, model))}")
         return found[0]
     leaves = [index for index in bodies if model.frames[index].parentJoint != 0
               and not any(_is_beyond(model, other, index) for other in bodies)]
     if len(leaves) != 1:
-        what = (f"{len(leaves)} leaves ({', '.join(model.frames[i].name for i in leaves)})"
+        what = (f"{len(leaves)} leaves ({_listed(model.frames[i].name for i in leaves)})"
                 if leaves else "no link beyond a joint")
         raise ChaingenError(f"{shown}: {what}: choose the chain's tip with --tip LINK")
     return leaves[0]
+
+
+def _root_name(pin, model, first: int) -> str:
+    """The link the chain's first joint hangs from (the base, fixed to the world)."""
+    index = next(index for index, frame in enumerate(model.frames)
+                 if frame.parentJoint == first and frame.type == pin.FrameType.JOINT)
+    while index != 0:
+        index = model.frames[index].parentFrame
+        if model.frames[index].type == pin.FrameType.BODY:
+            return model.frames[index].name
+    return model.frames[0].name
+
+
+def _listed(names, most: int = 20) -> str:
+    """Names for a one-line message: the first `most`, then how many more."""
+    names = list(names)
+    more = f", ... ({len(names) - most} more)" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
 
 
 def _chain(model, last: int) -> list[int]:
