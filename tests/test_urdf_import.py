@@ -135,6 +135,26 @@ def test_robots_agree_with_pinocchio(relative, tip, tmp_path):
     assert worst_mass <= TOLERANCE and worst_gravity <= TOLERANCE, (worst_mass, worst_gravity)
 
 
+@pytest.mark.parametrize("tip", ("panda_hand", "panda_link7"))
+def test_other_tips_of_the_panda_agree_with_pinocchio(tip, tmp_path):
+    """To panda_hand (the hand kept, the fingers left out) and to panda_link7 (link 8 and all
+    after it left out): the same agreement at 20 configurations."""
+    worst_mass, worst_gravity = reference_agreement(robot_urdf(ROBOTS[0][0]), tip, tmp_path,
+                                                    CONFIGURATIONS, seed=7)
+    assert worst_mass <= TOLERANCE and worst_gravity <= TOLERANCE, (worst_mass, worst_gravity)
+
+
+def test_a_tip_past_a_branch_of_the_panda_is_refused():
+    """panda_hand_tcp hangs off the hand beside the fingers: they would branch off the chain."""
+    require_module("pinocchio", "robots")
+    from chaingen.errors import ChaingenError
+    from chaingen.spatial.urdf import import_chain
+
+    with pytest.raises(ChaingenError, match="joint 'panda_finger_joint1' branches off the chain "
+                                            "at joint 'panda_joint7'"):
+        import_chain(robot_urdf(ROBOTS[0][0]), tip="panda_hand_tcp")
+
+
 def test_panda_to_link8_leaves_out_the_hand_and_keeps_the_rest(tmp_path):
     """The Panda's hand (0.73 kg, merged by Pinocchio into joint 7's body) and fingers are
     left out; the damping of <dynamics> and the limits' rule for the initial angles hold."""
