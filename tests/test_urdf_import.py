@@ -200,6 +200,25 @@ def test_the_ur5_has_two_leaves_and_starts_at_its_base_link():
     assert chain.left_out == () and chain.scene.name == "ur5"
 
 
+def test_inertia_kept_twice_by_pinocchio_is_caught(monkeypatch):
+    """The guard on Pinocchio's layout: were the hand's inertia on its BODY frame as well as on
+    its fixed joint's frame, taking it out twice would go unseen; the import stops instead."""
+    pin = require_module("pinocchio", "robots")
+    from chaingen.spatial import urdf as importer
+
+    load = importer._load_model
+
+    def doubled(pin_module, path):
+        model = load(pin_module, path)
+        hand = model.frames[model.getFrameId("panda_hand_joint")].inertia
+        model.frames[model.getFrameId("panda_hand", pin.FrameType.BODY)].inertia = hand
+        return model
+
+    monkeypatch.setattr(importer, "_load_model", doubled)
+    with pytest.raises(RuntimeError, match="inertia of panda_hand on two frames"):
+        importer.import_chain(robot_urdf(ROBOTS[0][0]), tip="panda_link8")
+
+
 # -- random chains ----------------------------------------------------------------------------
 
 def _numbers(values) -> str:

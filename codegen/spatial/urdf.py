@@ -322,9 +322,19 @@ def _link(pin, model, j: int, beyond: set[int], shown: str) -> SpatialLink:
     """Link j: its joint's placement and axis, the body's inertia less the fixed links beyond
     the tip, and the joint's damping."""
     inertia = model.inertias[j]
+    carried = [index for index, frame in enumerate(model.frames)
+               if frame.parentJoint == j and _has_inertia(frame)]
+    # A guard on where Pinocchio keeps a merged link's inertia: on one frame of it, the fixed
+    # joint's (4.1; the moving link's own inertia is on no frame, only in the body's). Were it
+    # on the link's BODY frame too, it would be taken out twice below.
+    twice = [model.frames[index].name for index in carried
+             if model.frames[index].type == pin.FrameType.BODY
+             and _has_inertia(model.frames[model.frames[index].parentFrame])]
+    if twice:
+        raise RuntimeError(f"{shown}: Pinocchio keeps the inertia of {', '.join(twice)} on two "
+                           "frames, a layout chaingen import does not know")
     removed = [model.frames[index].placement.act(model.frames[index].inertia)
-               for index in sorted(beyond) if model.frames[index].parentJoint == j
-               and model.frames[index].inertia.mass != 0.0]
+               for index in carried if index in beyond]
     if removed:
         mass, com, about_com = _less(inertia, removed)
     else:        # Pinocchio's numbers as they are
@@ -346,6 +356,10 @@ def _link(pin, model, j: int, beyond: set[int], shown: str) -> SpatialLink:
                            rpy=_floats(pin.rpy.matrixToRpy(placement.rotation)),
                            axis=_floats(axis / np.linalg.norm(axis))),
         damping=float(model.damping[model.idx_vs[j]]))
+
+
+def _has_inertia(frame) -> bool:
+    return frame.inertia.mass != 0.0 or bool(np.any(np.asarray(frame.inertia.inertia)))
 
 
 def _less(inertia, removed) -> tuple[float, np.ndarray, np.ndarray]:
