@@ -78,8 +78,8 @@ class ImportedChain:
 
     def comment_lines(self) -> tuple[str, ...]:
         """Where the scene came from, for the head of its file."""
-        lines = [f"Imported by `chaingen import` from {self.source} (robot {self.robot!r}): the",
-                 f"serial chain from {self.root} to {self.tip}, {len(self.joints)} revolute "
+        lines = [f"Imported by `chaingen import` from {self.source} (robot {self.robot!r}):",
+                 f"the serial chain from {self.root} to {self.tip}, {len(self.joints)} revolute "
                  "joints, each actuated;",
                  "fixed links merged into the link before them with their inertia."]
         if self.left_out:
