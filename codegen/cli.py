@@ -30,6 +30,7 @@ from .errors import (
 from .runtime.files import check_output_directory, check_output_file, reported_write
 from .scene import load_scene
 from .scene.shipped import scene_file
+from .spatial.urdf import add_import_arguments, command_import
 from .version import VERSION
 
 EXIT_BAD_INPUT = 2
@@ -72,6 +73,7 @@ def parser() -> argparse.ArgumentParser:
     export.add_argument("--integrator", default="RK4",
                         help="MuJoCo's integrator: RK4 (default), Euler, implicit, implicitfast")
 
+    add_import_arguments(command("import", help="write the scene of a robot's chain from a URDF"))
     simulate = command("simulate", help="simulate a scene with a generated solver")
     add_scheme_options(simulate)
     add_newton_options(simulate)
@@ -449,7 +451,7 @@ def _run(args) -> int:
     handlers = {"generate": command_generate, "simulate": command_simulate,
                 "check": command_check, "order": command_order, "bench": command_bench,
                 "plot": command_plot, "animate": command_animate, "sweep": command_sweep,
-                "export": command_export}
+                "export": command_export, "import": command_import}
     try:
         if getattr(args, "scene", None) is not None:
             args.scene = scene_file(args.scene)    # a shipped scene's name: its installed file
