@@ -20,13 +20,7 @@ from .arguments import (
     positive_int,
     seed,
 )
-from .errors import (
-    ChaingenError,
-    NewtonError,
-    SceneError,
-    SettingsError,
-    UnsupportedSceneError,
-)
+from .errors import ChaingenError, NewtonError, SceneError, SettingsError, UnsupportedSceneError
 from .runtime.files import check_output_directory, check_output_file, reported_write
 from .scene import load_scene
 from .scene.shipped import scene_file
@@ -457,9 +451,8 @@ def _run(args) -> int:
             args.scene = scene_file(args.scene)    # a shipped scene's name: its installed file
         return handlers[args.command](args)
     except UnsupportedSceneError as error:   # a valid scene that the chosen scheme cannot take
-        if isinstance(error, SceneError):     # names its file already (a spatial scene file)
-            return _error(str(error), EXIT_BAD_INPUT)
-        return _error(f"{getattr(args, 'scene', '')}: {error}", EXIT_BAD_INPUT)
+        prefix = "" if isinstance(error, SceneError) else f"{getattr(args, 'scene', '')}: "
+        return _error(f"{prefix}{error}", EXIT_BAD_INPUT)   # a SceneError names its file
     except ChaingenError as error:
         if debug and getattr(error, "details", None):
             print(error.details, file=sys.stderr)

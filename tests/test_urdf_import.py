@@ -496,6 +496,19 @@ def test_imported_panda_round_trips(tmp_path):
     assert "from panda.urdf" in text and str(urdf.parent) not in text   # no paths of this machine
 
 
+@pytest.mark.parametrize("robot, tip", [(robot, tip) for robot, tip, *_ in ROBOTS])
+def test_imported_robots_read_back_through_the_scene_reader(robot, tip, tmp_path):
+    """What `chaingen import` writes, read by the spatial scene reader: the imported scene,
+    bit for bit (names, numbers, actuation, initial state)."""
+    require_module("pinocchio", "robots")
+    from chaingen.spatial import parse_spatial_scene
+    from chaingen.spatial.urdf import import_chain
+
+    chain = import_chain(robot_urdf(robot), tip=tip)
+    text = scene_text(chain.scene, chain.comment_lines(), chain.link_comments())
+    assert same_bits(parse_spatial_scene(text, source="imported.toml"), chain.scene)
+
+
 # -- the command line -------------------------------------------------------------------------
 
 def test_cli_writes_the_scene(tmp_path):
