@@ -58,21 +58,25 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
     frames0 = spatial_recursion.link_frames(scene, q0, at_state)
     omegas = spatial_recursion.angular_velocities(frames0, w0, at_state)
     velocities = spatial_recursion.com_velocities(frames0, omegas, at_state)
-    _, spring_energy, _ = spatial_recursion.spring_gradient(scene, frames0, at_state)
+    _, spring_energy, segments = spatial_recursion.spring_gradient(scene, frames0, at_state)
     kinetic = spatial_recursion.kinetic_energy(scene, frames0, omegas, velocities)
     energy = kinetic + spatial_recursion.gravity_potential(scene, frames0) + spring_energy
+    state_fields = joint_space_state(scene, q0, w0, energy)
+    if scene.actuated:
+        state_fields.update(holding_torques(scene, state_fields["initial_angles"]))
 
     return DiscreteScheme.of(
         method="midpoint", quadrature=None, scene=scene, summary=SUMMARY, dt=dt, unknowns=dw,
         residual=ImmutableMatrix(residual),
         next_state=ImmutableMatrix([q + dt * w for q, w in zip(q0, wm)] + list(w0 + dw)),
         predictor=ImmutableMatrix.zeros(n, 1),
-        **joint_space_state(scene, q0, w0, energy),
+        **state_fields,
         unknowns_layout=Layout(tuple(f"dw_{i}" for i in range(1, n + 1)),
                                "the increment dw = w_1 - w_0 of the joint rates (rad/s)"),
         residual_description=("dt-scaled midpoint equations of motion M(q_m) dw + dt "
                               "(Coriolis + grad V - tau) at the mid-point, spatial chain (N m s)"),
         inputs=inputs, definitions=tuple(step.items), state_definitions=tuple(at_state.items),
+        segment_vectors=ImmutableMatrix([c for d in segments for c in d]),
         input_work=dt * sp.Add(*(tau * w for tau, w in zip(torques, wm))),
         dissipated=dt * sp.Add(*(number(link.damping) * w ** 2
                                  for link, w in zip(scene.links, wm) if link.damping)),
@@ -80,3 +84,17 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         jacobian_reuse=JACOBIAN_PER_STEP, kinetic_energy=kinetic,
     )
 
+
+
+def holding_torques(scene: SpatialScene, angles) -> dict:
+    """The fields of the holding torques dV/dq = dV_g/dq + dV_s/dq at the joint angles
+    `angles` (symbols): the Newton-Euler recursion at rest (zero rates and accelerations,
+    dt = 1: the gravity torques alone) and the springs' gradient, by initial definitions."""
+    defs = Definitions("hold_")
+    frames = spatial_recursion.link_frames(scene, angles, defs)
+    zeros = [sp.Integer(0)] * scene.n
+    gravity = spatial_recursion.inverse_dynamics(scene, frames, zeros, zeros, sp.Integer(1),
+                                                 defs)
+    springs, _, _ = spatial_recursion.spring_gradient(scene, frames, defs)
+    return {"holding_torques": ImmutableMatrix([g + s for g, s in zip(gravity, springs)]),
+            "initial_definitions": tuple(defs.items)}
