@@ -230,3 +230,62 @@ def test_energy_balance_with_damping_and_torques():
         assert dissipated[-1] > 0.0 and abs(work[-1]) > 0.0
         errors.append(np.abs(result.balance_error).max())
     assert 3.0 <= errors[0] / errors[1] <= 5.0, errors
+
+
+@pytest.mark.compile
+def test_sensitivities_and_generated_functions_pass_the_check():
+    """chaingen check's comparisons on an actuated spatial scene: the residual Jacobian and
+    the step sensitivities against central differences, every generated function against
+    the scheme's SymPy expressions; and the C holding torques against the numeric ones."""
+    from chaingen.simulation import build_solver
+    from chaingen.studies.check import check_solver
+
+    scene = dataclasses.replace(random_scene(41, 4, springs=True), actuated=(1, 3))
+    scheme = build_scheme(scene, "midpoint")
+    solver = build_solver(scene, "midpoint", sensitivities=True)
+    report = check_solver(scheme, solver, samples=3, dt=0.01)
+    assert {row.quantity for row in report.rows} >= {
+        "residual Jacobian", "d s1 / d s0", "d s1 / d u", "residual", "next state", "energy"}
+    assert report.passed, report.table()
+    q = np.random.default_rng(41).uniform(-np.pi, np.pi, 4)
+    np.testing.assert_allclose(
+        solver.holding_torques(q),
+        dynamics.gravity_torques(scene, q) + dynamics.spring_torques(scene, q),
+        rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.compile
+def test_composed_steps_of_order_4_and_6_converge_to_dop853():
+    """The spatial step composed to order 4 and 6 (chaingen.symbolic.composition): the error
+    at t = 1 s against DOP853 falls by 2^4 and 2^6 per halving of dt."""
+    from chaingen.simulation import build_solver
+
+    scene = random_scene(51, 3, springs=True)
+    rng = np.random.default_rng(51)
+    q0, w0 = rng.uniform(-1.0, 1.0, 3), rng.uniform(-1.0, 1.0, 3)
+    expected = reference_run(scene, q0, w0, np.zeros(3), 1.0)
+    for order, dts in ((4, (1e-2, 5e-3)), (6, (1e-2, 5e-3))):
+        solver = build_solver(scene, "midpoint", sensitivities=False, order=order)
+        errors = []
+        for dt in dts:
+            steps = round(1.0 / dt)
+            result = solver.simulate(q0, w0, dt=dt, n_steps=steps, every=steps)
+            errors.append(np.abs(wrapped(result.phi[-1] - expected)).max())
+        assert 0.7 * 2 ** order <= errors[0] / errors[1] <= 1.3 * 2 ** order, (order, errors)
+
+
+@pytest.mark.compile
+def test_simulate_scene_runs_a_spatial_scene_with_the_simulation_defaults():
+    """chaingen.simulation's one-call path: a spatial scene has no [simulation] table, so the
+    table's defaults apply (dt = 0.01 s), and the run starts from the scene's initial state."""
+    from chaingen.simulation import run_settings, simulate_scene
+
+    scene = dataclasses.replace(random_scene(61, 3, springs=True), initial_angles=(0.3, -0.2, 0.1),
+                                initial_velocities=(0.0, 0.5, 0.0))
+    settings = run_settings(scene, method="midpoint", t_end=0.1)
+    result = simulate_scene(scene, settings)
+    assert settings.dt == 0.01 and result.n_steps == 10
+    np.testing.assert_allclose(result.phi[0], scene.initial_angles, rtol=0, atol=1e-15)
+    assert result.energy[0] == pytest.approx(
+        dynamics.kinetic_energy(scene, scene.initial_angles, scene.initial_velocities)
+        + dynamics.potential_energy(scene, scene.initial_angles), rel=1e-12)
