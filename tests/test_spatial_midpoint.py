@@ -30,7 +30,7 @@ from chaingen.spatial.values import (
 )
 from chaingen.symbolic.schemes import build_scheme, spatial_midpoint
 
-from helpers import load, require_module
+from helpers import load, require_module, require_tools
 
 
 def residual_function(scheme):
@@ -349,3 +349,41 @@ def test_parallel_axes_give_the_planar_three_link_multi():
         finals.append(runs[1].phi[-1])
     # dt -> 0: the step is not the limit's (the runs moved by O(dt^2)), so agreeing was not free.
     assert 1e-8 < np.abs(wrapped(finals[0] - finals[1])).max() < 1e-4
+
+
+@pytest.mark.tools
+@pytest.mark.parametrize("actuated", [(), (1, 3)])
+def test_spatial_example_is_clean_under_valgrind_and_the_sanitizers(tmp_path, actuated):
+    """A spatial package as a user gets it (free motion, and an actuated, damped chain whose
+    example closes the PD loop on the holding torques): its example program, compiled with the
+    strict flags, runs clean under memcheck and under ASan/UBSan."""
+    require_tools("gcc", "valgrind")
+    import json
+    import subprocess
+
+    from chaingen.generate.package import generate_package, write_package
+    from chaingen.runtime import contract
+
+    plain = random_scene(71, 4, springs=True)
+    scene = dataclasses.replace(plain, name="spatial-example", actuated=actuated, links=tuple(
+        dataclasses.replace(link, damping=0.2) for link in plain.links))
+    package = write_package(generate_package(scene, "midpoint", 3, sensitivities=False),
+                            tmp_path / "package")
+    sources = [package / name for name in json.loads((package / "chaingen.json").read_text())
+               ["sources"]]
+    for name, flags, runner in (
+            ("memcheck", ["-g", "-O1"], ["valgrind", "--error-exitcode=99",
+                                         "--track-origins=yes", "--leak-check=full"]),
+            ("sanitized", ["-g", "-fsanitize=address,undefined", "-fno-omit-frame-pointer",
+                           "-fno-sanitize-recover=all"], [])):
+        binary = tmp_path / name
+        built = subprocess.run(["gcc", *flags, *contract.STRICT_FLAGS, f"-I{package}",
+                                *map(str, sources), str(package / "example.c"), "-lm", "-o",
+                                str(binary)], capture_output=True, text=True, timeout=300)
+        assert built.returncode == 0, built.stderr
+        run = subprocess.run([*runner, str(binary), "0.5"], capture_output=True, text=True,
+                             timeout=300)
+        assert run.returncode == 0, run.stdout + run.stderr
+        if runner:
+            assert "ERROR SUMMARY: 0 errors" in run.stderr, run.stderr
+        assert ("final tracking error" in run.stdout) == bool(actuated), run.stdout
