@@ -387,3 +387,28 @@ def test_spatial_example_is_clean_under_valgrind_and_the_sanitizers(tmp_path, ac
         if runner:
             assert "ERROR SUMMARY: 0 errors" in run.stderr, run.stderr
         assert ("final tracking error" in run.stdout) == bool(actuated), run.stdout
+
+
+@pytest.mark.compile
+def test_a_route_segment_passing_through_zero_length_stops_the_run():
+    """A spring from the base's (0.1, 0, 0) to (0, 0.1, 0) on a link turning about z from 0 at
+    -3 rad/s: its segment has zero length at q = -pi/2, reached between two steps of 0.01 s
+    around t = pi/6 s; the run stops there with the segment status (model.md 12), in 3D as in
+    the plane."""
+    from chaingen.runtime import NewtonError
+    from chaingen.simulation import build_solver
+
+    link = SpatialLink(mass=1.0, com=(0.3, 0.0, 0.0), inertia=(0.01, 0.02, 0.02, 0, 0, 0),
+                       joint=SpatialJoint((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)))
+    spring = SpatialSpring((RoutePoint(0, (0.1, 0.0, 0.0)), RoutePoint(1, (0.0, 0.1, 0.0))),
+                           stiffness=0.5, rest_length=0.1)
+    scene = SpatialScene(name="collapsing-route", gravity=(0.0, 0.0, -9.81), links=(link,),
+                         springs=(spring,), initial_angles=(0.0,), initial_velocities=(-3.0,))
+    solver = build_solver(scene, "midpoint", sensitivities=False)
+    with pytest.raises(NewtonError, match="spring segment") as caught:
+        solver.simulate([0.0], [-3.0], dt=0.01, n_steps=100)
+    assert caught.value.status == 6
+    crossing = (np.pi / 2) / 3.0
+    assert caught.value.time <= crossing <= caught.value.time + 0.01
+    clear = solver.simulate([0.0], [3.0], dt=0.01, n_steps=30)    # turning away from it
+    assert np.all(np.isfinite(clear.samples))
