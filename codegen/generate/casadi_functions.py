@@ -256,16 +256,16 @@ def holding_torques(t: SchemeTranslation) -> GeneratedFunction | None:
     maps = t.scheme.maps
     if maps.holding_torques is None:
         return None
-    # The initial state's definitions in the angles alone may carry them (a spatial chain's
-    # recursion): those in the initial velocities stay unused.
+    # They may use the initial state's definitions (a spatial chain's recursion), all bound;
+    # the function takes the angles alone, so no symbol of the velocities may reach them.
     translate = bind_all(SympyToCasadi({**dict(zip(maps.initial_angles, ca.vertsplit(t.phi))),
                                         **dict(zip(maps.initial_velocities,
                                                    ca.vertsplit(t.phidot))),
                                         **t.parameter_bindings}, t.parameters),
                          maps.initial_definitions)
+    velocities = set(maps.initial_velocities)
     torques = t.translated("holding_torques", maps.holding_torques, translate,
-                           [symbol for symbol in t.initial_symbols
-                            if symbol not in set(maps.initial_velocities)])
+                           [symbol for symbol in t.initial_symbols if symbol not in velocities])
     return GeneratedFunction("holding_torques", tuple([t.phi] + t.with_p[0]),
                              tuple(["phi"] + t.with_p[1]), (torques,), ("tau",))
 
