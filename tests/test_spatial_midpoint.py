@@ -47,7 +47,7 @@ def residual_function(scheme):
     return residual
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=12, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7),
        dt=st.floats(1e-4, 0.1))
 def test_residual_is_the_inverse_dynamics_of_pinocchio(seed, n, dt):
@@ -63,7 +63,7 @@ def test_residual_is_the_inverse_dynamics_of_pinocchio(seed, n, dt):
     assert np.abs(ours - expected).max() <= 1e-10 * max(1.0, np.abs(expected).max())
 
 
-@settings(max_examples=15, deadline=None)
+@settings(max_examples=8, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
 def test_actuated_damped_residual_subtracts_torques_and_damping(seed, n):
     """With inputs on some joints and damping on all: the residual / dt is the inverse
@@ -87,7 +87,7 @@ def test_actuated_damped_residual_subtracts_torques_and_damping(seed, n):
     assert np.abs(ours - expected).max() <= 1e-10 * max(1.0, np.abs(expected).max())
 
 
-@settings(max_examples=20, deadline=None)
+@settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7))
 def test_energy_and_segments_of_a_state_are_the_numeric_ones(seed, n):
     """H = T + V by the recursion against chaingen.spatial.dynamics; the watched segment
