@@ -13,8 +13,9 @@ from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
 from .runtime.solver import MAX_SAMPLE_BYTES  # samples are held in memory before they are written
-from .scene import Scene, SolverSpec
+from .scene import Scene, Simulation, SolverSpec
 from .scene.solver_rules import REQUEST_KEYS, request_refusal
+from .spatial.values import SpatialScene
 
 #: A run of more steps is refused: at about 1 us a step it would take days.
 MAX_STEPS = 10 ** 12
@@ -50,7 +51,7 @@ class RunSettings:
                           gradient=self.gradient)
 
 
-def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=None,
+def run_settings(scene: Scene | SpatialScene, *, method=None, quadrature=None, dt=None, t_end=None,
                  every=None, order=None, rtol=None, atol=None, gradient=None,
                  source: str = "") -> RunSettings:
     """Merge command-line overrides into the scene's defaults, validating each override.
@@ -58,7 +59,8 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
     `source` (the scene file) prefixes errors about values that came from the scene.
     """
     scene_source = f"{source}: " if source else ""
-    defaults = scene.simulation
+    # A spatial scene has no [simulation] table (yet): the table's defaults.
+    defaults = Simulation() if isinstance(scene, SpatialScene) else scene.simulation
     settings = RunSettings(
         method=method if method is not None else defaults.method,
         quadrature=quadrature if quadrature is not None else defaults.quadrature,
@@ -97,7 +99,7 @@ def run_settings(scene: Scene, *, method=None, quadrature=None, dt=None, t_end=N
     return settings
 
 
-def build_solver(scene: Scene | SolverSpec, method: str | None = None,
+def build_solver(scene: Scene | SpatialScene | SolverSpec, method: str | None = None,
                  quadrature: int | None = None, *, sensitivities: bool = True, parameters=(),
                  order: int | None = None, gradient: str | None = None) -> Solver:
     """Generate and build (or load from the cache) the solver of a SolverSpec, or of `scene`
@@ -147,7 +149,7 @@ def build_solver(scene: Scene | SolverSpec, method: str | None = None,
     return solver
 
 
-def solver_spec(scene: Scene | SolverSpec, method: str | None = None,
+def solver_spec(scene: Scene | SpatialScene | SolverSpec, method: str | None = None,
                 quadrature: int | None = None, *, sensitivities: bool = True, parameters=(),
                 order: int | None = None, gradient: str | None = None) -> SolverSpec:
     """The SolverSpec build_solver builds from its arguments: a given SolverSpec as it is
@@ -163,7 +165,8 @@ def solver_spec(scene: Scene | SolverSpec, method: str | None = None,
                              sensitivities=sensitivities, gradient=gradient)
 
 
-def simulate_scene(scene: Scene, settings: RunSettings, *, solver: Solver | None = None,
+def simulate_scene(scene: Scene | SpatialScene, settings: RunSettings, *,
+                   solver: Solver | None = None,
                    options: NewtonOptions | dict | None = None) -> SimulationResult:
     """Simulate `scene` from its initial state; raises NewtonError if a step fails. On a
     terminal a progress bar follows the run (the samples do not depend on it). options:

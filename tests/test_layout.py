@@ -19,7 +19,7 @@ FOLDERS = {"codegen": "chaingen", "runtime": "chaingen.runtime"}
 #: The pipeline's stages, bottom first: a module may import its own stage and the ones below.
 STAGES = (
     ("chaingen.version", "chaingen.runtime", "chaingen.errors"),
-    ("chaingen.scene", "chaingen.progress"),
+    ("chaingen.scene", "chaingen.spatial", "chaingen.progress"),
     ("chaingen.symbolic",),
     ("chaingen.generate",),
     ("chaingen.simulation",),

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
+from ..spatial.values import SpatialScene
 from ..symbolic.schemes import DiscreteScheme
 from .jacobians import (
     JACOBIAN_CHUNK,
@@ -98,7 +99,8 @@ class SchemeTranslation:
         self.nz, self.nx = step.unknowns.shape[0], maps.state.shape[0]
         self.nu = scheme.flows.inputs.shape[0]
         self.n, self.n_p = scheme.scene.n, scheme.run_parameters.symbols.shape[0]
-        if 2 * len(scheme.segments.tolerances) != scheme.segments.vectors.shape[0]:
+        if segment_dimension(scheme) * len(scheme.segments.tolerances) != \
+                scheme.segments.vectors.shape[0]:
             raise ValueError(f"{scheme.metadata.method}: one segment tolerance per spring "
                              "segment")
         self.parameters = list(scheme.run_parameters.symbols)
@@ -203,6 +205,12 @@ def defined(kind: str, inputs, definitions) -> list:
     return symbols
 
 
+def segment_dimension(scheme: DiscreteScheme) -> int:
+    """The entries of each spring segment's vector: (dx, dy) for a planar chain, (dx, dy, dz)
+    for a spatial one."""
+    return 3 if isinstance(scheme.scene, SpatialScene) else 2
+
+
 def bind_all(translate: SympyToCasadi, definitions) -> SympyToCasadi:
     """`translate` with the symbols of `definitions` bound, in order."""
     for symbol, expression in definitions:
@@ -219,10 +227,11 @@ def segment_margins(t: SchemeTranslation) -> GeneratedFunction | None:
     if not vectors.shape[0]:
         return None
     tolerances = ca.DM(list(t.scheme.segments.tolerances))
+    rows = segment_dimension(t.scheme)
     before = ca.reshape(t.translated("segment_vectors", vectors, t.state_translator(t.x0),
-                                     t.state_symbols), 2, -1)
+                                     t.state_symbols), rows, -1)
     after = ca.reshape(t.translated("segment_vectors", vectors, t.state_translator(t.x),
-                                    t.state_symbols), 2, -1)
+                                    t.state_symbols), rows, -1)
     lengths_before = ca.sqrt(ca.sum1(before ** 2)).T
     lengths_after = ca.sqrt(ca.sum1(after ** 2)).T
     turn = ca.sum1(before * after).T / (lengths_before * lengths_after)
@@ -247,10 +256,16 @@ def holding_torques(t: SchemeTranslation) -> GeneratedFunction | None:
     maps = t.scheme.maps
     if maps.holding_torques is None:
         return None
-    translate = SympyToCasadi({**dict(zip(maps.initial_angles, ca.vertsplit(t.phi))),
-                               **t.parameter_bindings}, t.parameters)
+    # They may use the initial state's definitions (a spatial chain's recursion), all bound;
+    # the function takes the angles alone, so no symbol of the velocities may reach them.
+    translate = bind_all(SympyToCasadi({**dict(zip(maps.initial_angles, ca.vertsplit(t.phi))),
+                                        **dict(zip(maps.initial_velocities,
+                                                   ca.vertsplit(t.phidot))),
+                                        **t.parameter_bindings}, t.parameters),
+                         maps.initial_definitions)
+    velocities = set(maps.initial_velocities)
     torques = t.translated("holding_torques", maps.holding_torques, translate,
-                           list(maps.initial_angles) + t.parameters)
+                           [symbol for symbol in t.initial_symbols if symbol not in velocities])
     return GeneratedFunction("holding_torques", tuple([t.phi] + t.with_p[0]),
                              tuple(["phi"] + t.with_p[1]), (torques,), ("tau",))
 

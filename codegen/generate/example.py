@@ -21,7 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..scene import Scene, kinematics
+from ..scene import Scene, Simulation, kinematics
+from ..spatial import dynamics as spatial_dynamics
+from ..spatial.values import SpatialScene
+from ..symbolic.schemes.base import actuated_joints
 from .interface import c_literal
 
 #: Closed-loop bandwidth (rad/s) and damping ratio the gains aim at.
@@ -45,29 +48,33 @@ class ExampleSettings:
     bandwidth: float            # omega_c the gains were made for (rad/s)
 
 
-def example_settings(scene: Scene) -> ExampleSettings:
-    """The target posture and gains of the example: joint 1 raised to pi/2, the rest straight."""
+def example_settings(scene: Scene | SpatialScene) -> ExampleSettings:
+    """The target posture and gains of the example: joint 1 raised to pi/2, the rest straight
+    (a spatial chain: joint 1 turned by pi/2 about its axis)."""
     target = (math.pi / 2,) + (0.0,) * (scene.n - 1)
-    if not scene.actuated_joints:   # free motion at the scene's own step
-        dt = scene.simulation.dt
+    spatial = isinstance(scene, SpatialScene)
+    if not actuated_joints(scene):   # free motion at the scene's own step
+        # A spatial scene has no [simulation] table: the table's default step.
+        dt = Simulation().dt if spatial else scene.simulation.dt
         return ExampleSettings(target=target, kp=(), kd=(), dt=dt, duration=EXAMPLE_DURATION,
                                print_every=max(1, round(0.5 / dt)), bandwidth=0.0)
     dt = 1 / CONTROL_RATE
-    mass = kinematics.mass_matrix(scene, target)
+    mass = (spatial_dynamics.mass_matrix(scene, target) if spatial
+            else kinematics.mass_matrix(scene, target))
     inertia = np.zeros(scene.n)
-    for joint in scene.actuated_joints:
+    for joint in actuated_joints(scene):
         inertia[joint - 1] = mass[joint - 1, joint - 1]
     # Largest eigenvalue of M^-1 diag(inertia) (real and >= 0: similar to a symmetric matrix).
     fastest = max(np.linalg.eigvals(np.linalg.solve(mass, np.diag(inertia))).real)
     bandwidth = min(BANDWIDTH, SAMPLING_MARGIN / (2 * DAMPING_RATIO * dt * fastest))
-    chosen = [inertia[joint - 1] for joint in scene.actuated_joints]
+    chosen = [inertia[joint - 1] for joint in actuated_joints(scene)]
     return ExampleSettings(
         target=target, kp=tuple(bandwidth ** 2 * i for i in chosen),
         kd=tuple(2 * DAMPING_RATIO * bandwidth * i for i in chosen), dt=dt,
         duration=EXAMPLE_DURATION, print_every=max(1, round(0.5 / dt)), bandwidth=bandwidth)
 
 
-def example_context(scene: Scene) -> dict:
+def example_context(scene: Scene | SpatialScene) -> dict:
     """The example program's numbers as C text, for the templates."""
     settings = example_settings(scene)
 
@@ -79,7 +86,7 @@ def example_context(scene: Scene) -> dict:
         "initial_velocities": doubles(scene.initial_velocities),
         "dt": c_literal(settings.dt), "duration": c_literal(settings.duration),
         "print_every": settings.print_every, "target": doubles(settings.target),
-        "actuated_indices": ", ".join(str(j - 1) for j in scene.actuated_joints),
+        "actuated_indices": ", ".join(str(j - 1) for j in actuated_joints(scene)),
         "kp": doubles(settings.kp), "kd": doubles(settings.kd),
         "bandwidth_hz": f"{settings.bandwidth / (2 * math.pi):.3g}",
     }

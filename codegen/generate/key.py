@@ -50,7 +50,7 @@ def input_hash(spec: SolverSpec | Scene, method: str | None = None,
         scene = spec
     code_relevant = dataclasses.asdict(scene)
     for key in ("initial_angles", "initial_velocities", "simulation"):
-        code_relevant.pop(key)
+        code_relevant.pop(key, None)     # a spatial scene has no simulation defaults
     payload = {
         "scene": code_relevant, "method": method,
         "quadrature": quadrature_used(scene, method, quadrature, order),

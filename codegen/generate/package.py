@@ -23,9 +23,10 @@ from ..errors import ChaingenError, PackageWriteError, RunFailedError, SceneErro
 from ..runtime import contract
 from ..runtime.contract import Features
 from ..runtime.files import write_directory
-from ..scene import Scene, SolverSpec, labels
+from ..scene import Scene, SolverSpec, c_identifier, labels
 from ..scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE, ZERO_SEGMENT_RELATIVE_TOLERANCE
 from ..symbolic.schemes import DiscreteScheme, build_scheme
+from ..symbolic.schemes.base import actuated_joints
 from ..version import VERSION
 from .casadi_functions import chains_state, scheme_functions
 from .casadi_source import casadi_c_source, work_sizes
@@ -100,7 +101,7 @@ def package_prefix(scene: Scene, method: str) -> str:
         raise SceneError(f"name: must be at most {contract.MAX_SCENE_NAME_LENGTH} characters "
                          f"long (it prefixes generated C and file names), not "
                          f"{len(scene.name)}")
-    return f"{scene.c_name}_{method}"
+    return f"{c_identifier(scene.name)}_{method}"
 
 
 def parameter_bounds(paths) -> list[tuple[str, str, str]]:
@@ -210,12 +211,12 @@ def layout_comments(scheme: DiscreteScheme, prefix: str, columns, parameters) ->
 
     parts = [listing(f"State x ({P}_NX entries): {scheme.state_layout.description}.",
                      [f"x[{i}] {name}" for i, name in enumerate(scheme.state_layout.entries)])]
-    if scene.actuated_joints:
+    if actuated_joints(scene):
         parts.append(listing(
             f"Inputs u ({P}_NU entries): the torque (N m) of each actuated joint, held constant "
             "over a\n * step. It acts between link i-1 and link i, positive in the direction of "
             "phi_i (power tau phidot).",
-            [f"u[{i}] tau of joint {joint}" for i, joint in enumerate(scene.actuated_joints)]))
+            [f"u[{i}] tau of joint {joint}" for i, joint in enumerate(actuated_joints(scene))]))
     else:
         parts.append("/* The scene has no [actuation] table: the chain is unactuated, NU is 0 "
                      "and u is NULL. */\n")
@@ -283,7 +284,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
                    f"Do not edit. chaingen_input_hash={digest}")
     c_banner = f"/* {banner_text} */"
     n = scene.n
-    nu = len(scene.actuated_joints)
+    nu = len(actuated_joints(scene))
     n_p = len(scheme.parameter_paths)
     columns = contract.sample_columns(n, features.flows)
     chain_state = chains_state(scheme)
@@ -320,7 +321,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "n": n, "nx": sizes["nx"], "nz": sizes["nz"], "nsample": sizes["nsample"],
         "flows": int(features.flows),
         "p_arguments": f"parameters, {prefix.upper()}_NP" if n_p else "NULL, 0",
-        "actuated_joints": scene.actuated_joints,
+        "actuated_joints": actuated_joints(scene),
         **example_context(scene),
         "parameters": parameters_listed,
         "work": work,
@@ -366,7 +367,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "scene": scene.name, "method": scheme.method, "quadrature": scheme.quadrature,
         "gradient": scheme.gradient, "order": scheme.order, "composition": list(scheme.composition),
         "n_joints": n, "nx": context["nx"], "nz": context["nz"], "nsample": context["nsample"],
-        "actuated_joints": list(scene.actuated_joints), "nu": nu,
+        "actuated_joints": list(actuated_joints(scene)), "nu": nu,
         "parameters": [{"path": path, "unit": unit, "value": value,
                         "lower": None if bound is None else bound.value,
                         "lower_inclusive": True if bound is None else bound.inclusive}

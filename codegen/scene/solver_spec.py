@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import SceneError
+from ..errors import SceneError, UnsupportedSceneError
+from ..spatial.values import SpatialScene
 from .parameters import NumberPath, compiled_paths, number_path
 from .solver_rules import (
     GALERKIN_ORDER,
@@ -19,7 +20,7 @@ from .solver_rules import (
     quadrature_used,
     request_refusal,
 )
-from .values import Scene
+from .values import Scene, Simulation
 
 
 @dataclass(frozen=True)
@@ -44,9 +45,13 @@ class SolverSpec:
     gradient: str = "exact"
 
     def __post_init__(self):
-        if not isinstance(self.scene, Scene):
-            raise TypeError(f"SolverSpec.scene: a Scene (chaingen.load_scene), not "
-                            f"{type(self.scene).__name__}")
+        if not isinstance(self.scene, (Scene, SpatialScene)):
+            raise TypeError(f"SolverSpec.scene: a Scene (chaingen.load_scene) or a "
+                            f"SpatialScene, not {type(self.scene).__name__}")
+        if isinstance(self.scene, SpatialScene) and self.parameters:
+            raise UnsupportedSceneError(
+                f"parameters: run-time parameters are planar-only so far; the spatial scene "
+                f"{self.scene.name!r} takes none, got {self.parameters!r}")
         refused = request_refusal({"method": self.method, "quadrature": self.quadrature,
                                    "order": self.order, "gradient": self.gradient})
         if refused:
@@ -70,7 +75,9 @@ class SolverSpec:
                gradient: str | None = None) -> SolverSpec:
         """A spec with the scene's own method, quadrature, order and gradient ([simulation])
         where they are None."""
-        defaults = scene.simulation if isinstance(scene, Scene) else None
+        # A spatial scene has no [simulation] table: the table's defaults.
+        defaults = (scene.simulation if isinstance(scene, Scene) else
+                    Simulation() if isinstance(scene, SpatialScene) else None)
         return cls(scene=scene,
                    method=defaults.method if method is None and defaults else method,
                    quadrature=(defaults.quadrature if quadrature is None and defaults

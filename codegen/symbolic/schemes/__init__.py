@@ -5,18 +5,25 @@ A scheme may take some of the scene's numbers as run-time parameters: they enter
 as symbols (chaingen.scene.parameters.with_symbols), every other number as a constant."""
 from __future__ import annotations
 
+import math
+
 import sympy as sp
 from sympy import ImmutableMatrix
 
+from ...errors import UnsupportedSceneError
 from ...scene import METHODS, Scene, SolverSpec
+from ...scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE
 from ...scene.parameters import with_symbols
+from ...spatial.values import SpatialScene
 from ..composition import FROM_ORDER_4, composition
-from . import es, galerkin, midpoint, vi
+from . import es, galerkin, midpoint, spatial_midpoint, vi
 from .base import DiscreteScheme, FlowDescription, Layout, segment_tolerances
 
 BUILDERS = {"es": es.build, "vi": vi.build, "midpoint": midpoint.build}
 if tuple(BUILDERS) != METHODS:
     raise ImportError(f"schemes {tuple(BUILDERS)} do not match the methods {METHODS}")
+#: The schemes a spatial scene (chaingen.spatial.values) has so far.
+SPATIAL_BUILDERS = {"midpoint": spatial_midpoint.build}
 
 
 def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
@@ -33,6 +40,8 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
     spec = scene if isinstance(scene, SolverSpec) else SolverSpec.create(
         scene, method, quadrature, order=order, parameters=parameters, gradient=gradient)
     scene, quadrature, order = spec.scene, spec.quadrature, spec.order
+    if isinstance(scene, SpatialScene):
+        return build_spatial_scheme(spec)
     stages = FROM_ORDER_4 if spec.galerkin_step else composition(order)
     builder = galerkin.build if spec.galerkin_step else BUILDERS[spec.method]
     numbers = spec.parameter_numbers
@@ -53,6 +62,32 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
         parameter_units=tuple(number.unit for number in numbers),
         parameter_values=tuple(number.value(scene) for number in numbers),
         order=order, composition=stages)
+
+
+def build_spatial_scheme(spec: SolverSpec) -> DiscreteScheme:
+    """The scheme of a spatial scene's SolverSpec (no run-time parameters: SolverSpec refuses
+    them), its step composed to the spec's order; UnsupportedSceneError for a method that has
+    no spatial scheme yet."""
+    scene = spec.scene
+    if spec.method not in SPATIAL_BUILDERS:
+        raise UnsupportedSceneError(
+            f"method {spec.method!r}: not available for a spatial scene (scene {scene.name!r}) "
+            f"yet; use {', '.join(map(repr, SPATIAL_BUILDERS))}")
+    scheme = SPATIAL_BUILDERS[spec.method](scene, spec.quadrature, spec.order)
+    return scheme.replaced(segment_tolerances=spatial_segment_tolerances(scene),
+                           order=spec.order, composition=composition(spec.order))
+
+
+def spatial_segment_tolerances(scene: SpatialScene) -> tuple[float, ...]:
+    """The run tolerance of every route segment of a spatial scene's springs, spring by
+    spring: RUN_SEGMENT_RELATIVE_TOLERANCE times the size of the geometry, the sum of |xyz|
+    over the joints' origins and of |point| over the spring's route points (the planar rule,
+    chaingen.scene.kinematics.geometry_size, in 3D)."""
+    chain = sum(math.dist(link.joint.xyz, (0.0, 0.0, 0.0)) for link in scene.links)
+    return tuple(RUN_SEGMENT_RELATIVE_TOLERANCE
+                 * (chain + sum(math.dist(point.point, (0.0, 0.0, 0.0))
+                                for point in spring.route))
+                 for spring in scene.springs for _ in spring.route[1:])
 
 
 __all__ = ["DiscreteScheme", "FlowDescription", "Layout", "build_scheme"]

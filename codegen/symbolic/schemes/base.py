@@ -18,6 +18,7 @@ from sympy import ImmutableMatrix
 from ...runtime.contract import JACOBIAN_EVERY_ITERATE
 from ...scene import Scene
 from ...scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE, run_segment_tolerance
+from ...spatial.values import SpatialScene
 from ..joint_model import angle_directions, joint_space_potential
 
 
@@ -335,20 +336,25 @@ def numpy_function(inputs, definitions, expressions):
                        cse=eliminate if definitions else True)
 
 
-def has_energy_flows(scene: Scene) -> bool:
+def actuated_joints(scene: Scene | SpatialScene) -> tuple[int, ...]:
+    """The 1-based actuated joints of a planar or a spatial scene, ascending."""
+    return scene.actuated if isinstance(scene, SpatialScene) else scene.actuated_joints
+
+
+def has_energy_flows(scene: Scene | SpatialScene) -> bool:
     """Whether energy can enter (actuation) or leave (damping) the chain."""
-    return bool(scene.actuated_joints) or any(link.damping for link in scene.links)
+    return bool(actuated_joints(scene)) or any(link.damping for link in scene.links)
 
 
-def input_symbols(scene: Scene) -> ImmutableMatrix:
+def input_symbols(scene: Scene | SpatialScene) -> ImmutableMatrix:
     """u: one torque symbol per actuated joint, in the scene's order."""
-    return ImmutableMatrix(sp.symbols([f"tau{j}" for j in scene.actuated_joints], real=True))
+    return ImmutableMatrix(sp.symbols([f"tau{j}" for j in actuated_joints(scene)], real=True))
 
 
-def joint_torques(scene: Scene, inputs) -> list[sp.Expr]:
+def joint_torques(scene: Scene | SpatialScene, inputs) -> list[sp.Expr]:
     """tau_i for every joint i: the input of an actuated joint, zero elsewhere."""
     torques = [sp.Integer(0)] * scene.n
-    for joint, u in zip(scene.actuated_joints, inputs):
+    for joint, u in zip(actuated_joints(scene), inputs):
         torques[joint - 1] = u
     return torques
 
@@ -364,21 +370,23 @@ def segment_tolerances(scene: Scene) -> tuple[float, ...]:
                  for spring in scene.springs for _ in spring.joints)
 
 
-def holding_torques(scene: Scene, angles) -> ImmutableMatrix | None:
-    """dV/dphi at the relative angles `angles` (symbols) for an actuated scene, else None."""
-    if not scene.actuated_joints:
+def holding_torques(scene: Scene | SpatialScene, angles) -> ImmutableMatrix | None:
+    """dV/dphi at the relative angles `angles` (symbols) for an actuated planar scene, else
+    None: a spatial scene's package has no holding torques (the planar potential's closed
+    form does not carry over; its example controller runs without them)."""
+    if isinstance(scene, SpatialScene) or not scene.actuated_joints:
         return None
     potential = joint_space_potential(scene, angle_directions(angles))
     return ImmutableMatrix([potential]).jacobian(list(angles)).T
 
 
-def common_fields(scene: Scene, angles) -> dict:
+def common_fields(scene: Scene | SpatialScene, angles) -> dict:
     """The fields every scheme derives the same way from its scene (angles: the symbols of
     initial_angles)."""
     return {"holding_torques": holding_torques(scene, angles)}
 
 
-def joint_space_state(scene: Scene, angles, rates, energy) -> dict:
+def joint_space_state(scene: Scene | SpatialScene, angles, rates, energy) -> dict:
     """The fields of a scheme whose state is x = (phi, w), the relative joint angles `angles`
     (not wrapped) and rates `rates` (symbols), with energy H(x): its outputs, its start from
     joint space, its layout and common_fields. Minimal coordinates: no constraint residuals."""
