@@ -24,14 +24,11 @@ def random_scene(seed: int, n: int, springs: bool = False) -> SpatialScene:
     rng = np.random.default_rng(seed)
     links = []
     for _ in range(n):
-        # A physically possible tensor: a solid box's principal moments, turned at random.
-        mass = float(rng.uniform(0.2, 5.0))
-        a, b, c = rng.uniform(0.02, 0.5, 3) ** 2
-        turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-        inertia = turn @ np.diag([mass * (b + c), mass * (a + c), mass * (a + b)]) @ turn.T / 12
+        root = rng.normal(size=(3, 3))
+        inertia = 0.1 * root @ root.T + 0.01 * np.eye(3)
         axis = rng.normal(size=3)
         links.append(SpatialLink(
-            mass=mass, com=tuple(0.1 * rng.normal(size=3)),
+            mass=float(rng.uniform(0.2, 5.0)), com=tuple(0.1 * rng.normal(size=3)),
             inertia=(inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2],
                      inertia[1, 2]),
             joint=SpatialJoint(xyz=tuple(0.3 * rng.normal(size=3)),
