@@ -478,7 +478,8 @@ def test_a_planar_file_is_refused_by_the_spatial_loader(stem):
 
 def spatial_refusal(marker: str, source: str = SOURCE) -> str:
     return (f"{source}: {marker}: a spatial scene (scene-format.md, \"Spatial scenes\"), which "
-            "no scheme takes yet; read it with chaingen.spatial.load_spatial_scene")
+            "sweeps and the other planar-only readers do not take yet; read it with "
+            "chaingen.spatial.load_spatial_scene")
 
 
 @pytest.mark.parametrize("text, marker", [
@@ -494,7 +495,7 @@ def spatial_refusal(marker: str, source: str = SOURCE) -> str:
 def test_a_spatial_file_is_refused_by_the_planar_loader(text, marker):
     """Not a half-valid Scene: one line naming the key that makes the file spatial, an error
     that is both a SceneError (a file the planar loader cannot use) and an
-    UnsupportedSceneError (a scene no scheme takes yet)."""
+    UnsupportedSceneError (a scene the planar-only features do not take yet)."""
     with pytest.raises(UnsupportedSceneError) as caught:
         parse_scene(text, SOURCE, "test")
     assert isinstance(caught.value, SceneError)
