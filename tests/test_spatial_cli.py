@@ -91,7 +91,8 @@ def test_a_bad_spatial_file_is_one_line_naming_its_key_for_every_command(tmp_pat
     for args in (["simulate", bad], ["generate", bad], ["check", bad], ["order", bad],
                  ["export", bad, "--mjcf", "arm.xml"], ["animate", bad, "-o", "arm.gif"]):
         line = error_line(chaingen_in_process(*args, cwd=tmp_path))
-        assert f"{bad}: links[1].joint" in line and "axis" in line, line
+        assert line.startswith(f"chaingen: error: {bad}: links[1].joint"), line
+        assert "axis" in line and line.count(str(bad)) == 1, line
     assert snapshot(tmp_path) == before
 
 
@@ -123,6 +124,7 @@ def test_generate_refuses_what_a_spatial_scene_cannot_take_and_writes_nothing(
         assert result.returncode == EXIT_BAD_INPUT and "--order" in result.stderr
     else:
         line = error_line(result)
+        assert line.startswith(f"chaingen: error: {scene}: ") and line.count(str(scene)) == 1
         for fragment in fragments:
             assert fragment in line, line
     assert snapshot(tmp_path) == before
