@@ -15,6 +15,9 @@ import re
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_spatial_dynamics import random_scene
 
 from chaingen.arguments import SPATIAL_DEFAULT_METHOD, load_command_scene
 from chaingen.scene import Scene
@@ -223,6 +226,37 @@ def test_the_animation_draws_the_joints_where_link_poses_has_them(tmp_path, seed
             np.testing.assert_allclose(view["links"][:-1], view["joints"], atol=0)
             for line, route in zip(view["springs"], routes):
                 np.testing.assert_allclose(line, route[:, [horizontal, vertical]], atol=1e-12)
+
+
+@settings(max_examples=12, deadline=None, derandomize=True, database=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 7), springs=st.booleans(),
+       turns=st.lists(st.floats(-np.pi, np.pi), min_size=7, max_size=7))
+def test_random_arms_are_drawn_where_link_poses_has_them_and_inside_the_views(
+        seed, n, springs, turns):
+    """Random chains (skew axes, off-axis COMs, routed springs): each view holds the
+    projections of chaingen.spatial.dynamics' joints, COMs and route points, and every point
+    lies inside the view's limits (spatial_reach bounds every posture)."""
+    from chaingen.views.animate_spatial import VIEWS, SpatialDrawing
+
+    scene = random_scene(seed, n, springs)
+    q = np.asarray(turns[:n])
+    drawing = SpatialDrawing(scene, pixels=240)
+    drawing.draw(q, 0.0)
+    joints = np.array([origin for _, origin in dynamics.link_poses(scene, q)[1:]])
+    coms = dynamics.com_positions(scene, q)
+    routes = dynamics.route_positions(scene, q)
+    for view, (name, horizontal, vertical) in zip(drawing.views, VIEWS):
+        drawn = drawing.drawn()[name]
+        pick = [horizontal, vertical]
+        np.testing.assert_allclose(drawn["joints"], joints[:, pick], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(drawn["coms"], coms[:, pick], rtol=0, atol=1e-12)
+        assert len(drawn["springs"]) == len(routes)
+        for line, route in zip(drawn["springs"], routes):
+            np.testing.assert_allclose(line, route[:, pick], rtol=0, atol=1e-12)
+        points = np.vstack([drawn["joints"], drawn["coms"], *drawn["springs"]])
+        (left, right), (bottom, top) = view.axes.get_xlim(), view.axes.get_ylim()
+        assert np.all((points[:, 0] > left) & (points[:, 0] < right))
+        assert np.all((points[:, 1] > bottom) & (points[:, 1] < top))
 
 
 def test_animate_from_the_command_line_of_a_spatial_trajectory(tmp_path):
