@@ -4,7 +4,7 @@ written, no input overwritten), and the animation's drawing checked against the 
 kinematics of chaingen.spatial.dynamics at the samples it draws.
 
 The fast tests need no compiler (generate writes C without building it, export and the views
-read files); the ones that build a solver are marked compile.
+read files); the ones that build a solver are marked compile, the MP4 one (ffmpeg) tools.
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from chaingen.arguments import SPATIAL_DEFAULT_METHOD, load_command_scene
 from chaingen.scene import Scene
 from chaingen.spatial import SpatialScene, dynamics, load_spatial_scene
 
-from helpers import ROOT, chaingen, chaingen_in_process, require_module
+from helpers import ROOT, chaingen, chaingen_in_process, require_module, require_tools
 
 SPATIAL = ROOT / "scenes" / "spatial_three_link.toml"
 PLANAR = ROOT / "scenes" / "three_link_multi.toml"
@@ -268,6 +268,28 @@ def test_animate_from_the_command_line_of_a_spatial_trajectory(tmp_path):
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("wrote arm.gif: 11 frames"), result.stdout
     assert scene.read_text() == SPATIAL.read_text()
+
+
+@pytest.mark.tools
+def test_animate_a_spatial_run_as_mp4_of_even_size(tmp_path):
+    """An odd --size still gives even frame sides (MP4's yuv420p), as ffprobe reads them."""
+    require_tools("ffmpeg", "ffprobe")
+    import subprocess
+
+    from chaingen.views.animate_spatial import spatial_frame_layout
+
+    t, q = random_run(3, samples=11, dt=0.1)
+    write_run(tmp_path / "run.csv", q, t)
+    result = chaingen_in_process("animate", SPATIAL, "run.csv", "-o", "arm.mp4", "--size",
+                                 "301", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    probe = subprocess.run(["ffprobe", "-v", "error", "-select_streams", "v:0", "-count_frames",
+                            "-show_entries", "stream=width,height,nb_read_frames", "-of",
+                            "csv=p=0", str(tmp_path / "arm.mp4")],
+                           capture_output=True, text=True, check=True)
+    width, height, frames = map(int, probe.stdout.strip().split(","))
+    assert (width, height) == spatial_frame_layout(302, True)[:2]
+    assert width % 2 == 0 and height % 2 == 0 and frames == 11
 
 
 @pytest.mark.parametrize("case", ["planar run", "other scene", "png", "scene as output",
