@@ -8,7 +8,6 @@ import math
 import os
 from pathlib import Path
 
-from .errors import UnsupportedSceneError
 from .runtime import contract
 from .scene import Scene
 from .scene.reader import parse_scene, parse_toml, read_scene_text, spatial_marker
@@ -84,14 +83,6 @@ def scene_method(scene: Scene | SpatialScene, method: str | None) -> str | None:
     if method is None and isinstance(scene, SpatialScene):
         return SPATIAL_DEFAULT_METHOD
     return method
-
-
-def refuse_spatial(scene: Scene | SpatialScene, feature: str) -> None:
-    """UnsupportedSceneError (one line, exit status 2) naming `feature` for a spatial scene:
-    for what reads a planar Scene only."""
-    if isinstance(scene, SpatialScene):
-        raise UnsupportedSceneError(f"{feature}: planar scenes only so far; {scene.name!r} is "
-                                    "a spatial scene")
 
 
 def add_scheme_options(parser: argparse.ArgumentParser,

@@ -7,10 +7,8 @@ import sys
 import numpy as np
 
 from .arguments import load_command_scene, newton_overrides, scene_method
-from .errors import ChaingenError, NewtonError
+from .errors import ChaingenError, NewtonError, RunFailedError
 from .runtime.files import check_output_file
-
-EXIT_FAILED = 1
 
 
 def command_plot(args) -> int:
@@ -57,7 +55,7 @@ def command_animate(args) -> int:
         except NewtonError as error:
             print(f"chaingen: error: simulation of {args.scene} failed: {error}",
                   file=sys.stderr)
-            return EXIT_FAILED
+            return RunFailedError.exit_status   # a run that failed: 1
         run = run_from_result(result, args.scene)
     if args.t_end is not None:
         run = run.until(args.t_end)
