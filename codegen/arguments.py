@@ -1,12 +1,16 @@
 """The command line's option types and shared options: numbers and paths as argparse reads them,
-the scheme options, the run-time parameters, the Newton options of the C-interface contract."""
+the scheme options, the run-time parameters, the Newton options of the C-interface contract;
+and the scene a command is given, planar or spatial, told apart here once."""
 from __future__ import annotations
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 from .runtime import contract
+from .scene import Scene
+from .scene.reader import parse_scene, parse_toml, read_scene_text, spatial_marker
 from .scene.solver_rules import (
     GALERKIN_MIN_QUADRATURE,
     GALERKIN_ORDER,
@@ -15,6 +19,14 @@ from .scene.solver_rules import (
     ORDERS,
     request_refusal,
 )
+from .spatial import SpatialScene, parse_spatial_scene
+
+#: The method of a spatial scene run without --method. A spatial scene file has no
+#: [simulation] table, so the default cannot be the file's; the planar default, es, is not
+#: built for spatial scenes yet. midpoint is the scheme every spatial feature has (orders,
+#: sensitivities, actuation, damping), and a fixed default keeps the numbers of a command line
+#: the same when another scheme's spatial builder lands (changing it is a decision, here).
+SPATIAL_DEFAULT_METHOD = "midpoint"
 
 #: The orders of the step each method takes (chaingen.scene.solver_rules), said once.
 ORDERS_TAKEN = (f"every method: {', '.join(map(str, ORDERS[:-1]))} and {ORDERS[-1]}; es at "
@@ -55,11 +67,30 @@ def number(text: str) -> float:
         raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
 
 
+def load_command_scene(path: str | os.PathLike[str]) -> Scene | SpatialScene:
+    """The scene file a command is given, planar or spatial: its kind is told by its keys
+    (chaingen.scene.reader.spatial_marker: a link's `joint` table or a gravity vector), and
+    the reader of that kind validates it (SceneError: one line naming file, key and value)."""
+    source, text = read_scene_text(path)
+    if spatial_marker(parse_toml(text, source)) is None:
+        return parse_scene(text, source, Path(source).stem)
+    return parse_spatial_scene(text, source, Path(source).stem)
+
+
+def scene_method(scene: Scene | SpatialScene, method: str | None) -> str | None:
+    """--method as given; for a spatial scene without it SPATIAL_DEFAULT_METHOD (a planar
+    scene's default is its [simulation].method, which run_settings reads)."""
+    if method is None and isinstance(scene, SpatialScene):
+        return SPATIAL_DEFAULT_METHOD
+    return method
+
+
 def add_scheme_options(parser: argparse.ArgumentParser,
                        order_default: str = "the scene's") -> None:
     parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format.md)")
     parser.add_argument("--method", choices=METHODS,
-                        help="time-stepping scheme (default: the scene's [simulation].method)")
+                        help="time-stepping scheme (default: the scene's [simulation].method; "
+                             f"{SPATIAL_DEFAULT_METHOD} for a spatial scene)")
     # K's range is the rules' (run_settings): one message for 0 and for 21.
     parser.add_argument("--quadrature", type=integer, metavar="K",
                         help="Gauss-Legendre points for the spring terms of 'es' "

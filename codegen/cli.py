@@ -7,25 +7,27 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from .arguments import (
     ORDERS_TAKEN,
     add_newton_options,
     add_parameters_option,
     add_scheme_options,
     dimension,
+    load_command_scene,
     newton_overrides,
     number,
     positive_int,
+    scene_method,
     seed,
 )
 from .errors import ChaingenError, NewtonError, SceneError, SettingsError, UnsupportedSceneError
 from .runtime.files import check_output_directory, check_output_file, reported_write
-from .scene import load_scene
+from .scene import Simulation
 from .scene.shipped import scene_file
+from .spatial import SpatialScene
 from .spatial.urdf import add_import_arguments, command_import
 from .version import VERSION
+from .view_commands import command_animate, command_plot
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -36,8 +38,8 @@ PATH_ERRORS = (errno.ENAMETOOLONG, errno.ELOOP)
 def parser() -> argparse.ArgumentParser:
     main = argparse.ArgumentParser(
         prog="chaingen",
-        description="Structure-preserving solvers for planar elastic robot arms: SymPy derives "
-                    "the model, CasADi generates C, and the C solver simulates.")
+        description="Structure-preserving solvers for elastic robot arms, planar and spatial: "
+                    "SymPy derives the model, CasADi generates C, and the C solver simulates.")
     main.add_argument("--version", action="version", version=f"chaingen {VERSION}")
     main.add_argument("--debug", action="store_true",
                       help="show the traceback of an unexpected error (or CHAINGEN_DEBUG=1)")
@@ -112,7 +114,8 @@ def parser() -> argparse.ArgumentParser:
                        help="draw METRIC against the axes into OUT/METRIC.png")
 
     animate = command(
-        "animate", help="animate the chain and its springs (GIF, or MP4 with ffmpeg)")
+        "animate", help="animate the chain and its springs (GIF, or MP4 with ffmpeg); a "
+                        "spatial scene in a front (x-z) and a top (x-y) view")
     add_scheme_options(animate)
     add_newton_options(animate)
     animate.add_argument("trajectory", type=Path, nargs="?", metavar="TRAJ.csv",
@@ -128,8 +131,9 @@ def parser() -> argparse.ArgumentParser:
     animate.add_argument("--every", type=positive_int, metavar="N",
                          help="draw every N-th sample (default: real time at --fps)")
     animate.add_argument("--size", type=dimension, default=480, metavar="PIXELS",
-                         help="width and height of the frames (default 480; 100 to 4000, "
-                              "200 at least for a scene with springs)")
+                         help="width and height of the frames; a spatial scene's are as "
+                              "high and hold two views side by side (default 480; 100 to "
+                              "4000, 200 at least for a scene with springs)")
 
     check = command(
         "check", help="compare the generated functions with finite differences and SymPy")
@@ -190,10 +194,10 @@ def parser() -> argparse.ArgumentParser:
 def command_generate(args) -> int:
     from .simulation import run_settings
 
-    scene = load_scene(args.scene)
-    settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                            order=args.order, gradient=args.gradient,
-                            source=str(args.scene))
+    scene = load_command_scene(args.scene)
+    settings = run_settings(scene, method=scene_method(scene, args.method),
+                            quadrature=args.quadrature, order=args.order,
+                            gradient=args.gradient, source=str(args.scene))
     # The generation stage (SymPy, CasADi) is imported once the input is known to be good.
     from .generate.package import (
         check_package_target,
@@ -214,23 +218,28 @@ def command_generate(args) -> int:
 
 def command_export(args) -> int:
     from .reference.mjcf import MUJOCO_INTEGRATORS, mjcf_from_scene
+    from .reference.spatial_mjcf import spatial_mjcf_from_scene
     from .runtime.files import write_text
 
-    scene = load_scene(args.scene)
-    dt = scene.simulation.dt if args.dt is None else args.dt
+    scene = load_command_scene(args.scene)
+    spatial = isinstance(scene, SpatialScene)
+    # A spatial scene has no [simulation] table: its default step is the table's.
+    dt = (Simulation() if spatial else scene.simulation).dt if args.dt is None else args.dt
     if not (dt > 0.0 and dt < float("inf")):
         raise SettingsError(f"--dt: must be > 0 s and finite, got {dt!r}")
     if args.integrator not in MUJOCO_INTEGRATORS:
         raise SettingsError(f"--integrator: must be one of {', '.join(MUJOCO_INTEGRATORS)}, "
                             f"got {args.integrator!r}")
     check_output_file(args.mjcf, "--mjcf", [args.scene])
+    writer = spatial_mjcf_from_scene if spatial else mjcf_from_scene
     try:
-        text = mjcf_from_scene(scene, dt=dt, integrator=args.integrator, export=True)
+        text = writer(scene, dt=dt, integrator=args.integrator, export=True)
     except ValueError as error:               # what MuJoCo cannot represent (J = 0)
         raise SettingsError(f"{args.scene}: {error}") from None
     with reported_write(args.mjcf, "the MJCF"):
         write_text(args.mjcf, text)
-    motors = f", motors on joints {list(scene.actuated_joints)}" if scene.actuated_joints else ""
+    actuated = scene.actuated if spatial else scene.actuated_joints
+    motors = f", motors on joints {list(actuated)}" if actuated else ""
     print(f"wrote {args.mjcf}: {scene.n} links, {len(scene.springs)} spring tendons{motors}, "
           f"dt {dt:g} s, {args.integrator}")
     return 0
@@ -243,10 +252,10 @@ def command_check(args) -> int:
     from .studies.check import check_solver
     from .symbolic.schemes import build_scheme
 
-    scene = load_scene(args.scene)
-    settings = run_settings(scene, method=args.method, quadrature=args.quadrature, dt=args.dt,
-                            order=args.order, gradient=args.gradient,
-                            source=str(args.scene))
+    scene = load_command_scene(args.scene)
+    settings = run_settings(scene, method=scene_method(scene, args.method),
+                            quadrature=args.quadrature, dt=args.dt, order=args.order,
+                            gradient=args.gradient, source=str(args.scene))
     scheme = build_scheme(settings.solver_spec(scene, parameters=args.parameters))
     solver = Solver.from_files(render_package(scheme, sensitivities=True).files)
     report = check_solver(scheme, solver, samples=args.samples, seed=args.seed, dt=settings.dt)
@@ -259,9 +268,10 @@ def command_order(args) -> int:
     from .studies.order import allowed_orders, format_summary, format_table, order_studies
     from .views.order_plot import plot_order
 
-    scene = load_scene(args.scene)
+    scene = load_command_scene(args.scene)
     # Without --order every order the method takes runs, whatever the scene's simulation.order.
-    settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
+    settings = run_settings(scene, method=scene_method(scene, args.method),
+                            quadrature=args.quadrature,
                             t_end=args.t_end, order=args.order or 2, gradient=args.gradient,
                             source=str(args.scene))
     if args.plot is not None:   # before the study: the plot needs matplotlib
@@ -306,9 +316,10 @@ def command_simulate(args) -> int:
     from .simulation import run_settings, simulate_scene
     from .views.run_summary import run_summary
 
-    scene = load_scene(args.scene)
-    settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                            dt=args.dt, t_end=args.t_end, every=args.every, order=args.order,
+    scene = load_command_scene(args.scene)
+    settings = run_settings(scene, method=scene_method(scene, args.method),
+                            quadrature=args.quadrature, dt=args.dt, t_end=args.t_end,
+                            every=args.every, order=args.order,
                             gradient=args.gradient, rtol=args.rtol, atol=args.atol,
                             source=str(args.scene))
     figure = None
@@ -342,21 +353,6 @@ def command_simulate(args) -> int:
     return 0
 
 
-def command_plot(args) -> int:
-    if len(args.trajectories) == 1 and args.trajectories[0].is_dir():
-        from .views.sweep_plot import plot_sweep
-
-        if args.metric is None:
-            raise ChaingenError(f"--metric: {args.trajectories[0]} is a sweep directory: name "
-                                "the metric to draw")
-        print(f"wrote {plot_sweep(args.trajectories[0], args.metric, args.output)}")
-        return 0
-    from .views.plots import plot_files
-
-    print(f"wrote {plot_files(args.trajectories, args.output)}")
-    return 0
-
-
 def command_sweep(args) -> int:
     import time
 
@@ -384,45 +380,6 @@ def command_sweep(args) -> int:
     if args.plot:
         from .views.sweep_plot import plot_sweep
         print(f"  figure                 {plot_sweep(outcome.out, args.plot)}")
-    return 0
-
-
-def command_animate(args) -> int:
-    from .simulation import run_settings, simulate_scene
-    from .views.animate import animate, check_fps
-    from .views.plots import load_run, run_from_result
-
-    scene = load_scene(args.scene)
-    check_fps(args.fps)
-    from .runtime.trajectory import metadata_path
-    check_output_file(args.output, "-o", [args.scene] + (
-        [args.trajectory, metadata_path(args.trajectory)] if args.trajectory else []))
-    if args.t_end is not None and not (np.isfinite(args.t_end) and args.t_end > 0):
-        raise ChaingenError(f"--t-end: must be > 0 and finite, got {args.t_end}")
-    if args.trajectory is not None:
-        if args.method is not None or args.quadrature is not None or args.dt is not None:
-            raise ChaingenError("--method/--quadrature/--dt: only when animate simulates; the "
-                                f"trajectory {args.trajectory} is already a run")
-        run = load_run(args.trajectory)
-    else:
-        from .views.animate import check_output
-        check_output(args.output)
-        settings = run_settings(scene, method=args.method, quadrature=args.quadrature,
-                                dt=args.dt, t_end=args.t_end, order=args.order,
-                                gradient=args.gradient, source=str(args.scene))
-        try:
-            result = simulate_scene(scene, settings, options=newton_overrides(args))
-        except NewtonError as error:
-            print(f"chaingen: error: simulation of {args.scene} failed: {error}",
-                  file=sys.stderr)
-            return EXIT_FAILED
-        run = run_from_result(result, args.scene)
-    if args.t_end is not None:
-        run = run.until(args.t_end)
-    out, plan = animate(scene, run, args.output, fps=args.fps, every=args.every,
-                        pixels=args.size)
-    print(f"wrote {out}: {plan.indices.size} frames at {plan.fps:g} fps, every "
-          f"{plan.every} samples ({plan.playback_speed:g} x real time)")
     return 0
 
 

@@ -34,7 +34,7 @@ from chaingen.spatial import (
 from chaingen.spatial.reader import DEFAULT_GRAVITY
 from chaingen.symbolic.joint_model import angle_directions, joint_space_potential
 
-from helpers import chaingen_in_process, require_module
+from helpers import require_module
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
@@ -478,7 +478,8 @@ def test_a_planar_file_is_refused_by_the_spatial_loader(stem):
 
 def spatial_refusal(marker: str, source: str = SOURCE) -> str:
     return (f"{source}: {marker}: a spatial scene (scene-format.md, \"Spatial scenes\"), which "
-            "no scheme takes yet; read it with chaingen.spatial.load_spatial_scene")
+            "sweeps and the other planar-only readers do not take yet; read it with "
+            "chaingen.spatial.load_spatial_scene")
 
 
 @pytest.mark.parametrize("text, marker", [
@@ -494,7 +495,7 @@ def spatial_refusal(marker: str, source: str = SOURCE) -> str:
 def test_a_spatial_file_is_refused_by_the_planar_loader(text, marker):
     """Not a half-valid Scene: one line naming the key that makes the file spatial, an error
     that is both a SceneError (a file the planar loader cannot use) and an
-    UnsupportedSceneError (a scene no scheme takes yet)."""
+    UnsupportedSceneError (a scene the planar-only features do not take yet)."""
     with pytest.raises(UnsupportedSceneError) as caught:
         parse_scene(text, SOURCE, "test")
     assert isinstance(caught.value, SceneError)
@@ -507,25 +508,6 @@ def test_load_scene_refuses_the_shipped_spatial_scenes():
         with pytest.raises(UnsupportedSceneError) as caught:
             load_scene(path)
         assert str(caught.value) == spatial_refusal("gravity", str(path))
-
-
-@pytest.mark.parametrize("command", ["simulate", "generate", "check"])
-def test_the_cli_refuses_a_spatial_scene_in_one_line(command, tmp_path):
-    path = tmp_path / "arm.toml"
-    path.write_text(VALID, encoding="utf-8")
-    result = chaingen_in_process(command, path, cwd=tmp_path)
-    assert result.returncode == 2, result
-    assert result.stdout == ""
-    assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr, result.stderr
-    assert result.stderr.startswith("chaingen: error: ")
-    assert result.stderr.endswith(spatial_refusal("gravity", str(path)) + "\n")
-    assert sorted(item.name for item in tmp_path.iterdir()) == ["arm.toml"]
-
-
-def test_the_cli_names_the_file_once():
-    path = SCENES / "spatial_three_link.toml"
-    result = chaingen_in_process("simulate", path, cwd=ROOT)
-    assert result.stderr == f"chaingen: error: {spatial_refusal('gravity', str(path))}\n"
 
 
 # -- three_link_multi as a spatial scene --------------------------------------------------------

@@ -42,7 +42,7 @@ _MISSING = object()
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
     """Read and validate the scene file at `path` (a bare name of a shipped scene: its file,
-    scene_file); its default name is the file's stem. A spatial scene file (SPATIAL_MARKERS) is
+    scene_file); its default name is the file's stem. A spatial scene file (spatial_marker) is
     refused with a SpatialSceneFileError: chaingen.spatial.load_spatial_scene reads it."""
     source, text = read_scene_text(path)
     return parse_scene(text, source, Path(source).stem)
@@ -82,7 +82,8 @@ def parse_scene(text: str, source: str, default_name: str) -> Scene:
     if marker is not None:
         raise SpatialSceneFileError(
             f"{source}: {marker}: a spatial scene (scene-format.md, \"Spatial scenes\"), which "
-            "no scheme takes yet; read it with chaingen.spatial.load_spatial_scene")
+            "sweeps and the other planar-only readers do not take yet; read it with "
+            "chaingen.spatial.load_spatial_scene")
     return SceneReader(source, default_name).read(document)
 
 
@@ -109,9 +110,10 @@ def parse_toml(text: str, source: str) -> dict[str, Any]:
 
 
 class SpatialSceneFileError(UnsupportedSceneError, SceneError):
-    """A spatial scene file given to the planar reader: a scene the schemes cannot take yet
-    (UnsupportedSceneError) and a file this reader cannot use (SceneError, naming the file and
-    the key that makes it spatial)."""
+    """A spatial scene file given to the planar reader: a scene the planar-only features
+    (sweeps, the bench, the Python API's Scene) cannot take yet (UnsupportedSceneError) and a
+    file this reader cannot use (SceneError, naming the file and the key that makes it
+    spatial). The commands tell the two kinds apart before reading (chaingen.arguments)."""
 
 
 def spatial_marker(document: dict[str, Any]) -> str | None:

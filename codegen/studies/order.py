@@ -256,7 +256,7 @@ def order_study(scene: Scene | str | os.PathLike, method: str, quadrature: int, 
     Raises OrderStudyError for step sizes that do not fit the sample grid and when the
     reference run fails; a failing dt is recorded in its row.
     """
-    if not isinstance(scene, Scene):
+    if isinstance(scene, (str, os.PathLike)):     # a file; a SpatialScene is taken as it is
         scene = load_scene(scene)
     spec = study_solver_spec(scene, method, quadrature, order, gradient)
     quadrature_in_use = spec.quadrature_used
@@ -394,7 +394,7 @@ def order_studies(scene: Scene | str | os.PathLike, method: str, quadrature: int
     overrides: Newton option fields over every order's settings. settings: further keywords of
     order_study (sample_interval, floors, slope_tolerance) for every order.
     """
-    if not isinstance(scene, Scene):
+    if isinstance(scene, (str, os.PathLike)):     # a file; a SpatialScene is taken as it is
         scene = load_scene(scene)
     available = allowed_orders(method) if method in METHODS else ORDERS
     orders = available if orders is None else tuple(sorted(set(orders)))

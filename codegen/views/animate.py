@@ -28,6 +28,8 @@ from ..runtime.trajectory import metadata_path
 from ..scene import Scene
 from ..scene.kinematics import chain_geometry, spring_geometry
 from ..scene.parameters import with_values
+from ..spatial.values import SpatialScene
+from .animate_spatial import SpatialDrawing, spatial_stretch_limit
 from .figure import matplotlib_figure
 from .plots import TrajectoryRun
 
@@ -216,11 +218,15 @@ def check_matches(scene: Scene, run: TrajectoryRun) -> None:
                         f"not {scene.name!r}")
 
 
-def run_scene(scene: Scene, run: TrajectoryRun) -> Scene:
+def run_scene(scene: Scene | SpatialScene, run: TrajectoryRun) -> Scene | SpatialScene:
     """The scene as the run had it: its run-time parameters' values (the metadata's) in place
-    of the scene file's numbers; SceneError naming the file and path of one it cannot take."""
+    of the scene file's numbers; SceneError naming the file and path of one it cannot take.
+    A spatial scene takes no run-time parameters (chaingen.scene.SolverSpec refuses them)."""
     if not run.parameters:
         return scene
+    if isinstance(scene, SpatialScene):
+        raise PlotError(f"{metadata_path(run.path)}: parameters: run-time parameters are "
+                        f"planar-only so far; no run of the spatial scene {scene.name!r} has them")
     return with_values(scene, run.parameters, where=f"{metadata_path(run.path)}: parameters")
 
 
@@ -241,9 +247,12 @@ def check_output(out: Path) -> str | None:
     return None
 
 
-def animate(scene: Scene, run: TrajectoryRun, out: Path, *, fps: float | None = None,
-            every: int | None = None, pixels: int = DEFAULT_PIXELS) -> tuple[Path, FramePlan]:
-    """Render `run` of `scene` to `out` (.gif, or .mp4 with ffmpeg); returns it and the plan."""
+def animate(scene: Scene | SpatialScene, run: TrajectoryRun, out: Path, *,
+            fps: float | None = None, every: int | None = None,
+            pixels: int = DEFAULT_PIXELS) -> tuple[Path, FramePlan]:
+    """Render `run` of `scene` to `out` (.gif, or .mp4 with ffmpeg); returns it and the plan.
+    A planar scene's frames are `pixels` square; a spatial scene's (views.animate_spatial)
+    are `pixels` high, its two views side by side."""
     out = Path(out)
     suffix = out.suffix.lower()
     ffmpeg = check_output(out)
@@ -256,8 +265,13 @@ def animate(scene: Scene, run: TrajectoryRun, out: Path, *, fps: float | None = 
     scene = run_scene(scene, run)
     plan = frame_plan(run.t, fps=fps, every=every, gif=suffix == ".gif")
     phis = run.phi[plan.indices]
-    drawing = ChainDrawing(scene, pixels=pixels, stretch_limit=stretch_limit(scene, phis),
-                           title=f"{scene.name}: {run.label}")
+    title = f"{scene.name}: {run.label}"
+    if isinstance(scene, SpatialScene):
+        drawing = SpatialDrawing(scene, pixels=pixels,
+                                 stretch_limit=spatial_stretch_limit(scene, phis), title=title)
+    else:
+        drawing = ChainDrawing(scene, pixels=pixels, stretch_limit=stretch_limit(scene, phis),
+                               title=title)
     with reported_write(out, "the animation"), staged_file(out, suffix=suffix) as temporary, \
             Progress("animate", total=len(plan.indices), unit="frames") as progress:
         frames = _frames(drawing, run, plan, progress)
@@ -268,7 +282,8 @@ def animate(scene: Scene, run: TrajectoryRun, out: Path, *, fps: float | None = 
     return out, plan
 
 
-def _frames(drawing: ChainDrawing, run: TrajectoryRun, plan: FramePlan, progress: Progress):
+def _frames(drawing: ChainDrawing | SpatialDrawing, run: TrajectoryRun, plan: FramePlan,
+            progress: Progress):
     for count, index in enumerate(plan.indices, start=1):
         drawing.draw(run.phi[index], float(run.t[index]))
         yield drawing.rgb()
