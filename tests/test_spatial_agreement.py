@@ -233,8 +233,12 @@ def test_spatial_only_runs_that_part_alone(tmp_path):
             bench_config(spatial_only=True, out=tmp_path / "b.md", **clash)
 
 
-def test_spatial_section_is_replaced_in_place():
-    from chaingen.studies.bench.spatial import SPATIAL_HEADING, replace_spatial_section
+def test_spatial_section_is_replaced_in_place_and_kept_by_a_full_run():
+    from chaingen.studies.bench.spatial import (
+        SPATIAL_HEADING,
+        replace_spatial_section,
+        spatial_section_of,
+    )
 
     section = f"{SPATIAL_HEADING}\n\nnew\n"
     old = f"# T\n\n## Scaling\n\ns\n\n{SPATIAL_HEADING}\n\nold\n\n## Speed knobs\n\nk\n"
@@ -244,6 +248,11 @@ def test_spatial_section_is_replaced_in_place():
         f"# T\n\nh\n\n{SPATIAL_HEADING}\n\nnew\n"
     assert replace_spatial_section(f"# T\n\n{SPATIAL_HEADING}\n\nold\n", section) == \
         f"# T\n\n{SPATIAL_HEADING}\n\nnew\n"
+    # what a full run carries over from the report it replaces
+    assert spatial_section_of(old) == f"{SPATIAL_HEADING}\n\nold\n"
+    assert spatial_section_of(f"# T\n\n{SPATIAL_HEADING}\n\nold\n") == \
+        f"{SPATIAL_HEADING}\n\nold\n"
+    assert spatial_section_of("# T\n\n## Scaling\n\ns\n") is None
 
 
 def test_spatial_tables_hold_the_targets_and_leave_python_loops_uncompared():

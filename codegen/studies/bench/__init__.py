@@ -82,6 +82,7 @@ from .spatial import (
     pinocchio_version,
     replace_spatial_section,
     spatial_section,
+    spatial_section_of,
     spatial_study,
     step_table,
 )
@@ -265,9 +266,13 @@ def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> Benc
     if stiff is not None and drawing is not None:
         figures[STIFF_FIGURE] = _stiff_figure(stiff, config, drawing)
     wall = time.perf_counter() - started
-    document = write_text(config.out, markdown(config, found, reference, scaling,
-                                                     figures, machine, wall, knobs,
-                                                     studies, control, stiff))
+    text = markdown(config, found, reference, scaling, figures, machine, wall, knobs, studies,
+                    control, stiff)
+    # The spatial arm's section is written by --spatial-only alone: a full run keeps it.
+    kept = spatial_section_of(config.out.read_text(encoding="utf-8")
+                              if config.out.is_file() else "")
+    document = write_text(config.out, text if kept is None
+                          else replace_spatial_section(text, kept))
     emit(f"\nwrote {document} and {len(figures)} figures in {config.figures} "
          f"({wall / 60:.1f} min)")
     return BenchReport(found, reference, scaling, document, stiff, figures, wall)

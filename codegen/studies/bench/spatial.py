@@ -365,6 +365,16 @@ def spatial_section(study: SpatialStudy, config: BenchConfig, measured: str) -> 
         findings(study), ""])
 
 
+def spatial_section_of(document: str) -> str | None:
+    """The spatial section of `document` (from SPATIAL_HEADING up to the next "## "
+    heading), or None without one."""
+    start = document.find(f"\n{SPATIAL_HEADING}\n")
+    if start < 0:
+        return None
+    end = document.find("\n## ", start + 1)
+    return document[start + 1:] if end < 0 else document[start + 1:end]
+
+
 def replace_spatial_section(document: str, section: str) -> str:
     """`document` with its spatial section replaced by `section` (up to the next "## "
     heading), or, without one, with `section` at the end."""
