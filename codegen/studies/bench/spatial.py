@@ -89,6 +89,8 @@ class SpatialStudy:
     steps: tuple[StepRow, ...]
     builds: tuple[BuildRow, ...]
     pinocchio: str | None               # why Pinocchio's rows are missing, or None
+    #: max |q_Pinocchio - q_MuJoCo| (rad) after python_steps of RK4 (check_pinocchio_model)
+    pinocchio_agreement: float | None = None
 
     def ratio(self, row: StepRow) -> float:
         """Median over rounds of row / MuJoCo RK4 in the same round."""
@@ -126,9 +128,15 @@ def pinocchio_model(scene):
 
 def pinocchio_rk4_seconds(scene, model, dt: float, n_steps: int, *,
                           springs: bool = True) -> float:
-    """CPU seconds per step of RK4 on qddot = ABA(q, qdot, tau), tau = -d qdot - dV_s/dq (no
-    torques on the motors, as the other sides), in a Python loop from the initial state.
-    springs=False: the four pin.aba calls alone (with tau = 0)."""
+    """CPU seconds per step of pinocchio_rk4."""
+    return pinocchio_rk4(scene, model, dt, n_steps, springs=springs)[0] / n_steps
+
+
+def pinocchio_rk4(scene, model, dt: float, n_steps: int, *,
+                  springs: bool = True) -> tuple[float, np.ndarray]:
+    """(CPU seconds, final angles) of n_steps of RK4 on qddot = ABA(q, qdot, tau),
+    tau = -d qdot - dV_s/dq (no torques on the motors, as the other sides), in a Python loop
+    from the initial state. springs=False: the four pin.aba calls alone (with tau = 0)."""
     import pinocchio as pin
 
     data = model.createData()
@@ -154,7 +162,28 @@ def pinocchio_rk4_seconds(scene, model, dt: float, n_steps: int, *,
     seconds = time.process_time() - start
     if not np.all(np.isfinite(q)):
         raise RuntimeError("Pinocchio ABA RK4: the state turned non-finite")
-    return seconds / n_steps
+    return seconds, q
+
+
+#: How far (rad) Pinocchio's RK4 may end from MuJoCo's over the same steps: the same method on
+#: the same equations, so only round-off parts them.
+PINOCCHIO_AGREEMENT = 1e-9
+
+
+def check_pinocchio_model(scene, model, dt: float, n_steps: int) -> float:
+    """max |q_Pinocchio - q_MuJoCo| (rad) after n_steps of RK4 at dt from the initial state;
+    RuntimeError if over PINOCCHIO_AGREEMENT: the timed model must be the scene's."""
+    import mujoco
+
+    from ...reference.spatial_mujoco import spatial_mujoco_model_and_data
+
+    mj_model, data = spatial_mujoco_model_and_data(scene, dt, "RK4")
+    mujoco.mj_step(mj_model, data, nstep=n_steps)
+    difference = float(np.abs(pinocchio_rk4(scene, model, dt, n_steps)[1] - data.qpos).max())
+    if not difference <= PINOCCHIO_AGREEMENT:
+        raise RuntimeError(f"Pinocchio ABA RK4 ends {difference:.2e} rad from MuJoCo RK4 after "
+                           f"{n_steps} steps: not the same model")
+    return difference
 
 
 def mujoco_rk4_seconds(scene, dt: float, n_steps: int) -> float:
@@ -234,12 +263,13 @@ def spatial_study(config: BenchConfig, note) -> SpatialStudy:
                                                     *scene.initial_velocities), float).ravel()
             harnesses[method] = (Harness(render_package(scheme, sensitivities=False),
                                          flags=HARNESS_FLAGS), x0)
-        pinocchio = None
+        pinocchio, agreement = None, None
         if importlib.util.find_spec("pinocchio") is None:
             pinocchio = "Pinocchio (the pin package) is not installed: its rows are missing"
             model = None
         else:
             model = pinocchio_model(scene)
+            agreement = check_pinocchio_model(scene, model, dt, python_steps)
         rounds: dict[str, list[float]] = {}
         iterations = {}
         for k in range(config.repeats):
@@ -263,8 +293,7 @@ def spatial_study(config: BenchConfig, note) -> SpatialStudy:
     steps = tuple(StepRow(name, loops.get(name, "C (timing program)"), tuple(values),
                           iterations.get(name)) for name, values in rounds.items())
     return SpatialStudy(SPATIAL_SCENE, dt, n_steps, python_steps, steps, tuple(builds),
-                        pinocchio)
-
+                        pinocchio, agreement)
 
 
 def _microseconds(seconds: float) -> str:
@@ -330,7 +359,9 @@ def findings(study: SpatialStudy) -> str:
                     "call overhead); the rest "
                     "is the springs in numpy and the loop. Neither is a C loop: the row says "
                     "what a Python user of Pinocchio pays, not what Pinocchio's C++ costs, and "
-                    "it is not held to a target.")
+                    "it is not held to a target. Its model is the scene's: after "
+                    f"{study.python_steps} steps it ends {study.pinocchio_agreement:.1e} rad "
+                    "from MuJoCo's RK4.")
     elif study.pinocchio:
         said.append(study.pinocchio + ".")
     return " ".join(said)
