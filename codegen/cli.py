@@ -186,6 +186,8 @@ def parser() -> argparse.ArgumentParser:
                        help="run es on the scaling chain and on its uneven sibling alone and "
                             "write the uneven chain's subsection of the scaling section into "
                             "--out in place (the rest of the report kept)")
+    bench.add_argument("--spatial-only", action="store_true", help="time the spatial Panda "
+                       "alone and write its section into --out in place (issue 33 d)")
     bench.add_argument("--timeout", type=number, default=300.0, metavar="SECONDS",
                        help="limit of generate + build per scheme and n (default 300)")
     return main
@@ -300,12 +302,10 @@ def command_bench(args) -> int:
     from .views import bench_figures
 
     config = bench_config(quick=args.quick, dts=args.dts, scaling_n=args.scaling_n,
-                          timeout=args.timeout, skip_scaling=args.skip_scaling,
-                          skip_reference=args.skip_reference, skip_sweep=args.skip_sweep,
-                          skip_stiff=args.skip_stiff, stiff_only=args.stiff_only,
-                          uneven_only=args.uneven_only,
-                          out=args.out,
-                          figures=args.figures)
+                          skip_reference=args.skip_reference, skip_scaling=args.skip_scaling,
+                          skip_sweep=args.skip_sweep, spatial_only=args.spatial_only, out=args.out,
+                          skip_stiff=args.skip_stiff, uneven_only=args.uneven_only,
+                          stiff_only=args.stiff_only, timeout=args.timeout, figures=args.figures)
     run_bench(config, figures=bench_figures)
     return 0
 

@@ -3,7 +3,7 @@
     chaingen bench [--quick] [--out FILE.md] [--figures DIR] [--dts 0.04,0.02,...]
                    [--scaling-n 2,3,5,10,20] [--skip-scaling] [--skip-reference]
                    [--skip-sweep] [--skip-stiff] [--stiff-only] [--uneven-only]
-                   [--timeout SECONDS]
+                   [--spatial-only] [--timeout SECONDS]
 
 Four parts, all measured side by side on one machine in one process (the scaling series in
 child processes, so that a size that takes too long can be stopped):
@@ -30,6 +30,11 @@ child processes, so that a size that takes too long can be stopped):
    (es with both gradients, adaptive es, vi, midpoint, orders 2 and 4) against the compiled
    peers and MuJoCo, CPU against the trajectory error and against the energy error (the
    stiff module). `--stiff-only` runs it alone and writes its section into an existing
+   report in place.
+7. The spatial arm (issue 33 d): scenes/panda_springs.toml at dt = 1e-3 s, each spatial scheme's
+   step in the C loop against MuJoCo RK4 and Pinocchio's ABA with RK4, round by round, and
+   each scheme's generate and build seconds with and without sensitivities (the spatial
+   module). Only `--spatial-only` runs it, alone, and writes its section into an existing
    report in place.
 
 The parts live in their own modules: config (what runs), runs (part 1), scaling (part 2),
@@ -72,6 +77,15 @@ from .report import (
 )
 from .scaling import scaling_study
 from .scenes import scaling_scene
+from .spatial import (
+    build_table,
+    pinocchio_version,
+    replace_spatial_section,
+    spatial_section,
+    spatial_section_of,
+    spatial_study,
+    step_table,
+)
 from .stiff import StiffStudy, stiff_study
 from .studies import study_part, study_tables
 
@@ -192,7 +206,31 @@ def _run_uneven_only(config: BenchConfig, note, emit, started: float) -> BenchRe
     return BenchReport([], {}, scaling, document, None, {}, wall)
 
 
+def _run_spatial_only(config: BenchConfig, note, emit, started: float) -> BenchReport:
+    """The spatial arm's part alone: its section replaces the one of an existing report at
+    config.out (or is added at its end), the rest kept; without a report there, a document of
+    the title and the section."""
+    machine = dict(machine_description())
+    study = spatial_study(config, note)
+    emit(f"\nspatial arm\n\n{step_table(study)}\n\n{build_table(study)}")
+    wall = time.perf_counter() - started
+    measured = (f"Written by `{config.command}` in {wall / 60:.1f} min of wall time on "
+                f"{time.strftime('%Y-%m-%d')}, apart from the rest of this report (its Machine "
+                f"section is not this run's). CPU: {machine['CPU']}; cores: {machine['cores']}; "
+                f"{_versions()}, {pinocchio_version()}."
+                + (" Quick mode: a smoke test, not the benchmark." if config.quick else ""))
+    existing = config.out.read_text(encoding="utf-8") if config.out.is_file() else ""
+    section = spatial_section(study, config, measured)
+    text = (replace_spatial_section(existing, section) if existing.startswith(REPORT_TITLE)
+            else f"{REPORT_TITLE}\n\n{section}")
+    document = write_text(config.out, text)
+    emit(f"\nwrote the spatial arm's section into {document} ({wall / 60:.1f} min)")
+    return BenchReport([], {}, None, document, None, {}, wall)
+
+
 def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> BenchReport:
+    if config.spatial_only:
+        return _run_spatial_only(config, note, emit, started)
     if config.stiff_only:
         return _run_stiff_only(config, note, emit, started, drawing)
     if config.uneven_only:
@@ -228,9 +266,13 @@ def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> Benc
     if stiff is not None and drawing is not None:
         figures[STIFF_FIGURE] = _stiff_figure(stiff, config, drawing)
     wall = time.perf_counter() - started
-    document = write_text(config.out, markdown(config, found, reference, scaling,
-                                                     figures, machine, wall, knobs,
-                                                     studies, control, stiff))
+    text = markdown(config, found, reference, scaling, figures, machine, wall, knobs, studies,
+                    control, stiff)
+    # The spatial arm's section is written by --spatial-only alone: a full run keeps it.
+    kept = spatial_section_of(config.out.read_text(encoding="utf-8")
+                              if config.out.is_file() else "")
+    document = write_text(config.out, text if kept is None
+                          else replace_spatial_section(text, kept))
     emit(f"\nwrote {document} and {len(figures)} figures in {config.figures} "
          f"({wall / 60:.1f} min)")
     return BenchReport(found, reference, scaling, document, stiff, figures, wall)

@@ -244,6 +244,7 @@ class BenchConfig:
     out: Path
     figures: Path
     command: str
+    spatial_only: bool = False           # the spatial arm alone, its section written in place
 
 
 def _parse_list(text: str, option: str, kind):
@@ -294,13 +295,17 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
                  timeout: float = 300.0, skip_scaling: bool = False,
                  skip_reference: bool = False, skip_sweep: bool = False,
                  skip_stiff: bool = False, stiff_only: bool = False,
-                 uneven_only: bool = False,
+                 uneven_only: bool = False, spatial_only: bool = False,
                  out: Path | None = None, figures: Path | None = None) -> BenchConfig:
     """The run's settings from the command line's values; BenchError names a bad one.
     stiff_only: the stiff chain's part alone, its section written into `out` in place (the
     rest of an existing report kept). uneven_only: es on the two scaling chains alone (at the
     scaling series' n), the uneven chain's subsection of the scaling section written into
-    `out` in place."""
+    `out` in place. spatial_only: the spatial arm's part alone (spatial module), its section
+    written into `out` in place."""
+    if spatial_only and (stiff_only or uneven_only):
+        raise BenchError("--spatial-only runs one part alone: it goes with neither "
+                         "--stiff-only nor --uneven-only")
     if stiff_only and skip_stiff:
         raise BenchError("--stiff-only and --skip-stiff: the one runs only what the other "
                          "leaves out; give one of them")
@@ -312,6 +317,8 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
         skip_scaling = skip_reference = skip_sweep = True
     if uneven_only:
         skip_reference = skip_sweep = skip_stiff = True
+    if spatial_only:
+        skip_scaling = skip_reference = skip_sweep = skip_stiff = True
     if not (math.isfinite(timeout) and timeout > 0):
         raise BenchError(f"--timeout: must be > 0 seconds and finite, got {timeout}")
     for module in ("mujoco", "scipy", "matplotlib") + (
@@ -355,7 +362,7 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
     if not figures.exists() and not figures.parent.is_dir():
         raise BenchError(f"--figures: directory {figures.parent} does not exist")
     if figures.is_dir():   # the figures it will write, checked as every output is
-        names = ((STIFF_FIGURE,) if stiff_only else () if uneven_only else
+        names = ((STIFF_FIGURE,) if stiff_only else () if uneven_only or spatial_only else
                  (*scenes, "scaling") + (() if skip_stiff else (STIFF_FIGURE,)))
         for name in names:
             check_output_file(figures / f"bench_{name}.png", "--figures", [out])
@@ -366,10 +373,11 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
     command += ["--scaling-n", scaling_n] if scaling_n is not None else []
     command += ["--stiff-only"] if stiff_only else []
     command += ["--uneven-only"] if uneven_only else []
+    command += ["--spatial-only"] if spatial_only else []
     command += ["--skip-scaling"] if command_skips[0] else []
     command += ["--skip-reference"] if command_skips[1] else []
     command += ["--skip-sweep"] if command_skips[2] else []
-    command += ["--skip-stiff"] if skip_stiff and not uneven_only else []
+    command += ["--skip-stiff"] if skip_stiff and not (uneven_only or spatial_only) else []
     command += ["--timeout", f"{timeout:g}"] if timeout != 300.0 else []
     command += [] if out_default else ["--out", str(out)]
     command += [] if figures_default else ["--figures", str(figures)]
@@ -394,7 +402,7 @@ def bench_config(*, quick: bool = False, dts: str | None = None, scaling_n: str 
         run_sweep=not skip_sweep, run_stiff=not skip_stiff, stiff_only=stiff_only,
         uneven_only=uneven_only,
         stiff=STIFF_QUICK_SETTINGS if quick else STIFF_SETTINGS,
-        out=out, figures=figures, command=" ".join(command))
+        out=out, figures=figures, command=" ".join(command), spatial_only=spatial_only)
 
 
 def steps(t_end: float, dt: float) -> int:
