@@ -1,0 +1,202 @@
+"""Method "es" for spatial scenes (issue 33, build 1): the director formulation and its
+energy-momentum step (chaingen.symbolic.spatial_com_model, docs/model.md 4.7), against
+independent paths.
+
+The pieces against derivatives and the joint-space dynamics of chaingen.spatial.dynamics
+(itself checked against Pinocchio): the constraint Jacobian against central differences, the
+springs' discrete gradient against V(q_1) - V(q_0), the kinetic energy of the constant mass
+matrix against 1/2 qdot . M(q) qdot. The step: energy and constraints to round-off over 1000
+steps of random conservative 3- and 5-link chains, the energy balance with torques and damping
+per step, and order 2 convergence to scipy's DOP853 on the joint-space equations of motion (C
+qdot + g from Pinocchio's rnea) and to the compiled spatial midpoint.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_spatial_dynamics import random_scene
+from test_spatial_midpoint import reference_run, wrapped
+
+from chaingen.spatial import dynamics
+from chaingen.symbolic import spatial_com_model as directors
+
+
+def random_state(scene, seed):
+    """(angles, rates, q, v) of a random joint-space state of `scene`."""
+    rng = np.random.default_rng(seed)
+    angles, rates = rng.uniform(-1.0, 1.0, scene.n), rng.uniform(-1.0, 1.0, scene.n)
+    model = directors.director_model(scene)
+    q, v = directors.joint_space_start(model, angles, rates)
+    return model, angles, rates, q, v
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
+def test_joint_space_start_is_on_the_constraints_and_reads_back(seed, n):
+    """The start from joint angles and rates satisfies g = 0 and G v = 0, reads back the same
+    angles and rates, and has the joint-space energies of chaingen.spatial.dynamics: the
+    constant M of the directors gives 1/2 qdot . M(q) qdot."""
+    scene = random_scene(seed, n, springs=True)
+    model, angles, rates, q, v = random_state(scene, seed)
+    assert np.abs(directors.constraints(model, q)).max() <= 1e-14
+    assert np.abs(directors.constraint_jacobian(model, q) @ v).max() <= 1e-13
+    np.testing.assert_allclose(directors.joint_angles(model, q), angles, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(directors.joint_rates(model, q, v), rates, rtol=0, atol=1e-13)
+    kinetic = dynamics.kinetic_energy(scene, angles, rates)
+    assert 0.5 * v @ model.mass_matrix @ v == pytest.approx(kinetic, rel=1e-12)
+    assert directors.potential(model, q) == pytest.approx(
+        dynamics.potential_energy(scene, angles), rel=1e-12, abs=1e-12)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 5))
+def test_constraint_jacobian_and_discrete_gradient(seed, n):
+    """Off the constraints, at random q: G against central differences of g (exact for a
+    quadratic g but for round-off); the midpoint identity G(q_m)(q_1 - q_0) = g(q_1) - g(q_0);
+    gradV~ . (q_1 - q_0) = V(q_1) - V(q_0), and gradV~(q, q) the gradient of V."""
+    scene = random_scene(seed, n, springs=True)
+    model = directors.director_model(scene)
+    rng = np.random.default_rng(seed)
+    q0, q1 = rng.normal(size=(2, 12 * n))
+    h = 1e-6
+    columns = [(directors.constraints(model, q0 + h * e) - directors.constraints(model, q0 - h * e))
+               / (2 * h) for e in np.eye(12 * n)]
+    np.testing.assert_allclose(directors.constraint_jacobian(model, q0), np.array(columns).T,
+                               rtol=0, atol=1e-8)
+    qm = (q0 + q1) / 2
+    np.testing.assert_allclose(directors.constraint_jacobian(model, qm) @ (q1 - q0),
+                               directors.constraints(model, q1) - directors.constraints(model, q0),
+                               rtol=0, atol=1e-13)
+    change = directors.potential(model, q1) - directors.potential(model, q0)
+    scale = abs(directors.potential(model, q0)) + abs(directors.potential(model, q1))
+    assert directors.discrete_gradient(model, q0, q1) @ (q1 - q0) == pytest.approx(
+        change, rel=0, abs=1e-13 * scale)
+    gradient = [(directors.potential(model, q0 + h * e) - directors.potential(model, q0 - h * e))
+                / (2 * h) for e in np.eye(12 * n)]
+    np.testing.assert_allclose(directors.discrete_gradient(model, q0, q0), gradient,
+                               rtol=1e-6, atol=1e-6 * np.abs(gradient).max())
+
+
+def test_torque_forces_do_the_work_of_the_joint_torques():
+    """f(q, tau) . v = sum tau_i phidot_i(q, v) for any v, on the constraints or not."""
+    scene = random_scene(5, 4, springs=True)
+    model, _, rates, q, v = random_state(scene, 5)
+    rng = np.random.default_rng(5)
+    torques = rng.normal(size=4)
+    assert directors.torque_forces(model, q, torques) @ v == pytest.approx(torques @ rates,
+                                                                           rel=1e-13)
+    other = rng.normal(size=12 * 4)
+    assert directors.torque_forces(model, q, torques) @ other == pytest.approx(
+        torques @ directors.joint_rates(model, q, other), rel=1e-13)
+
+
+def run(model, q, v, dt, steps, inputs=None):
+    """es steps from (q, v): the states and the steps' flows."""
+    springs = directors.spring_maps(model)
+    states, work, dissipated = [(q, v)], [], []
+    guess = None
+    for k in range(steps):
+        step = directors.es_step(model, q, v, dt, () if inputs is None else inputs[k], springs,
+                                 guess)
+        q, v, guess = step.q, step.v, step.unknowns
+        states.append((q, v))
+        work.append(step.input_work)
+        dissipated.append(step.dissipated)
+    return states, np.array(work), np.array(dissipated)
+
+
+@pytest.mark.heavy
+@pytest.mark.parametrize("n, seed", [(3, 41), (5, 42)])
+def test_energy_and_constraints_to_round_off_over_1000_steps(n, seed):
+    """A conservative random chain (gravity, springs routed over one to three joints, skew
+    axes, full inertia tensors) at dt = 0.01 s: |H_k - H_0| <= 1e-12 of the energy's size and
+    the constraint errors at round-off, while the motion is large."""
+    scene = random_scene(seed, n, springs=True)
+    model, angles, _, q, v = random_state(scene, seed)
+    states, _, _ = run(model, q, v, 0.01, 1000)
+    springs = directors.spring_maps(model)
+    energies = np.array([directors.energy(model, q, v, springs) for q, v in states])
+    size = 0.5 * v @ model.mass_matrix @ v + abs(directors.potential(model, q, springs))
+    assert np.abs(energies - energies[0]).max() <= 1e-12 * size, (energies - energies[0])
+    errors = [np.abs(directors.constraints(model, q)).max() for q, _ in states]
+    assert max(errors) <= 1e-13, max(errors)
+    moved = np.abs(wrapped(directors.joint_angles(model, states[-1][0]) - angles)).max()
+    assert moved >= 0.1, moved
+
+
+@pytest.mark.heavy
+def test_balance_with_torques_and_damping_per_step():
+    """Damped joints and random torques on three of four joints: every step's
+    H_1 - H_0 = dt sum u_i phidot_i(m) - dt sum d_i phidot_i(m)^2 to round-off, with both
+    flows far from zero."""
+    plain = random_scene(51, 4, springs=True)
+    damping = np.array([0.3, 0.0, 0.8, 0.2])
+    scene = dataclasses.replace(plain, actuated=(1, 2, 4), links=tuple(
+        dataclasses.replace(link, damping=float(d)) for link, d in zip(plain.links, damping)))
+    model, _, _, q, v = random_state(scene, 51)
+    inputs = np.random.default_rng(51).uniform(-2.0, 2.0, (200, 3))
+    states, work, dissipated = run(model, q, v, 0.01, 200, inputs)
+    springs = directors.spring_maps(model)
+    energies = np.array([directors.energy(model, q, v, springs) for q, v in states])
+    size = np.abs(energies).max()
+    balance = np.diff(energies) - work + dissipated
+    assert np.abs(balance).max() <= 1e-13 * size, np.abs(balance).max()
+    assert dissipated.sum() >= 1e-3 * size and np.abs(work).sum() >= 1e-3 * size
+
+
+def joint_space_run(scene, angles, rates, dt, t_end, torques=None):
+    """The joint angles at t_end of an es run from (angles, rates), constant torques."""
+    model = directors.director_model(scene)
+    q, v = directors.joint_space_start(model, angles, rates)
+    steps = round(t_end / dt)
+    inputs = None if torques is None else np.tile(torques, (steps, 1))
+    states, _, _ = run(model, q, v, dt, steps, inputs)
+    return directors.joint_angles(model, states[-1][0])
+
+
+def actuated_damped(seed, n):
+    rng = np.random.default_rng(seed)
+    plain = random_scene(seed, n, springs=True)
+    scene = dataclasses.replace(plain, actuated=(1, n), links=tuple(
+        dataclasses.replace(link, damping=float(d))
+        for link, d in zip(plain.links, rng.uniform(0.0, 0.5, n))))
+    return scene, rng.uniform(-1.0, 1.0, 2), rng.uniform(-1.0, 1.0, n), rng.uniform(-1, 1, n)
+
+
+@pytest.mark.heavy
+def test_converges_at_order_2_to_dop853():
+    """Random 3-link chain, springs, gravity, damping on every joint, torques on two: the
+    angle error at t = 1 s against DOP853 on M qddot = tau - d qdot - C qdot - g - dV_s/dq
+    (Pinocchio's rnea) falls by 4 per halving of dt."""
+    scene, u, angles, rates = actuated_damped(61, 3)
+    torques = np.zeros(3)
+    torques[[0, 2]] = u
+    expected = reference_run(scene, angles, rates, torques, 1.0)
+    errors = [np.abs(wrapped(joint_space_run(scene, angles, rates, dt, 1.0, u) - expected)).max()
+              for dt in (1e-2, 5e-3, 2.5e-3)]
+    ratios = np.array(errors[:-1]) / np.array(errors[1:])
+    assert np.all((3.6 <= ratios) & (ratios <= 4.4)), (errors, ratios)
+
+
+@pytest.mark.compile
+def test_converges_to_the_spatial_midpoint():
+    """The same chain by the compiled spatial midpoint (joint coordinates, Newton-Euler): two
+    order 2 schemes of the same equations, so their difference at t = 1 s falls by 4 per
+    halving of dt."""
+    from chaingen.simulation import build_solver
+
+    scene, u, angles, rates = actuated_damped(71, 3)
+    solver = build_solver(scene, "midpoint", sensitivities=False)
+    differences = []
+    for dt in (1e-2, 5e-3, 2.5e-3):
+        steps = round(1.0 / dt)
+        midpoint = solver.simulate(angles, rates, dt=dt, n_steps=steps, every=steps,
+                                   torques=np.tile(u, (steps, 1))).phi[-1]
+        es = joint_space_run(scene, angles, rates, dt, 1.0, u)
+        differences.append(np.abs(wrapped(es - midpoint)).max())
+    ratios = np.array(differences[:-1]) / np.array(differences[1:])
+    assert np.all((3.6 <= ratios) & (ratios <= 4.4)), (differences, ratios)
