@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..spatial.dynamics import axis_rotation, link_poses, rpy_matrix
+from ..spatial.dynamics import link_poses, rpy_matrix
 from ..spatial.values import SpatialScene
 
 #: Coordinates per link: x_i, d_i1, d_i2, d_i3.
@@ -363,8 +363,9 @@ def es_step(model: DirectorModel, q0, v0, dt: float, inputs=(), springs=None,
     applied[[joint - 1 for joint in scene.actuated]] = inputs
     damping = np.array([link.damping for link in scene.links])
     z = np.zeros(size + LINK_CONSTRAINTS * n) if guess is None else np.array(guess, dtype=float)
-    last = np.inf
-    for iteration in range(1, max_iterations + 1):
+    last, iterations = np.inf, 0
+    while iterations < max_iterations:
+        iterations += 1
         dv, mu = z[:size], z[size:]
         vm = v0 + dv / 2
         q1 = q0 + dt * vm
@@ -388,11 +389,11 @@ def es_step(model: DirectorModel, q0, v0, dt: float, inputs=(), springs=None,
         if size_of_update <= 1e-16 * np.abs(z).max() or size_of_update >= last / 2:
             break
         last = size_of_update
-    else:
+    if size_of_update > 1e-8 * np.abs(z).max():
         raise RuntimeError(f"es step: Newton did not converge in {max_iterations} iterations")
     dv, mu = z[:size], z[size:]
     vm = v0 + dv / 2
     q1 = q0 + dt * vm
     rates = np.array([torque_forces(model, (q0 + q1) / 2, np.eye(n)[i]) for i in range(n)]) @ vm
     return StepResult(q1, v0 + dv, float(dt * applied @ rates),
-                      float(dt * damping @ rates ** 2), iteration, z)
+                      float(dt * damping @ rates ** 2), iterations, z)
