@@ -1,6 +1,6 @@
 """Method "es" for spatial scenes (issue 33, build 1): the director formulation and its
-energy-momentum step (chaingen.symbolic.spatial_com_model, docs/model.md 4.7), against
-independent paths.
+energy-momentum step (numpy: chaingen.symbolic.spatial_com_model; the generated scheme:
+chaingen.symbolic.schemes.spatial_es; docs/model.md 4.8), against independent paths.
 
 The pieces against derivatives and the joint-space dynamics of chaingen.spatial.dynamics
 (itself checked against Pinocchio): the constraint Jacobian against central differences, the
@@ -8,7 +8,10 @@ springs' discrete gradient against V(q_1) - V(q_0), the kinetic energy of the co
 matrix against 1/2 qdot . M(q) qdot. The step: energy and constraints to round-off over 1000
 steps of random conservative 3- and 5-link chains, the energy balance with torques and damping
 per step, and order 2 convergence to scipy's DOP853 on the joint-space equations of motion (C
-qdot + g from Pinocchio's rnea) and to the compiled spatial midpoint.
+qdot + g from Pinocchio's rnea) and to the compiled spatial midpoint. The generated scheme,
+built from its own SymPy expressions, against the numpy step: its residual vanishes at the
+numpy step's root, its maps give the same state, energy, angles and rates, and the compiled
+package runs the numpy trajectory.
 """
 from __future__ import annotations
 
@@ -21,8 +24,10 @@ from hypothesis import strategies as st
 from test_spatial_dynamics import random_scene
 from test_spatial_midpoint import reference_run, wrapped
 
+from chaingen.errors import UnsupportedSceneError
 from chaingen.spatial import dynamics
 from chaingen.symbolic import spatial_com_model as directors
+from chaingen.symbolic.schemes import build_scheme
 
 
 def random_state(scene, seed):
@@ -159,12 +164,16 @@ def joint_space_run(scene, angles, rates, dt, t_end, torques=None):
 
 
 def actuated_damped(seed, n):
+    """(scene, u, angles, rates): a random chain with springs, damping on every joint and
+    torques u on its first and last joints."""
     rng = np.random.default_rng(seed)
     plain = random_scene(seed, n, springs=True)
-    scene = dataclasses.replace(plain, actuated=(1, n), links=tuple(
+    actuated = tuple(sorted({1, n}))
+    scene = dataclasses.replace(plain, actuated=actuated, links=tuple(
         dataclasses.replace(link, damping=float(d))
         for link, d in zip(plain.links, rng.uniform(0.0, 0.5, n))))
-    return scene, rng.uniform(-1.0, 1.0, 2), rng.uniform(-1.0, 1.0, n), rng.uniform(-1, 1, n)
+    return (scene, rng.uniform(-1.0, 1.0, len(actuated)), rng.uniform(-1.0, 1.0, n),
+            rng.uniform(-1.0, 1.0, n))
 
 
 @pytest.mark.heavy
@@ -184,19 +193,102 @@ def test_converges_at_order_2_to_dop853():
 
 @pytest.mark.compile
 def test_converges_to_the_spatial_midpoint():
-    """The same chain by the compiled spatial midpoint (joint coordinates, Newton-Euler): two
-    order 2 schemes of the same equations, so their difference at t = 1 s falls by 4 per
-    halving of dt."""
+    """The same chain by the compiled spatial es and midpoint (joint coordinates,
+    Newton-Euler): two order 2 schemes of the same equations, so their difference at t = 1 s
+    falls by 4 per halving of dt."""
     from chaingen.simulation import build_solver
 
     scene, u, angles, rates = actuated_damped(71, 3)
-    solver = build_solver(scene, "midpoint", sensitivities=False)
+    solvers = [build_solver(scene, method, sensitivities=False) for method in ("midpoint", "es")]
     differences = []
-    for dt in (1e-2, 5e-3, 2.5e-3):
+    for dt in (1e-2, 5e-3, 2.5e-3, 1.25e-3):
         steps = round(1.0 / dt)
-        midpoint = solver.simulate(angles, rates, dt=dt, n_steps=steps, every=steps,
-                                   torques=np.tile(u, (steps, 1))).phi[-1]
-        es = joint_space_run(scene, angles, rates, dt, 1.0, u)
+        midpoint, es = (solver.simulate(angles, rates, dt=dt, n_steps=steps, every=steps,
+                                        torques=np.tile(u, (steps, 1))).phi[-1]
+                        for solver in solvers)
         differences.append(np.abs(wrapped(es - midpoint)).max())
     ratios = np.array(differences[:-1]) / np.array(differences[1:])
     assert np.all((3.6 <= ratios) & (ratios <= 4.4)), (differences, ratios)
+
+
+# -- the generated scheme -------------------------------------------------------------------
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 3))
+def test_scheme_is_the_numpy_step(seed, n):
+    """An actuated, damped random chain: the scheme's residual is zero (to round-off) at the
+    numpy step's root, its next state and flows are the numpy step's, and its maps give the
+    numpy start, energy, angles, rates and constraint errors, at the start and after the step."""
+    scene, u, angles, rates = actuated_damped(seed, n)
+    scheme = build_scheme(scene, "es")
+    model = directors.director_model(scene)
+    q, v = directors.joint_space_start(model, angles, rates)
+    start = np.array(scheme.initial_function()(*angles, *rates), dtype=float).ravel()
+    np.testing.assert_allclose(start, np.concatenate([q, v]), rtol=0, atol=1e-14)
+    dt = 0.01
+    step = directors.es_step(model, q, v, dt, u)
+    evaluate = scheme.step_function(list(scheme.residual) + list(scheme.next_state)
+                                    + [scheme.input_work, scheme.dissipated])
+    out = np.array(evaluate(*step.unknowns, *q, *v, *u, dt), dtype=float).ravel()
+    size = len(step.unknowns)
+    assert np.abs(out[:size]).max() <= 1e-13 * max(1.0, np.abs(step.unknowns).max())
+    np.testing.assert_allclose(out[size:-2], np.concatenate([step.q, step.v]), rtol=0,
+                               atol=1e-15)
+    np.testing.assert_allclose(out[-2:], [step.input_work, step.dissipated], rtol=1e-12,
+                               atol=1e-16)
+    state = scheme.state_function([scheme.energy, *scheme.joint_angles,
+                                   *scheme.joint_velocities, *scheme.constraint_residuals])
+    for q_, v_ in ((q, v), (step.q, step.v)):
+        values = np.array(state(*q_, *v_), dtype=float).ravel()
+        assert values[0] == pytest.approx(directors.energy(model, q_, v_), rel=1e-13)
+        np.testing.assert_allclose(values[1:n + 1], directors.joint_angles(model, q_), atol=1e-14)
+        np.testing.assert_allclose(values[n + 1:2 * n + 1], directors.joint_rates(model, q_, v_),
+                                   atol=1e-13)
+        np.testing.assert_allclose(values[2 * n + 1:], directors.constraints(model, q_),
+                                   atol=1e-14)
+
+
+def test_only_order_2_so_far():
+    with pytest.raises(UnsupportedSceneError, match="order 4: es for a spatial scene"):
+        build_scheme(random_scene(1, 2), "es", order=4)
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("n, seed", [(3, 81), (5, 82)])
+def test_compiled_es_conserves_energy_and_runs_the_numpy_trajectory(n, seed):
+    """build_solver(scene, "es"): a conservative random chain over 1000 steps of 0.01 s keeps
+    its energy to 1e-12 relative and its constraints to round-off; the first 50 steps are the
+    numpy step's to round-off."""
+    from chaingen.simulation import build_solver
+
+    scene = random_scene(seed, n, springs=True)
+    model, angles, rates, q, v = random_state(scene, seed)
+    solver = build_solver(scene, "es", sensitivities=False)
+    result = solver.simulate(angles, rates, dt=0.01, n_steps=1000)
+    size = 0.5 * v @ model.mass_matrix @ v + abs(directors.potential(model, q))
+    assert result.energy[0] == pytest.approx(directors.energy(model, q, v), rel=1e-14)
+    assert np.abs(result.energy - result.energy[0]).max() <= 1e-12 * size
+    assert np.abs(result.constraint_error).max() <= 1e-13
+    assert np.abs(wrapped(result.phi[-1] - angles)).max() >= 0.1
+    states, _, _ = run(model, q, v, 0.01, 50)
+    expected = np.array([directors.joint_angles(model, q_) for q_, _ in states])
+    assert np.abs(wrapped(result.phi[:51] - expected)).max() <= 1e-12
+
+
+@pytest.mark.compile
+def test_compiled_balance_with_torques_and_damping():
+    """The package's flows and balance: H_k - H_0 - work + dissipated at round-off for random
+    torques on three of four damped joints, with both flows far from zero."""
+    from chaingen.simulation import build_solver
+
+    plain = random_scene(91, 4, springs=True)
+    damping = np.array([0.3, 0.0, 0.8, 0.2])
+    scene = dataclasses.replace(plain, actuated=(1, 2, 4), links=tuple(
+        dataclasses.replace(link, damping=float(d)) for link, d in zip(plain.links, damping)))
+    _, angles, rates, _, _ = random_state(scene, 91)
+    torques = np.random.default_rng(91).uniform(-2.0, 2.0, (500, 3))
+    result = build_solver(scene, "es", sensitivities=False).simulate(
+        angles, rates, dt=0.01, n_steps=500, torques=torques)
+    size = np.abs(result.energy).max()
+    assert np.abs(result.balance_error).max() <= 1e-12 * size
+    assert result.dissipated[-1] >= 1e-3 * size and abs(result.input_work[-1]) > 0.0
