@@ -1,6 +1,6 @@
-"""A spatial chain in director coordinates and its energy-momentum step (docs/model.md 4.7),
-in numpy: the prototype of method "es" for spatial scenes, and the reference a generated
-spatial es will be checked against.
+"""A spatial chain in director coordinates and its energy-momentum step (docs/model.md 4.8),
+in numpy: the reference the generated spatial es (chaingen.symbolic.schemes.spatial_es) is
+checked against, and the place to try a change of the step before generating it.
 
 Each link i is described without rotation parameters: its centre of mass x_i and the three
 directors d_i1, d_i2, d_i3, the columns of its rotation R_i (Betsch and Steinmann, 2001). The
@@ -17,7 +17,7 @@ with o_i, J_i = R(rpy_i) and a_i the joint's origin, rotation and axis (URDF), b
 unit pair orthogonal to a_i. The kinetic energy is 1/2 v . M v with the constant
 M = diag(m_i I, E_i (x) I), E_i = tr(I_i)/2 I - I_i the Euler tensor about the COM.
 
-The step (Betsch and Steinmann's energy-momentum scheme, model.md 4.7): unknowns the velocity
+The step (Betsch and Steinmann's energy-momentum scheme, model.md 4.8): unknowns the velocity
 increment dv = v_1 - v_0 and the constraint impulses mu = dt lambda,
 
     M dv + G(q_m)^T mu + dt (gradV~(q_0, q_1) - f(q_m, v_m)) = 0,   g(q_1) = 0,
@@ -351,7 +351,7 @@ def es_step(model: DirectorModel, q0, v0, dt: float, inputs=(), springs=None,
             guess=None, max_iterations: int = 50) -> StepResult:
     """The energy-momentum step of the module docstring from (q_0, v_0), the torques `inputs`
     on the scene's actuated joints and its joint damping. Newton's method on the full
-    saddle-point system (model.md 4.7), its Jacobian exact but for the turning of the torques'
+    saddle-point system (model.md 4.8), its Jacobian exact but for the turning of the torques'
     axes and couples with q (O(dt^2 |tau|)), iterated until
     the update stops shrinking: the residual at round-off, which the energy balance needs.
     guess: the first (dv, mu), the last step's (StepResult.unknowns) along a run; zero if None."""
