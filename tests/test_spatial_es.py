@@ -301,12 +301,22 @@ def test_sensitivities_and_generated_functions_pass_the_check():
     from chaingen.simulation import build_solver
     from chaingen.studies.check import check_solver
 
-    scene, _, _, _ = actuated_damped(101, 3)
-    report = check_solver(build_scheme(scene, "es"),
-                          build_solver(scene, "es", sensitivities=True), samples=3, dt=0.01)
+    scene, u, angles, rates = actuated_damped(101, 3)
+    solver = build_solver(scene, "es", sensitivities=True)
+    report = check_solver(build_scheme(scene, "es"), solver, samples=3, dt=0.01)
     assert {row.quantity for row in report.rows} >= {
-        "residual Jacobian", "d s1 / d s0", "d s1 / d u", "residual", "next state", "energy"}
-    assert report.passed, report.table()
+        "residual Jacobian", "d s1 / d s0", "d s1 / d u", "residual", "energy"}
+    # The check's own reference Newton (central-difference Jacobian, from zero) stops at an
+    # update of 1e-14 |z|; on this 23n saddle point its updates stay near 5e-14 |z| with the
+    # residual at 1e-15, so it reports no reference for "next state". The next state is held
+    # to the numpy step instead.
+    assert all(row.worst <= row.tolerance for row in report.rows
+               if row.quantity != "next state"), report.table()
+    model = directors.director_model(scene)
+    q, v = directors.joint_space_start(model, angles, rates)
+    step = directors.es_step(model, q, v, 0.01, u)
+    x1 = solver.step(np.concatenate([q, v]), u, 0.01).x1
+    np.testing.assert_allclose(x1, np.concatenate([step.q, step.v]), rtol=0, atol=1e-13)
 
 
 @pytest.mark.tools
