@@ -112,7 +112,8 @@ def test_generate_without_method_writes_the_default_schemes_package(tmp_path):
 
 
 @pytest.mark.parametrize("args, fragments", [
-    (["--method", "es"], ["method 'es': not available for a spatial scene", "use 'midpoint'"]),
+    (["--method", "es", "--order", "4"], ["order 4: es for a spatial scene",
+                                          "is of order 2 so far"]),
     (["--method", "vi"], ["method 'vi': not available for a spatial scene"]),
     (["--parameters", "springs[0].stiffness"], ["parameters: run-time parameters are "
                                                 "planar-only"]),
@@ -356,9 +357,9 @@ def test_simulate_without_method_agrees_with_mujoco_and_plots(tmp_path):
 def test_simulate_with_a_refused_method_writes_nothing(tmp_path):
     scene = spatial_copy(tmp_path)
     before = snapshot(tmp_path)
-    line = error_line(chaingen_in_process("simulate", scene, "--method", "es", "--out",
-                                          "arm.csv", "--plot", cwd=tmp_path))
-    assert "method 'es': not available for a spatial scene" in line, line
+    line = error_line(chaingen_in_process("simulate", scene, "--method", "es", "--order", "6",
+                                          "--out", "arm.csv", "--plot", cwd=tmp_path))
+    assert "order 6: es for a spatial scene" in line, line
     assert snapshot(tmp_path) == before
 
 
