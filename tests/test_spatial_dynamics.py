@@ -20,15 +20,29 @@ from chaingen.spatial.values import (
 from helpers import require_module
 
 
-def random_scene(seed: int, n: int, springs: bool = False) -> SpatialScene:
+def random_scene(seed: int, n: int, springs: bool = False, physical: bool = True) -> SpatialScene:
+    """A random chain of n links (skew axes, joint origins turned by rpy, off-axis COMs, full
+    inertia tensors), with springs through route points when asked. physical: each tensor a
+    solid box's principal moments, turned at random (a rigid body's, as the reader and es's
+    director mass matrix need); False: any positive definite tensor, which the joint-space
+    dynamics take (the spatial midpoint's tests and model.md 6.7's figures use those chains)."""
     rng = np.random.default_rng(seed)
     links = []
     for _ in range(n):
-        root = rng.normal(size=(3, 3))
-        inertia = 0.1 * root @ root.T + 0.01 * np.eye(3)
-        axis = rng.normal(size=3)
+        if physical:
+            mass = float(rng.uniform(0.2, 5.0))
+            a, b, c = rng.uniform(0.02, 0.5, 3) ** 2
+            turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+            moments = np.diag([mass * (b + c), mass * (a + c), mass * (a + b)]) / 12
+            inertia = turn @ moments @ turn.T
+            axis = rng.normal(size=3)
+        else:
+            root = rng.normal(size=(3, 3))
+            inertia = 0.1 * root @ root.T + 0.01 * np.eye(3)
+            axis = rng.normal(size=3)
+            mass = float(rng.uniform(0.2, 5.0))
         links.append(SpatialLink(
-            mass=float(rng.uniform(0.2, 5.0)), com=tuple(0.1 * rng.normal(size=3)),
+            mass=mass, com=tuple(0.1 * rng.normal(size=3)),
             inertia=(inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2],
                      inertia[1, 2]),
             joint=SpatialJoint(xyz=tuple(0.3 * rng.normal(size=3)),

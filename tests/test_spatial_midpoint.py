@@ -53,7 +53,7 @@ def residual_function(scheme):
 def test_residual_is_the_inverse_dynamics_of_pinocchio(seed, n, dt):
     """M(q) qddot + C(q, qdot) qdot + g(q) + dV_s/dq: Pinocchio's rnea and our springs."""
     pin = require_module("pinocchio", "robots")
-    scene = random_scene(seed, n, springs=True)
+    scene = random_scene(seed, n, springs=True, physical=False)
     _, model = pinocchio_model(scene)
     data = model.createData()
     rng = np.random.default_rng(seed + 1)
@@ -70,7 +70,7 @@ def test_actuated_damped_residual_subtracts_torques_and_damping(seed, n):
     dynamics + d qdot - tau, tau the inputs of the actuated joints (model.md 7)."""
     pin = require_module("pinocchio", "robots")
     rng = np.random.default_rng(seed)
-    plain = random_scene(seed, n, springs=True)
+    plain = random_scene(seed, n, springs=True, physical=False)
     actuated = tuple(j for j in range(1, n + 1) if rng.uniform() < 0.6) or (1,)
     damping = rng.uniform(0.0, 2.0, n)
     scene = dataclasses.replace(plain, actuated=actuated, links=tuple(
@@ -92,7 +92,7 @@ def test_actuated_damped_residual_subtracts_torques_and_damping(seed, n):
 def test_energy_and_segments_of_a_state_are_the_numeric_ones(seed, n):
     """H = T + V by the recursion against chaingen.spatial.dynamics; the watched segment
     vectors' lengths sum to the springs' lengths."""
-    scene = random_scene(seed, n, springs=True)
+    scene = random_scene(seed, n, springs=True, physical=False)
     scheme = spatial_midpoint.build(scene)
     rng = np.random.default_rng(seed + 2)
     q, qdot = rng.uniform(-np.pi, np.pi, n), rng.normal(size=n)
@@ -108,7 +108,7 @@ def test_energy_and_segments_of_a_state_are_the_numeric_ones(seed, n):
 
 def test_holding_torques_are_gravity_and_springs():
     """An actuated scene's holding torques: dV/dq from the numeric gravity and spring forces."""
-    scene = dataclasses.replace(random_scene(5, 4, springs=True), actuated=(1, 3))
+    scene = dataclasses.replace(random_scene(5, 4, springs=True, physical=False), actuated=(1, 3))
     scheme = spatial_midpoint.build(scene)
     maps = scheme.maps
     from chaingen.symbolic.schemes.base import numpy_function
@@ -121,7 +121,7 @@ def test_holding_torques_are_gravity_and_springs():
 
 
 def test_planar_only_features_are_refused_for_spatial_scenes():
-    scene = random_scene(1, 3, springs=True)
+    scene = random_scene(1, 3, springs=True, physical=False)
     with pytest.raises(UnsupportedSceneError, match="method 'vi': not available for a spatial"):
         build_scheme(scene, "vi")
     with pytest.raises(UnsupportedSceneError, match="parameters: run-time parameters are "
@@ -166,7 +166,7 @@ def test_compiled_run_converges_at_order_2_to_dop853(n, seed):
     from chaingen.simulation import build_solver
 
     rng = np.random.default_rng(seed)
-    plain = random_scene(seed, n, springs=True)
+    plain = random_scene(seed, n, springs=True, physical=False)
     scene = dataclasses.replace(plain, actuated=(1, n), links=tuple(
         dataclasses.replace(link, damping=float(d))
         for link, d in zip(plain.links, rng.uniform(0.0, 0.5, n))))
@@ -193,7 +193,7 @@ def test_conservative_energy_stays_bounded_over_10_s():
     does not drift (the second five seconds err no more than the first)."""
     from chaingen.simulation import build_solver
 
-    scene = random_scene(21, 4, springs=True)
+    scene = random_scene(21, 4, springs=True, physical=False)
     rng = np.random.default_rng(21)
     q0, w0 = rng.uniform(-1.0, 1.0, 4), rng.uniform(-1.0, 1.0, 4)
     solver = build_solver(scene, "midpoint", sensitivities=False)
@@ -218,7 +218,7 @@ def test_energy_balance_with_damping_and_torques():
     and the balance H - H_0 - work + dissipated is O(dt^2)."""
     from chaingen.simulation import build_solver
 
-    plain = random_scene(31, 4, springs=True)
+    plain = random_scene(31, 4, springs=True, physical=False)
     damping = np.array([0.3, 0.0, 0.8, 0.2])
     scene = dataclasses.replace(plain, actuated=(1, 2, 4), links=tuple(
         dataclasses.replace(link, damping=float(d)) for link, d in zip(plain.links, damping)))
@@ -248,7 +248,7 @@ def test_sensitivities_and_generated_functions_pass_the_check():
     from chaingen.simulation import build_solver
     from chaingen.studies.check import check_solver
 
-    scene = dataclasses.replace(random_scene(41, 4, springs=True), actuated=(1, 3))
+    scene = dataclasses.replace(random_scene(41, 4, springs=True, physical=False), actuated=(1, 3))
     scheme = build_scheme(scene, "midpoint")
     solver = build_solver(scene, "midpoint", sensitivities=True)
     report = check_solver(scheme, solver, samples=3, dt=0.01)
@@ -268,7 +268,7 @@ def test_composed_steps_of_order_4_and_6_converge_to_dop853():
     at t = 1 s against DOP853 falls by 2^4 and 2^6 per halving of dt."""
     from chaingen.simulation import build_solver
 
-    scene = random_scene(51, 3, springs=True)
+    scene = random_scene(51, 3, springs=True, physical=False)
     rng = np.random.default_rng(51)
     q0, w0 = rng.uniform(-1.0, 1.0, 3), rng.uniform(-1.0, 1.0, 3)
     expected = reference_run(scene, q0, w0, np.zeros(3), 1.0)
@@ -288,7 +288,8 @@ def test_simulate_scene_runs_a_spatial_scene_with_the_simulation_defaults():
     table's defaults apply (dt = 0.01 s), and the run starts from the scene's initial state."""
     from chaingen.simulation import run_settings, simulate_scene
 
-    scene = dataclasses.replace(random_scene(61, 3, springs=True), initial_angles=(0.3, -0.2, 0.1),
+    scene = dataclasses.replace(random_scene(61, 3, springs=True, physical=False),
+                                initial_angles=(0.3, -0.2, 0.1),
                                 initial_velocities=(0.0, 0.5, 0.0))
     settings = run_settings(scene, method="midpoint", t_end=0.1)
     result = simulate_scene(scene, settings)
@@ -364,7 +365,7 @@ def test_spatial_example_is_clean_under_valgrind_and_the_sanitizers(tmp_path, ac
     from chaingen.generate.package import generate_package, write_package
     from chaingen.runtime import contract
 
-    plain = random_scene(71, 4, springs=True)
+    plain = random_scene(71, 4, springs=True, physical=False)
     scene = dataclasses.replace(plain, name="spatial-example", actuated=actuated, links=tuple(
         dataclasses.replace(link, damping=0.2) for link in plain.links))
     package = write_package(generate_package(scene, "midpoint", 3, sensitivities=False),
