@@ -122,8 +122,8 @@ def test_holding_torques_are_gravity_and_springs():
 
 def test_planar_only_features_are_refused_for_spatial_scenes():
     scene = random_scene(1, 3, springs=True)
-    with pytest.raises(UnsupportedSceneError, match="method 'vi': not available for a spatial"):
-        build_scheme(scene, "vi")
+    with pytest.raises(UnsupportedSceneError, match="method 'es': not available for a spatial"):
+        build_scheme(scene, "es")
     with pytest.raises(UnsupportedSceneError, match="parameters: run-time parameters are "
                                                     "planar-only"):
         build_scheme(scene, "midpoint", parameters=("springs[0].stiffness",))
