@@ -221,15 +221,15 @@ def test_step_map_is_symplectic_in_q_and_p():
     to_momenta = momentum_jacobian(scene)
     omega = np.block([[np.zeros((n, n)), np.eye(n)], [-np.eye(n), np.zeros((n, n))]])
     rng = np.random.default_rng(91)
+    q0, w0 = rng.uniform(-1.0, 1.0, n), rng.uniform(-2.0, 2.0, n)
     defects = {}
     for method in ("vi", "midpoint"):
         solver = build_solver(scene, method, sensitivities=True)
-        q0, w0 = rng.uniform(-1.0, 1.0, n), rng.uniform(-2.0, 2.0, n)
-        sens = solver.step_sensitivities(solver.initial_state(q0, w0), dt=0.05, options=STRICT)
+        sens = solver.step_sensitivities(solver.initial_state(q0, w0), dt=0.01, options=STRICT)
         q1, w1 = sens.x1[:n], sens.x1[n:]
         jacobian = (to_momenta(q1, w1) @ sens.ds_ds @ np.linalg.inv(to_momenta(q0, w0)))
         defects[method] = np.abs(jacobian.T @ omega @ jacobian - omega).max()
-        assert np.abs(jacobian).max() > 1.0
+        assert np.abs(jacobian - np.eye(2 * n)).max() > 1e-2    # the step moved the chain
     assert defects["vi"] <= 1e-11, defects
     assert defects["midpoint"] > 1e-6, defects
 
