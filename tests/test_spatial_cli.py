@@ -114,7 +114,6 @@ def test_generate_without_method_writes_the_default_schemes_package(tmp_path):
 @pytest.mark.parametrize("args, fragments", [
     (["--method", "es", "--order", "4"], ["order 4: es for a spatial scene",
                                           "is of order 2 so far"]),
-    (["--method", "vi"], ["method 'vi': not available for a spatial scene"]),
     (["--parameters", "springs[0].stiffness"], ["parameters: run-time parameters are "
                                                 "planar-only"]),
     (["--order", "3"], ["--order"]),

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from test_spatial_dynamics import pinocchio_model, random_scene
 
 from chaingen.errors import UnsupportedSceneError
-from chaingen.scene import kinematics
+from chaingen.scene import METHODS, kinematics
 from chaingen.spatial import dynamics
 from chaingen.spatial.values import (
     RoutePoint,
@@ -28,7 +28,7 @@ from chaingen.spatial.values import (
     SpatialScene,
     SpatialSpring,
 )
-from chaingen.symbolic.schemes import build_scheme, spatial_midpoint
+from chaingen.symbolic.schemes import SPATIAL_BUILDERS, build_scheme, spatial_midpoint
 
 from helpers import load, require_module, require_tools
 
@@ -122,8 +122,7 @@ def test_holding_torques_are_gravity_and_springs():
 
 def test_planar_only_features_are_refused_for_spatial_scenes():
     scene = random_scene(1, 3, springs=True, physical=False)
-    with pytest.raises(UnsupportedSceneError, match="method 'vi': not available for a spatial"):
-        build_scheme(scene, "vi")
+    assert set(SPATIAL_BUILDERS) == set(METHODS)     # every scheme takes spatial scenes now
     with pytest.raises(UnsupportedSceneError, match="parameters: run-time parameters are "
                                                     "planar-only"):
         build_scheme(scene, "midpoint", parameters=("springs[0].stiffness",))

@@ -261,3 +261,69 @@ def spring_gradient(scene: SpatialScene, frames: SpatialFrames, defs: Definition
             gradient[j - 1] = -dot(frames.axes[j - 1], add(
                 total_moment, scale(-1, cross(frames.origins[j - 1], total_force))))
     return gradient, energy, segments
+
+
+def origin_velocities(frames: SpatialFrames, omegas, defs: Definitions, tag: str = "") -> list:
+    """The velocities of the joint origins, V_1 = 0 (the base does not move) and
+    V_{i+1} = V_i + omega_i x (p_{i+1} - p_i)."""
+    joint, out = ZERO, [ZERO]
+    for i in range(len(omegas) - 1):
+        link_vector = add(frames.origins[i + 1], scale(-1, frames.origins[i]))
+        joint = define_vector(defs, f"{tag}V{i + 2}", add(joint, cross(omegas[i], link_vector)))
+        out.append(joint)
+    return out
+
+
+def momenta(scene: SpatialScene, frames: SpatialFrames, rates, defs: Definitions,
+            tag: str = "") -> tuple[list, list]:
+    """(dT/dqdot, dT/dq) at the joint rates `rates` (model.md 5.7): the conjugate momenta
+    M(q) qdot and the kinetic energy's gradient in the angles at fixed rates, O(n).
+
+    With the linear momenta L_i = m_i v(c_i), the angular momenta h_i = J_i omega_i about the
+    COMs, and over the links j..n the linear momentum P_j = sum L_i and the angular momentum
+    H_j = sum h_i + (c_i - p_j) x L_i about p_j, accumulated from the tip
+    (H_j = h_j + r_j x L_j + H_{j+1} + (p_{j+1} - p_j) x P_{j+1}):
+
+        dT/dqdot_j = z_j . H_j,    dT/dq_j = z_j . (H_j x omega_{j-1} + P_j x V_j),
+
+    the second because turning joint j turns links j..n about z_j through p_j, and with them
+    their rates relative to link j - 1 (omega_0 = 0, V_1 = 0: T does not depend on q_1)."""
+    n = scene.n
+    omegas = angular_velocities(frames, rates, defs, tag)
+    joints = origin_velocities(frames, omegas, defs, tag)
+    linear_total, angular_total = ZERO, ZERO
+    momentum, gradient = [None] * n, [None] * n
+    for i in range(n - 1, -1, -1):
+        link = scene.links[i]
+        velocity = add(joints[i], cross(omegas[i], frames.arms[i]))
+        linear = define_vector(defs, f"{tag}L{i + 1}", scale(number(link.mass), velocity))
+        parts = [apply(frames.inertias[i], omegas[i]), cross(frames.arms[i], linear)]
+        if i + 1 < n:
+            link_vector = add(frames.origins[i + 1], scale(-1, frames.origins[i]))
+            parts += [angular_total, cross(link_vector, linear_total)]
+        angular_total = define_vector(defs, f"{tag}H{i + 1}", add(*parts))
+        linear_total = define_vector(defs, f"{tag}P{i + 1}", add(linear_total, linear))
+        momentum[i] = defs.define(f"{tag}mom{i + 1}", dot(frames.axes[i], angular_total))
+        parts = [cross(linear_total, joints[i])] if i else []
+        if i:
+            parts.append(cross(angular_total, omegas[i - 1]))
+        gradient[i] = (defs.define(f"{tag}dTdq{i + 1}", dot(frames.axes[i], add(*parts)))
+                       if parts else sp.Integer(0))
+    return momentum, gradient
+
+
+def gravity_gradient(scene: SpatialScene, frames: SpatialFrames, defs: Definitions,
+                     tag: str = "") -> list:
+    """dV_g/dq: with the weights W_i = m_i g, their sum F_j and moment about the world origin
+    N_j over the links j..n (from the tip), dV_g/dq_j = -z_j . (N_j - p_j x F_j), the torque
+    about joint j's axis that holds links j..n against gravity, negated. O(n)."""
+    gravity = constant(scene.gravity)
+    force, moment = ZERO, ZERO
+    gradient = [None] * scene.n
+    for i in range(scene.n - 1, -1, -1):
+        weight = scale(number(scene.links[i].mass), gravity)
+        centre = add(frames.origins[i], frames.arms[i])
+        force = define_vector(defs, f"{tag}gravity_F{i + 1}", add(force, weight))
+        moment = define_vector(defs, f"{tag}gravity_N{i + 1}", add(moment, cross(centre, weight)))
+        gradient[i] = -dot(frames.axes[i], add(moment, scale(-1, cross(frames.origins[i], force))))
+    return gradient

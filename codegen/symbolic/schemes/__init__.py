@@ -16,14 +16,15 @@ from ...scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE
 from ...scene.parameters import with_symbols
 from ...spatial.values import SpatialScene
 from ..composition import FROM_ORDER_4, composition
-from . import es, galerkin, midpoint, spatial_es, spatial_midpoint, vi
+from . import es, galerkin, midpoint, spatial_es, spatial_midpoint, spatial_vi, vi
 from .base import DiscreteScheme, FlowDescription, Layout, segment_tolerances
 
 BUILDERS = {"es": es.build, "vi": vi.build, "midpoint": midpoint.build}
 if tuple(BUILDERS) != METHODS:
     raise ImportError(f"schemes {tuple(BUILDERS)} do not match the methods {METHODS}")
 #: The schemes a spatial scene (chaingen.spatial.values) has so far.
-SPATIAL_BUILDERS = {"midpoint": spatial_midpoint.build, "es": spatial_es.build}
+SPATIAL_BUILDERS = {"midpoint": spatial_midpoint.build, "es": spatial_es.build,
+                    "vi": spatial_vi.build}
 
 
 def build_scheme(scene: Scene | SolverSpec, method: str | None = None,

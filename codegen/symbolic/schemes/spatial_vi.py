@@ -1,0 +1,117 @@
+"""Method "vi" for a spatial scene: the discrete Euler-Lagrange equations in joint angles, in
+position-momentum form (model.md section 5.7), with the spatial recursions
+(chaingen.symbolic.spatial_recursion).
+
+The planar vi's discrete Lagrangian and forcing, in joint angles instead of unit attitude
+vectors (a revolute joint's angle is its coordinate on S^1 either way):
+L_d(q_0, q_1) = dt [T(q_m, v) - V(q_m)], q_m = q_0 + theta/2, v = theta/dt, theta = q_1 - q_0,
+and the torques f = tau - d v as mid-point discrete Lagrange-d'Alembert forces dt/2 f at each end.
+The discrete Legendre transforms
+
+    p_0 = M(q_m) v - dt/2 (dT/dq(q_m, v) - dV/dq(q_m) + f),   p_1 = 2 M(q_m) v - p_0
+
+are the step. The state is the runtime's joint-space state (q, w) and the momenta are
+p = M(q) w; w_1 is solved for with theta, so that no M(q)^-1 is needed (a spatial
+articulated-body recursion is not written). Unknowns (theta, w_1), residual (N m s)
+
+    M(q_m) v - dt/2 (dT/dq - dV/dq + f) - M(q_0) w_0 = 0,
+    M(q_1) w_1 - (2 M(q_m) v - M(q_0) w_0) = 0.
+
+Every M(q) w and dT/dq is the momentum recursion (spatial_recursion.momenta), dV/dq the
+gravity and routed springs' recursions: O(n) definitions, no mass matrix of the whole chain.
+"""
+from __future__ import annotations
+
+import sympy as sp
+from sympy import ImmutableMatrix
+
+from ...runtime.contract import JACOBIAN_PER_STEP
+from ...spatial.values import SpatialScene
+from .. import spatial_recursion
+from ..com_model import number
+from ..recursion import Definitions
+from .base import (
+    DiscreteScheme,
+    Layout,
+    has_energy_flows,
+    input_symbols,
+    joint_space_state,
+    joint_torques,
+)
+from .spatial_midpoint import holding_torques
+from .vi import FLOWS
+
+SUMMARY = ("Variational integrator in joint angles, discrete Euler-Lagrange equations in "
+           "position-momentum form, spatial chain (docs/model.md, section 5.7).")
+
+
+def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) -> DiscreteScheme:
+    """The spatial vi scheme of `scene`. quadrature plays no role (the discrete Lagrangian is
+    the midpoint rule); order: of the composed step, the outputs are the same at every order."""
+    n = scene.n
+    dt = sp.Symbol("dt", positive=True)
+    q0 = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
+    w0 = ImmutableMatrix(sp.symbols(f"w1:{n + 1}", real=True))
+    theta = ImmutableMatrix(sp.symbols(f"theta1:{n + 1}", real=True))
+    w1 = ImmutableMatrix(sp.symbols(f"wnext1:{n + 1}", real=True))
+
+    step = Definitions("step_")
+    qm = [step.define(f"phim{k}", q + t / 2) for k, (q, t) in enumerate(zip(q0, theta), start=1)]
+    v = [step.define(f"v{k}", t / dt) for k, t in enumerate(theta, start=1)]
+    start = spatial_recursion.link_frames(scene, q0, step, "a")
+    p0, _ = spatial_recursion.momenta(scene, start, w0, step, "a")
+    middle = spatial_recursion.link_frames(scene, qm, step, "m")
+    pm, kinetic_gradient = spatial_recursion.momenta(scene, middle, v, step, "m")
+    gravity = spatial_recursion.gravity_gradient(scene, middle, step, "m")
+    springs, _, _ = spatial_recursion.spring_gradient(scene, middle, step, "m")
+    end = spatial_recursion.link_frames(
+        scene, [step.define(f"phie{k}", q + t) for k, (q, t) in enumerate(zip(q0, theta), 1)],
+        step, "e")
+    p1, _ = spatial_recursion.momenta(scene, end, w1, step, "e")
+    inputs = input_symbols(scene)
+    torques = joint_torques(scene, inputs)
+    # dL/dq + f = dT/dq - dV/dq + tau - d v at the mid-point
+    forces = [dT - weight - spring + tau - number(link.damping) * rate
+              for dT, weight, spring, tau, link, rate
+              in zip(kinetic_gradient, gravity, springs, torques, scene.links, v)]
+    transform = [m - dt / 2 * force - p for m, force, p in zip(pm, forces, p0)]
+    update = [p_end - (2 * m - p) for p_end, m, p in zip(p1, pm, p0)]
+
+    # The energy H = T + V of the state, by the recursions at (q_0, w_0), as the midpoint's.
+    at_state = Definitions("state_")
+    frames0 = spatial_recursion.link_frames(scene, q0, at_state)
+    omegas = spatial_recursion.angular_velocities(frames0, w0, at_state)
+    velocities = spatial_recursion.com_velocities(frames0, omegas, at_state)
+    _, spring_energy, segments = spatial_recursion.spring_gradient(scene, frames0, at_state)
+    kinetic = spatial_recursion.kinetic_energy(scene, frames0, omegas, velocities)
+    energy = kinetic + spatial_recursion.gravity_potential(scene, frames0) + spring_energy
+    state_fields = joint_space_state(scene, q0, w0, energy)
+    if scene.actuated:
+        state_fields.update(holding_torques(scene, state_fields["initial_angles"]))
+
+    return DiscreteScheme.of(
+        method="vi", quadrature=None, scene=scene, summary=SUMMARY, dt=dt,
+        unknowns=ImmutableMatrix.vstack(theta, w1),
+        residual=ImmutableMatrix(transform + update),
+        next_state=ImmutableMatrix.vstack(q0 + theta, w1),
+        # First guess: the step at the current rates, theta = dt w_0 and w_1 = w_0.
+        predictor=ImmutableMatrix.vstack(dt * w0, w0),
+        **state_fields,
+        unknowns_layout=Layout(
+            tuple(f"theta_{i}" for i in range(1, n + 1))
+            + tuple(f"w1_{i}" for i in range(1, n + 1)),
+            "the angle increments theta = q_1 - q_0 of the step (rad), then the joint rates "
+            "w_1 at its end (rad/s)"),
+        residual_description=(
+            "discrete Legendre transforms: M(q_m) v - dt/2 (dT/dq - dV/dq + f) - M(q_0) w_0, "
+            "v = theta/dt, then M(q_1) w_1 - 2 M(q_m) v + M(q_0) w_0, spatial chain (N m s)"),
+        inputs=inputs, definitions=tuple(step.items), state_definitions=tuple(at_state.items),
+        segment_vectors=ImmutableMatrix([c for d in segments for c in d]),
+        input_work=sp.Add(*(tau * t for tau, t in zip(torques, theta))),
+        dissipated=sp.Add(*(number(link.damping) * t ** 2 for link, t in zip(scene.links, theta)
+                            if link.damping)) / dt,
+        flow_description=FLOWS if has_energy_flows(scene) else None,
+        # Full Newton at every order: the momentum maps are kept to the Newton tolerance, and
+        # simplified Newton stops within a tenth of it (model.md 5.7).
+        jacobian_reuse=JACOBIAN_PER_STEP, kinetic_energy=kinetic,
+    )
