@@ -273,8 +273,9 @@ REFUSALS = [
      ' string, got "down"'),
     ('top simulation', '[initial]',
      '[simulation]\ndt = 0.01\n\n[initial]',
-     'simulation: a key of planar scenes, not of spatial ones: no scheme runs a spatial'
-     ' scene yet, so it has no [simulation] defaults; remove the table (allowed here:'
+     'simulation: a key of planar scenes, not of spatial ones: a spatial scene takes its'
+     ' run settings from the command line or the Python API, not from the file (yet); remove'
+     ' the table (allowed here:'
      ' name, gravity, links, springs, actuation, initial), got {dt = 0.01}'),
     ('top unknown key', 'name = "test-arm"',
      'name = "test-arm"\ngravty = 1.0',

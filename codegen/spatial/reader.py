@@ -49,8 +49,8 @@ _INITIAL_KEYS = ("angles", "velocities")
 # otherwise: the refusal says how.
 _PLANAR_KEYS = {
     ("", "base"): "a spring is fastened to the base by a route point on link 0",
-    ("", "simulation"): "no scheme runs a spatial scene yet, so it has no [simulation] "
-                        "defaults; remove the table",
+    ("", "simulation"): "a spatial scene takes its run settings from the command line or "
+                        "the Python API, not from the file (yet); remove the table",
     ("links", "length"): "the next link's joint.xyz places joint i + 1 on link i",
     ("links", "com_normal"): "com is the centre of mass's 3-vector in the link's frame",
     ("links", "fastening"): "a spring's route gives the points it passes through",
