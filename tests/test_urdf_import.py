@@ -88,14 +88,44 @@ def truncated_urdf(source: Path, tip: str | None, out: Path) -> Path:
     return out
 
 
+def numpy_dynamics(scene):
+    """M(q) and g(q) of a scene by chaingen.spatial.dynamics."""
+    return lambda angles: (dynamics.mass_matrix(scene, angles),
+                           dynamics.gravity_torques(scene, angles))
+
+
+def mujoco_dynamics(scene):
+    """M(q) (mj_fullM) and g(q) (the bias force at zero velocity) of MuJoCo on the scene's
+    MJCF (chaingen.reference.spatial_mjcf)."""
+    mujoco = require_module("mujoco", "test")
+    from chaingen.reference.spatial_mjcf import spatial_mjcf_from_scene
+
+    model = mujoco.MjModel.from_xml_string(spatial_mjcf_from_scene(scene, dt=1e-3))
+    data = mujoco.MjData(model)
+
+    def evaluate(angles):
+        data.qpos[:] = angles
+        data.qvel[:] = 0.0
+        mujoco.mj_forward(model, data)
+        mass = np.zeros((model.nv, model.nv))
+        try:
+            mujoco.mj_fullM(model, data, mass)       # MuJoCo 4
+        except TypeError:
+            mujoco.mj_fullM(model, mass, data.qM)    # MuJoCo 3
+        return mass, data.qfrc_bias.copy()
+    return evaluate
+
+
 def reference_agreement(urdf: Path, tip: str | None, work: Path, samples: int,
-                        seed: int) -> tuple[float, float]:
-    """The largest differences of M(q) and g(q) between the imported scene and Pinocchio on
-    the truncated URDF, relative to the largest entry (or 1), over `samples` random q."""
+                        seed: int, ours=numpy_dynamics) -> tuple[float, float]:
+    """The largest differences of M(q) and g(q) between the imported scene (by `ours`, numpy
+    dynamics or MuJoCo on its MJCF) and Pinocchio on the truncated URDF, relative to the
+    largest entry (or 1), over `samples` random q."""
     pin = require_module("pinocchio", "robots")
     from chaingen.spatial.urdf import import_chain
 
     chain = import_chain(urdf, tip=tip)
+    evaluate = ours(chain.scene)
     model = pin.buildModelFromUrdf(str(truncated_urdf(urdf, tip, work / "reference.urdf")))
     data = model.createData()
     ids = [model.getJointId(name) for name in chain.joints]
@@ -118,10 +148,9 @@ def reference_agreement(urdf: Path, tip: str | None, work: Path, samples: int,
         mass = pin.crba(model, data, q)
         mass = (np.triu(mass) + np.triu(mass, 1).T)[np.ix_(order, order)]
         gravity = pin.computeGeneralizedGravity(model, data, q)[order]
-        worst_mass = max(worst_mass, np.abs(dynamics.mass_matrix(chain.scene, angles)
-                                            - mass).max() / max(1.0, np.abs(mass).max()))
-        worst_gravity = max(worst_gravity, np.abs(dynamics.gravity_torques(chain.scene, angles)
-                                                  - gravity).max()
+        our_mass, our_gravity = evaluate(angles)
+        worst_mass = max(worst_mass, np.abs(our_mass - mass).max() / max(1.0, np.abs(mass).max()))
+        worst_gravity = max(worst_gravity, np.abs(our_gravity - gravity).max()
                             / max(1.0, np.abs(gravity).max()))
     return worst_mass, worst_gravity
 
@@ -132,6 +161,16 @@ def test_robots_agree_with_pinocchio(relative, tip, tmp_path):
     within the joint limits agree with Pinocchio's to 1e-10."""
     worst_mass, worst_gravity = reference_agreement(robot_urdf(relative), tip, tmp_path,
                                                     CONFIGURATIONS, seed=33)
+    assert worst_mass <= TOLERANCE and worst_gravity <= TOLERANCE, (worst_mass, worst_gravity)
+
+
+@pytest.mark.parametrize("relative, tip", ROBOTS, ids=[r[0].split("/")[-1] for r in ROBOTS])
+def test_the_imported_robots_mjcf_gives_mujoco_pinocchios_dynamics(relative, tip, tmp_path):
+    """Must show c, its MJCF half: the MJCF written from the imported scene
+    (spatial_mjcf_from_scene) gives MuJoCo Pinocchio's M(q) and g(q) at 20 configurations
+    within the joint limits, to 1e-10."""
+    worst_mass, worst_gravity = reference_agreement(robot_urdf(relative), tip, tmp_path,
+                                                    CONFIGURATIONS, seed=34, ours=mujoco_dynamics)
     assert worst_mass <= TOLERANCE and worst_gravity <= TOLERANCE, (worst_mass, worst_gravity)
 
 
