@@ -189,22 +189,39 @@ def test_momentum_of_a_cyclic_first_joint_is_kept_to_round_off(gravity):
 
 
 def momentum_jacobian(scene):
-    """(q, w) -> d(q, p)/d(q, w), p = M(q) w by the momentum recursion, differentiated by
-    SymPy: [[1, 0], [d(M w)/dq, M]]."""
+    """(q, w) -> d(q, p)/d(q, w), p = M(q) w by the momentum recursion: [[1, 0], [d(M w)/dq,
+    M]], differentiated exactly by forward mode through the recursion's definitions (each
+    one's partial derivatives by SymPy, chained numerically; substituting the definitions
+    into one expression first grows it beyond use)."""
     n = scene.n
     angles = sp.symbols(f"q1:{n + 1}", real=True)
     rates = sp.symbols(f"w1:{n + 1}", real=True)
+    variables = [*angles, *rates]
     defs = Definitions("j_")
     momentum, _ = spatial_recursion.momenta(
         scene, spatial_recursion.link_frames(scene, angles, defs), rates, defs)
-    for symbol, expression in reversed(defs.items):
-        momentum = [m.xreplace({symbol: expression}) for m in momentum]
-    jacobian = sp.Matrix(momentum).jacobian([*angles, *rates])
-    evaluate = sp.lambdify([*angles, *rates], jacobian, modules="numpy")
+    steps = []       # (symbol or None: a momentum, value, [(free symbol, partial)], free symbols)
+    for symbol, expression in [*defs.items, *((None, m) for m in momentum)]:
+        expression = sp.sympify(expression)
+        free = sorted(expression.free_symbols, key=str)
+        steps.append((symbol, sp.lambdify(free, expression, modules="numpy"),
+                      [(x, sp.lambdify(free, sp.diff(expression, x), modules="numpy"))
+                       for x in free], free))
 
     def at(q, w):
-        return np.vstack([np.hstack([np.eye(n), np.zeros((n, n))]),
-                          np.array(evaluate(*q, *w), dtype=float)])
+        values = dict(zip(variables, [*q, *w]))
+        gradients = {x: row for x, row in zip(variables, np.eye(2 * n))}
+        rows = []
+        for symbol, value, partials, free in steps:
+            arguments = [values[x] for x in free]
+            gradient = sum((float(partial(*arguments)) * gradients[x] for x, partial in partials),
+                           np.zeros(2 * n))
+            if symbol is None:
+                rows.append(gradient)
+            else:
+                values[symbol] = float(value(*arguments))
+                gradients[symbol] = gradient
+        return np.vstack([np.hstack([np.eye(n), np.zeros((n, n))]), np.array(rows)])
 
     return at
 
