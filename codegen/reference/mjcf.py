@@ -31,13 +31,13 @@ MUJOCO_MINIMUM_INERTIA = 1e-15
 MUJOCO_INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
 
 
-def _number(x: float) -> str:
+def number_text(x: float) -> str:
     """A float as the shortest text that round-trips (repr), never rounded."""
     return repr(float(x))
 
 
-def _vector(*xs: float) -> str:
-    return " ".join(_number(x) for x in xs)
+def vector_text(*xs: float) -> str:
+    return " ".join(number_text(x) for x in xs)
 
 
 def chain_fastening_site(j: int) -> str:
@@ -53,6 +53,18 @@ def spring_fastening_site(spring_index: int, j: int) -> str:
 def tendon_name(spring_index: int) -> str:
     """Name of the tendon of spring `spring_index` (0-based, the scene's order)."""
     return f"spring{spring_index}"
+
+
+def tendon_xml(k: int, stiffness: float, rest_length: float, sites, width: float | None) -> str:
+    """Spring k's spatial tendon through the named sites: energy 1/2 k (L - S_0)^2 (a single
+    springlength, no dead band); drawn `width` wide in an exported model, else not drawn."""
+    path = "".join(f"\n      <site site={quoteattr(name)}/>" for name in sites)
+    drawn = (f' width={quoteattr(number_text(width))} rgba="0.7 0.1 0.1 1"'
+             if width is not None else "")
+    return (f"    <spatial name={quoteattr(tendon_name(k))} "
+            f"stiffness={quoteattr(number_text(stiffness))} "
+            f"springlength={quoteattr(number_text(rest_length))}{drawn}>"
+            f"{path}\n    </spatial>")
 
 
 def body_name(i: int) -> str:
@@ -99,11 +111,11 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
     # P_j lies on body j-1 at (L_{j-1}, r_j, 0) (at (0, r_1, 0) on the world body).
     sites: list[list[str]] = [[] for _ in range(scene.n + 1)]
     size = 0.015 * sum(link.length for link in scene.links)      # of the drawn geometry
-    looks = (f' size={quoteattr(_number(size))} rgba="0.2 0.2 0.2 1"' if export else "")
+    looks = (f' size={quoteattr(number_text(size))} rgba="0.2 0.2 0.2 1"' if export else "")
 
     def site_xml(name: str, j: int, r: float) -> str:
         x = 0.0 if j == 1 else scene.links[j - 2].length
-        return f"<site name={quoteattr(name)} pos={quoteattr(_vector(x, r, 0.0))}{looks}/>"
+        return f"<site name={quoteattr(name)} pos={quoteattr(vector_text(x, r, 0.0))}{looks}/>"
 
     for j, r in enumerate(scene.chain_fastenings(), start=1):
         sites[j - 1].append(site_xml(chain_fastening_site(j), j, r))
@@ -117,14 +129,8 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
             names = [spring_fastening_site(k, j) for j in fastenings]
             for j, r in zip(fastenings, scene.spring_fastenings(spring)):
                 sites[j - 1].append(site_xml(spring_fastening_site(k, j), j, r))
-        path = "".join(f"\n      <site site={quoteattr(name)}/>" for name in names)
-        drawn = (f' width={quoteattr(_number(0.5 * size))} rgba="0.7 0.1 0.1 1"'
-                 if export else "")
-        tendons.append(
-            f"    <spatial name={quoteattr(tendon_name(k))} "
-            f"stiffness={quoteattr(_number(spring.stiffness))} "
-            f"springlength={quoteattr(_number(spring.rest_length))}{drawn}>"
-            f"{path}\n    </spatial>")
+        tendons.append(tendon_xml(k, spring.stiffness, spring.rest_length, names,
+                                  0.5 * size if export else None))
 
     # Bodies nest: build from the tip inwards.
     inner = ""
@@ -132,21 +138,22 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
         link = scene.links[i - 1]
         indent = "  " * (i + 1)
         x = 0.0 if i == 1 else scene.links[i - 2].length
-        damping = (f" damping={quoteattr(_number(link.damping))}"
+        damping = (f" damping={quoteattr(number_text(link.damping))}"
                    if link.damping != 0.0 else "")
         lines = [
-            f"{indent}<body name={quoteattr(body_name(i))} pos={quoteattr(_vector(x, 0.0, 0.0))}>",
+            f"{indent}<body name={quoteattr(body_name(i))} "
+            f"pos={quoteattr(vector_text(x, 0.0, 0.0))}>",
             f"{indent}  <joint name={quoteattr(joint_name(i))} type=\"hinge\" "
             f"pos=\"0 0 0\" axis=\"0 0 1\"{damping}/>",
-            f"{indent}  <inertial pos={quoteattr(_vector(link.com, link.com_normal, 0.0))} "
-            f"mass={quoteattr(_number(link.mass))} "
-            f"diaginertia={quoteattr(_vector(link.inertia, link.inertia, link.inertia))}/>",
+            f"{indent}  <inertial pos={quoteattr(vector_text(link.com, link.com_normal, 0.0))} "
+            f"mass={quoteattr(number_text(link.mass))} "
+            f"diaginertia={quoteattr(vector_text(link.inertia, link.inertia, link.inertia))}/>",
         ]
         if export:
             lines.append(
                 f"{indent}  <geom name={quoteattr(f'link{i}_geom')} type=\"capsule\" "
-                f"fromto={quoteattr(_vector(0.0, 0.0, 0.0, link.length, 0.0, 0.0))} "
-                f"size={quoteattr(_number(size))} mass=\"0\" contype=\"0\" "
+                f"fromto={quoteattr(vector_text(0.0, 0.0, 0.0, link.length, 0.0, 0.0))} "
+                f"size={quoteattr(number_text(size))} mass=\"0\" contype=\"0\" "
                 f"conaffinity=\"0\" rgba=\"0.5 0.5 0.55 1\"/>")
         lines += [f"{indent}  {site}" for site in sites[i]]
         body = "\n".join(lines) + "\n"
@@ -166,13 +173,13 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
     if export:   # the scene's initial state: mj_resetDataKeyframe(model, data, 0) starts there
         keyframe_block = (
             f"  <keyframe>\n    <key name=\"initial\" "
-            f"qpos={quoteattr(_vector(*scene.initial_angles))} "
-            f"qvel={quoteattr(_vector(*scene.initial_velocities))}/>\n  </keyframe>\n")
+            f"qpos={quoteattr(vector_text(*scene.initial_angles))} "
+            f"qvel={quoteattr(vector_text(*scene.initial_velocities))}/>\n  </keyframe>\n")
     return (
         f"<mujoco model={quoteattr(scene.name)}>\n"
         f"  <compiler angle=\"radian\"/>\n"
-        f"  <option gravity={quoteattr(_vector(0.0, -scene.gravity, 0.0))} "
-        f"integrator={quoteattr(integrator)} timestep={quoteattr(_number(dt))}>\n"
+        f"  <option gravity={quoteattr(vector_text(0.0, -scene.gravity, 0.0))} "
+        f"integrator={quoteattr(integrator)} timestep={quoteattr(number_text(dt))}>\n"
         f"    <flag contact=\"disable\" energy=\"enable\"/>\n"
         f"  </option>\n"
         f"  <worldbody>\n"

@@ -53,7 +53,7 @@ def mujoco_energy(data) -> float:
     return float(data.energy[0] + data.energy[1])
 
 
-def _step_count(t: float, dt: float, what: str) -> int:
+def step_count(t: float, dt: float, what: str) -> int:
     """round(t/dt), refusing a t that is not a whole number of steps (to 1e-6 of a step)."""
     if not (t >= 0.0 and t < float("inf")):
         raise ValueError(f"{what}: must be >= 0 and finite, got {t!r}")
@@ -86,16 +86,7 @@ def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
     after round(t/dt) steps for each t in `sample_times` (any order; each a whole number of
     steps and <= t_end).
     """
-    import mujoco
-
-    n_steps = _step_count(t_end, dt, "t_end")
-    sample_times = tuple(float(t) for t in sample_times)
-    steps = tuple(_step_count(t, dt, f"sample_times[{k}]") for k, t in enumerate(sample_times))
-    for k, s in enumerate(steps):
-        if s > n_steps:
-            raise ValueError(f"sample_times[{k}]: {sample_times[k]!r} s is after "
-                             f"t_end = {t_end!r} s")
-
+    step_count(t_end, dt, "t_end")
     model, data = mujoco_model_and_data(scene, dt, integrator)
     if torques is not None:
         torques = np.asarray(torques, dtype=float)
@@ -104,11 +95,28 @@ def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
                              f"shape {torques.shape}")
         for joint, torque in zip(scene.actuated_joints, torques):
             data.qfrc_applied[joint - 1] = torque
-    initial_energy = mujoco_energy(data)
+    return sampled_run(model, data, dt=dt, t_end=t_end, sample_times=sample_times,
+                       integrator=integrator)
 
-    n = scene.n
-    angles = np.empty((len(steps), n))
-    velocities = np.empty((len(steps), n))
+
+def sampled_run(model, data, *, dt: float, t_end: float, sample_times=(), integrator: str,
+                controls=None) -> MujocoTrajectory:
+    """round(t_end/dt) MuJoCo steps of (model, data) from its state, sampling (qpos, qvel, H)
+    after round(t/dt) steps for each t in `sample_times` (any order; each a whole number of
+    steps and <= t_end). `controls`: None, or one row of mjData.ctrl per step, set before it
+    (held over the step). The planar and the spatial references both run through it."""
+    import mujoco
+
+    n_steps = step_count(t_end, dt, "t_end")
+    sample_times = tuple(float(t) for t in sample_times)
+    steps = tuple(step_count(t, dt, f"sample_times[{k}]") for k, t in enumerate(sample_times))
+    for k, s in enumerate(steps):
+        if s > n_steps:
+            raise ValueError(f"sample_times[{k}]: {sample_times[k]!r} s is after "
+                             f"t_end = {t_end!r} s")
+    initial_energy = mujoco_energy(data)
+    angles = np.empty((len(steps), model.nq))
+    velocities = np.empty((len(steps), model.nv))
     energies = np.empty(len(steps))
     by_step: dict[int, list[int]] = {}
     for k, s in enumerate(steps):
@@ -122,6 +130,8 @@ def simulate_mujoco(scene: Scene, *, dt: float, t_end: float, sample_times=(),
 
     record(0)
     for step in range(1, n_steps + 1):
+        if controls is not None:
+            data.ctrl[:] = controls[step - 1]
         mujoco.mj_step(model, data)
         if step in by_step:
             # After mj_step, mjData.energy belongs to another state (Euler: the one before

@@ -35,17 +35,15 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .mjcf import MUJOCO_INTEGRATORS, MUJOCO_MINIMUM_INERTIA, body_name, joint_name, tendon_name
-
-
-def _number(x: float) -> str:
-    """A float as the shortest text that round-trips (repr), never rounded (as the planar
-    module writes its numbers)."""
-    return repr(float(x))
-
-
-def _vector(*xs: float) -> str:
-    return " ".join(_number(x) for x in xs)
+from .mjcf import (
+    MUJOCO_INTEGRATORS,
+    MUJOCO_MINIMUM_INERTIA,
+    body_name,
+    joint_name,
+    number_text,
+    tendon_xml,
+    vector_text,
+)
 
 
 def route_site(spring_index: int, point_index: int) -> str:
@@ -76,13 +74,13 @@ def _check_representable(scene) -> None:
         if not moments[0] > MUJOCO_MINIMUM_INERTIA:
             raise ValueError(
                 f"links[{i}].inertia: MuJoCo cannot represent link {i + 1} with principal "
-                f"moments of inertia {_vector(*moments)} kg m^2 (a moving body needs each "
+                f"moments of inertia {vector_text(*moments)} kg m^2 (a moving body needs each "
                 f"> {MUJOCO_MINIMUM_INERTIA!r} kg m^2); give it a positive definite inertia "
                 f"to compare with MuJoCo")
         if moments[0] + moments[1] < moments[2] * (1.0 - 1e-12):
             raise ValueError(
                 f"links[{i}].inertia: MuJoCo cannot represent link {i + 1} with principal "
-                f"moments of inertia {_vector(*moments)} kg m^2: no rigid body has two "
+                f"moments of inertia {vector_text(*moments)} kg m^2: no rigid body has two "
                 f"moments whose sum is below the third (A + B >= C)")
 
 
@@ -112,24 +110,18 @@ def spatial_mjcf_from_scene(scene, *, dt: float, integrator: str = "RK4",
     # The size of the drawn geometry: 1.5 % of the chain's reach (of its joint offsets).
     reach = sum(float(np.linalg.norm(link.joint.xyz)) for link in scene.links)
     size = 0.015 * (reach if reach > 0.0 else 1.0)
-    site_looks = f' size={quoteattr(_number(size))} rgba="0.2 0.2 0.2 1"' if export else ""
+    site_looks = f' size={quoteattr(number_text(size))} rgba="0.2 0.2 0.2 1"' if export else ""
 
     # Sites per body: index 0 is the world body, index i the body of link i.
     sites: list[list[str]] = [[] for _ in range(scene.n + 1)]
     tendons: list[str] = []
     for k, spring in enumerate(scene.springs):
-        path = ""
         for j, point in enumerate(spring.route):
             sites[point.link].append(f"<site name={quoteattr(route_site(k, j))} "
-                                     f"pos={quoteattr(_vector(*point.point))}{site_looks}/>")
-            path += f"\n      <site site={quoteattr(route_site(k, j))}/>"
-        drawn = (f' width={quoteattr(_number(0.5 * size))} rgba="0.7 0.1 0.1 1"'
-                 if export else "")
-        tendons.append(
-            f"    <spatial name={quoteattr(tendon_name(k))} "
-            f"stiffness={quoteattr(_number(spring.stiffness))} "
-            f"springlength={quoteattr(_number(spring.rest_length))}{drawn}>"
-            f"{path}\n    </spatial>")
+                                     f"pos={quoteattr(vector_text(*point.point))}{site_looks}/>")
+        tendons.append(tendon_xml(k, spring.stiffness, spring.rest_length,
+                                  [route_site(k, j) for j in range(len(spring.route))],
+                                  0.5 * size if export else None))
 
     # Bodies nest: build from the tip inwards.
     inner = ""
@@ -137,24 +129,25 @@ def spatial_mjcf_from_scene(scene, *, dt: float, integrator: str = "RK4",
         link = scene.links[i - 1]
         joint = link.joint
         indent = "  " * (i + 1)
-        damping = (f" damping={quoteattr(_number(link.damping))}"
+        damping = (f" damping={quoteattr(number_text(link.damping))}"
                    if link.damping != 0.0 else "")
         lines = [
-            f"{indent}<body name={quoteattr(body_name(i))} pos={quoteattr(_vector(*joint.xyz))} "
-            f"euler={quoteattr(_vector(*joint.rpy))}>",
+            f"{indent}<body name={quoteattr(body_name(i))} "
+            f"pos={quoteattr(vector_text(*joint.xyz))} "
+            f"euler={quoteattr(vector_text(*joint.rpy))}>",
             f"{indent}  <joint name={quoteattr(joint_name(i))} type=\"hinge\" pos=\"0 0 0\" "
-            f"axis={quoteattr(_vector(*joint.axis))}{damping}/>",
-            f"{indent}  <inertial pos={quoteattr(_vector(*link.com))} "
-            f"mass={quoteattr(_number(link.mass))} "
-            f"fullinertia={quoteattr(_vector(*link.inertia))}/>",
+            f"axis={quoteattr(vector_text(*joint.axis))}{damping}/>",
+            f"{indent}  <inertial pos={quoteattr(vector_text(*link.com))} "
+            f"mass={quoteattr(number_text(link.mass))} "
+            f"fullinertia={quoteattr(vector_text(*link.inertia))}/>",
         ]
         if export:
             end = scene.links[i].joint.xyz if i < scene.n else link.com
             if np.linalg.norm(end) > 0.0:     # MuJoCo refuses a capsule of zero length
                 lines.append(
                     f"{indent}  <geom name={quoteattr(f'link{i}_geom')} type=\"capsule\" "
-                    f"fromto={quoteattr(_vector(0.0, 0.0, 0.0, *end))} "
-                    f"size={quoteattr(_number(size))} mass=\"0\" contype=\"0\" "
+                    f"fromto={quoteattr(vector_text(0.0, 0.0, 0.0, *end))} "
+                    f"size={quoteattr(number_text(size))} mass=\"0\" contype=\"0\" "
                     f"conaffinity=\"0\" rgba=\"0.5 0.5 0.55 1\"/>")
         lines += [f"{indent}  {site}" for site in sites[i]]
         inner = "\n".join(lines) + "\n" + inner + f"{indent}</body>\n"
@@ -171,13 +164,13 @@ def spatial_mjcf_from_scene(scene, *, dt: float, integrator: str = "RK4",
     if export:   # the scene's initial state: mj_resetDataKeyframe(model, data, 0) starts there
         keyframe_block = (
             f"  <keyframe>\n    <key name=\"initial\" "
-            f"qpos={quoteattr(_vector(*scene.initial_angles))} "
-            f"qvel={quoteattr(_vector(*scene.initial_velocities))}/>\n  </keyframe>\n")
+            f"qpos={quoteattr(vector_text(*scene.initial_angles))} "
+            f"qvel={quoteattr(vector_text(*scene.initial_velocities))}/>\n  </keyframe>\n")
     return (
         f"<mujoco model={quoteattr(scene.name)}>\n"
         f"  <compiler angle=\"radian\" eulerseq=\"XYZ\"/>\n"
-        f"  <option gravity={quoteattr(_vector(*scene.gravity))} "
-        f"integrator={quoteattr(integrator)} timestep={quoteattr(_number(dt))}>\n"
+        f"  <option gravity={quoteattr(vector_text(*scene.gravity))} "
+        f"integrator={quoteattr(integrator)} timestep={quoteattr(number_text(dt))}>\n"
         f"    <flag contact=\"disable\" energy=\"enable\"/>\n"
         f"  </option>\n"
         f"  <worldbody>\n"

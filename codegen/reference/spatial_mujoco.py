@@ -11,25 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mujoco_runs import MujocoTrajectory, mujoco_energy
+from .mujoco_runs import MujocoTrajectory, sampled_run, step_count
 from .spatial_mjcf import spatial_mjcf_from_scene
-
-
-def _step_count(t: float, dt: float, what: str) -> int:
-    """round(t/dt), refusing a t that is not a whole number of steps (to 1e-6 of a step), as
-    the planar reference does."""
-    if not (t >= 0.0 and t < float("inf")):
-        raise ValueError(f"{what}: must be >= 0 and finite, got {t!r}")
-    steps = round(t / dt)
-    if abs(steps * dt - t) > 1e-6 * dt:
-        raise ValueError(f"{what}: {t!r} s is not a whole number of steps of dt = {dt!r} s")
-    return steps
-
-
-def _read_only(a) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
 
 
 def spatial_mujoco_model_and_data(scene, dt: float, integrator: str = "RK4"):
@@ -85,56 +68,9 @@ def simulate_spatial_mujoco(scene, *, dt: float, t_end: float,
     Samples (q, qdot, H) after round(t/dt) steps for each t in `sample_times` (any order;
     each a whole number of steps and <= t_end); the final state is always returned.
     """
-    import mujoco
-
     if not (dt > 0.0 and dt < float("inf")):
         raise ValueError(f"dt: must be > 0 and finite, got {dt!r}")
-    n_steps = _step_count(t_end, dt, "t_end")
-    sample_times = tuple(float(t) for t in sample_times)
-    steps = tuple(_step_count(t, dt, f"sample_times[{k}]") for k, t in enumerate(sample_times))
-    for k, s in enumerate(steps):
-        if s > n_steps:
-            raise ValueError(f"sample_times[{k}]: {sample_times[k]!r} s is after "
-                             f"t_end = {t_end!r} s")
-    rows = _torque_rows(scene, torques, n_steps)
-
+    rows = _torque_rows(scene, torques, step_count(t_end, dt, "t_end"))
     model, data = spatial_mujoco_model_and_data(scene, dt, integrator)
-    initial_energy = mujoco_energy(data)
-    angles = np.empty((len(steps), scene.n))
-    velocities = np.empty((len(steps), scene.n))
-    energies = np.empty(len(steps))
-    by_step: dict[int, list[int]] = {}
-    for k, s in enumerate(steps):
-        by_step.setdefault(s, []).append(k)
-
-    def record(step: int) -> None:
-        for k in by_step.get(step, ()):
-            angles[k] = data.qpos
-            velocities[k] = data.qvel
-            energies[k] = mujoco_energy(data)
-
-    record(0)
-    for step in range(1, n_steps + 1):
-        if rows is not None:
-            data.ctrl[:] = rows[step - 1]
-        mujoco.mj_step(model, data)
-        if step in by_step:
-            # mjData.energy after mj_step belongs to another state (RK4: its last stage);
-            # mj_forward evaluates it at the current one and changes neither qpos nor qvel.
-            mujoco.mj_forward(model, data)
-            record(step)
-    mujoco.mj_forward(model, data)
-
-    return MujocoTrajectory(
-        dt=float(dt),
-        integrator=integrator,
-        initial_energy=initial_energy,
-        sample_times=sample_times,
-        steps=steps,
-        angles=_read_only(angles),
-        velocities=_read_only(velocities),
-        energies=_read_only(energies),
-        final_angles=_read_only(data.qpos),
-        final_velocities=_read_only(data.qvel),
-        final_energy=mujoco_energy(data),
-    )
+    return sampled_run(model, data, dt=dt, t_end=t_end, sample_times=sample_times,
+                       integrator=integrator, controls=rows)
