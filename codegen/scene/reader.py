@@ -162,6 +162,9 @@ def _is_integer(value: Any) -> bool:
 class SceneReader:
     """Validates one parsed TOML document; `fail` raises the one-line SceneError."""
 
+    #: How messages name [initial]'s numbers: an angle, a rate, and how many there are.
+    INITIAL_MEANINGS = ("phi_i in rad", "phidot_i in rad/s", "one per link")
+
     def __init__(self, source: str, default_name: str):
         self.source = source
         self.default_name = default_name
@@ -436,11 +439,11 @@ class SceneReader:
         angles = velocities = None
         for key, item in table.items():
             where = f"initial.{key}"
+            angle, rate, count = self.INITIAL_MEANINGS
             if key == "angles":
-                angles = self.number_list(where, item, "phi_i in rad", self.n, "one per link")
+                angles = self.number_list(where, item, angle, self.n, count)
             elif key == "velocities":
-                velocities = self.number_list(where, item, "phidot_i in rad/s", self.n,
-                                              "one per link")
+                velocities = self.number_list(where, item, rate, self.n, count)
             else:
                 self.unknown_key("initial", key, item, _INITIAL_KEYS)
         return angles, velocities

@@ -43,7 +43,6 @@ _LINK_KEYS = ("mass", "com", "inertia", "joint", "damping")
 _LINK_REQUIRED = ("mass", "com", "inertia", "joint")
 _JOINT_KEYS = ("xyz", "rpy", "axis")
 _SPRING_KEYS = ("route", "stiffness", "rest_length")
-_INITIAL_KEYS = ("angles", "velocities")
 
 # Keys of the planar format (by section: "" the top level) that a spatial scene says
 # otherwise: the refusal says how.
@@ -85,6 +84,8 @@ def _plural(count: int, word: str) -> str:
 
 class SpatialSceneReader(SceneReader):
     """Validates one parsed spatial scene document; `fail` raises the one-line SceneError."""
+
+    INITIAL_MEANINGS = ("q_i in rad", "qdot_i in rad/s", "one per joint")
 
     def read(self, document: dict[str, Any]) -> SpatialScene:
         """The SpatialScene of a parsed document; the first violation in the file's order of
@@ -288,20 +289,6 @@ class SpatialSceneReader(SceneReader):
                                       "frame") for k, axis in ((1, "x"), (2, "y"), (3, "z")))
             points.append(RoutePoint(link=link, point=point))
         return tuple(points)
-
-    def initial(self, value: Any) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
-        table = self.table("initial", value, "[initial]")
-        angles = velocities = None
-        for key, item in table.items():
-            where = f"initial.{key}"
-            if key == "angles":
-                angles = self.number_list(where, item, "q_i in rad", self.n, "one per joint")
-            elif key == "velocities":
-                velocities = self.number_list(where, item, "qdot_i in rad/s", self.n,
-                                              "one per joint")
-            else:
-                self.unknown_key("initial", key, item, _INITIAL_KEYS)
-        return angles, velocities
 
     def refuse_zero_length_segments(self, scene: SpatialScene) -> None:
         """Refuse a spring segment of (numerically) zero length at the initial angles, where
