@@ -169,8 +169,9 @@ NUMBER_BOUNDS = {
 
 
 def lower_bound(path: str) -> LowerBound | None:
-    """The bound of the number at key path `path` (NUMBER_BOUNDS), None when it has none."""
-    return NUMBER_BOUNDS.get(re.sub(r"\[[0-9]+\]", "", path).rsplit(".", 1)[-1])
+    """The bound of the number at `path` (NUMBER_BOUNDS); None if none (spatial gravity[j])."""
+    return None if path.startswith("gravity[") else NUMBER_BOUNDS.get(
+        re.sub(r"\[[0-9]+\]", "", path).rsplit(".", 1)[-1])
 
 
 #: The longest scene name: it prefixes every exported C name and the names of a package's files

@@ -114,8 +114,6 @@ def test_generate_without_method_writes_the_default_schemes_package(tmp_path):
 @pytest.mark.parametrize("args, fragments", [
     (["--method", "es", "--order", "4"], ["order 4: es for a spatial scene",
                                           "is of order 2 so far"]),
-    (["--parameters", "springs[0].stiffness"], ["parameters: run-time parameters are "
-                                                "planar-only"]),
     (["--order", "3"], ["--order"]),
 ])
 def test_generate_refuses_what_a_spatial_scene_cannot_take_and_writes_nothing(

@@ -18,8 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_spatial_dynamics import pinocchio_model, random_scene
 
-from chaingen.errors import UnsupportedSceneError
-from chaingen.scene import METHODS, kinematics
+from chaingen.scene import METHODS, SolverSpecError, kinematics
 from chaingen.spatial import dynamics
 from chaingen.spatial.values import (
     RoutePoint,
@@ -120,12 +119,12 @@ def test_holding_torques_are_gravity_and_springs():
                                rtol=1e-12, atol=1e-12)
 
 
-def test_planar_only_features_are_refused_for_spatial_scenes():
+def test_every_scheme_takes_spatial_scenes_and_their_geometry_is_no_parameter():
     scene = random_scene(1, 3, springs=True, physical=False)
     assert set(SPATIAL_BUILDERS) == set(METHODS)     # every scheme takes spatial scenes now
-    with pytest.raises(UnsupportedSceneError, match="parameters: run-time parameters are "
-                                                    "planar-only"):
-        build_scheme(scene, "midpoint", parameters=("springs[0].stiffness",))
+    with pytest.raises(SolverSpecError, match=r"parameters: links\[1\]\.inertia: compiled "
+                                              "geometry of a spatial scene"):
+        build_scheme(scene, "midpoint", parameters=("links[1].inertia",))
 
 
 # -- compiled runs --------------------------------------------------------------------------

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import SceneError, UnsupportedSceneError
+from ..errors import SceneError
+from ..spatial import parameters as spatial_parameters
 from ..spatial.values import SpatialScene
-from .parameters import NumberPath, compiled_paths, number_path
+from . import parameters as planar_parameters
+from .parameters import NumberPath
 from .solver_rules import (
     GALERKIN_ORDER,
     Refusal,
@@ -48,10 +50,6 @@ class SolverSpec:
         if not isinstance(self.scene, (Scene, SpatialScene)):
             raise TypeError(f"SolverSpec.scene: a Scene (chaingen.load_scene) or a "
                             f"SpatialScene, not {type(self.scene).__name__}")
-        if isinstance(self.scene, SpatialScene) and self.parameters:
-            raise UnsupportedSceneError(
-                f"parameters: run-time parameters are planar-only so far; the spatial scene "
-                f"{self.scene.name!r} takes none, got {self.parameters!r}")
         refused = request_refusal({"method": self.method, "quadrature": self.quadrature,
                                    "order": self.order, "gradient": self.gradient})
         if refused:
@@ -59,7 +57,7 @@ class SolverSpec:
         paths = ((self.parameters,) if isinstance(self.parameters, str)
                  else tuple(self.parameters))
         if paths == ("all",):
-            paths = compiled_paths(self.scene)
+            paths = numbers_of(self.scene).compiled_paths(self.scene)
         refused = parameters_refusal(self.scene, paths)
         if refused:
             raise SolverSpecError(refused)
@@ -90,7 +88,8 @@ class SolverSpec:
     @property
     def parameter_numbers(self) -> tuple[NumberPath, ...]:
         """The run-time parameters as numbers of the scene (path, unit, compiled)."""
-        return tuple(number_path(self.scene, path) for path in self.parameters)
+        return tuple(numbers_of(self.scene).number_path(self.scene, path)
+                     for path in self.parameters)
 
     @property
     def galerkin_step(self) -> bool:
@@ -108,14 +107,21 @@ class SolverSpec:
         return quadrature_used(self.scene, self.method, self.quadrature, self.order)
 
 
-def parameters_refusal(scene: Scene, paths: tuple[str, ...]) -> Refusal | None:
+def numbers_of(scene: Scene | SpatialScene):
+    """The key paths of `scene`'s kind: chaingen.scene.parameters for a planar scene,
+    chaingen.spatial.parameters for a spatial one (number_path, compiled_paths, with_values,
+    with_symbols)."""
+    return spatial_parameters if isinstance(scene, SpatialScene) else planar_parameters
+
+
+def parameters_refusal(scene: Scene | SpatialScene, paths: tuple[str, ...]) -> Refusal | None:
     """Why `paths` cannot be a solver's run-time parameters, or None: each must name a number
     of `scene` compiled into the solver (not the initial state or dt, which every solver takes
     per run), each once."""
     seen = set()
     for path in paths:
         try:
-            number = number_path(scene, path)
+            number = numbers_of(scene).number_path(scene, path)
         except SceneError as error:
             return Refusal("parameters", str(error))
         except TypeError:

@@ -7,6 +7,8 @@ energy. Every quantity is a world-frame 3-vector (or a 3 x 3 matrix, rows listed
 expressions named once as intermediate symbols (recursion.Definitions): O(n) definitions in all,
 no mass matrix of the whole chain. The scene's numbers enter as constants: the joints' fixed
 rotations R_rpy, axes, origins, COMs and inertias; the joint angles only through cos and sin.
+Gravity, masses, damping and the springs' stiffness and rest length may be SymPy symbols, a
+solver's run-time parameters (chaingen.spatial.parameters): number() and constant() pass them.
 
 Conventions: R_i, p_i the rotation and origin of link i's frame in the world (link 0 the base:
 R_0 = 1, p_0 = 0); R_i = R_{i-1} R_rpy_i R_axis(q_i), p_i = p_{i-1} + R_{i-1} xyz_i; the joint
@@ -50,11 +52,11 @@ def apply(matrix, v) -> tuple:
 
 
 def constant(values) -> tuple:
-    """A vector (or rows of a matrix) of scene numbers as exact SymPy numbers."""
-    values = np.asarray(values, dtype=float)
-    if values.ndim == 1:
-        return tuple(number(value) for value in values)
-    return tuple(constant(row) for row in values)
+    """A vector (or rows of a matrix) of scene numbers as exact SymPy numbers; a run-time
+    parameter (a SymPy symbol in a number's place: gravity[j]) passes through as it is."""
+    if any(isinstance(value, (tuple, list, np.ndarray)) for value in values):
+        return tuple(constant(row) for row in values)
+    return tuple(number(value) for value in values)
 
 
 def define_vector(defs: Definitions, name: str, v) -> tuple:

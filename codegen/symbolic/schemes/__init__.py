@@ -14,6 +14,7 @@ from ...errors import UnsupportedSceneError
 from ...scene import METHODS, Scene, SolverSpec
 from ...scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE
 from ...scene.parameters import with_symbols
+from ...spatial import parameters as spatial_parameters
 from ...spatial.values import SpatialScene
 from ..composition import FROM_ORDER_4, composition
 from . import es, galerkin, midpoint, spatial_es, spatial_midpoint, spatial_vi, vi
@@ -66,17 +67,29 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
 
 
 def build_spatial_scheme(spec: SolverSpec) -> DiscreteScheme:
-    """The scheme of a spatial scene's SolverSpec (no run-time parameters: SolverSpec refuses
-    them), its step composed to the spec's order; UnsupportedSceneError for a method that has
-    no spatial scheme yet."""
+    """The scheme of a spatial scene's SolverSpec, its run-time parameters (gravity, masses,
+    damping, the springs' stiffness and rest length: chaingen.spatial.parameters) as symbols
+    in the scene's place, its step composed to the spec's order; UnsupportedSceneError for a
+    method that has no spatial scheme yet."""
     scene = spec.scene
     if spec.method not in SPATIAL_BUILDERS:
         raise UnsupportedSceneError(
             f"method {spec.method!r}: not available for a spatial scene (scene {scene.name!r}) "
             f"yet; use {', '.join(map(repr, SPATIAL_BUILDERS))}")
-    scheme = SPATIAL_BUILDERS[spec.method](scene, spec.quadrature, spec.order)
-    return scheme.replaced(segment_tolerances=spatial_segment_tolerances(scene),
-                           order=spec.order, composition=composition(spec.order))
+    numbers = spec.parameter_numbers
+    symbols = {number.path: sp.Dummy(f"parameter{index}", real=True)
+               for index, number in enumerate(numbers)}
+    scheme = SPATIAL_BUILDERS[spec.method](spatial_parameters.with_symbols(scene, symbols),
+                                           spec.quadrature, spec.order)
+    return scheme.replaced(
+        scene=scene, segment_tolerances=spatial_segment_tolerances(scene),
+        parameters=ImmutableMatrix(list(symbols.values()))
+        if symbols else ImmutableMatrix.zeros(0, 1),
+        parameter_paths=tuple(number.path for number in numbers),
+        parameter_units=tuple(number.unit for number in numbers),
+        parameter_values=tuple(float(spatial_parameters.value(scene, number.path))
+                               for number in numbers),
+        order=spec.order, composition=composition(spec.order))
 
 
 def spatial_segment_tolerances(scene: SpatialScene) -> tuple[float, ...]:
