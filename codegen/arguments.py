@@ -20,13 +20,7 @@ from .scene.solver_rules import (
     request_refusal,
 )
 from .spatial import SpatialScene, parse_spatial_scene
-
-#: The method of a spatial scene run without --method. A spatial scene file has no
-#: [simulation] table, so the default cannot be the file's; the planar default, es, is not
-#: built for spatial scenes yet. midpoint is the scheme every spatial feature has (orders,
-#: sensitivities, actuation, damping), and a fixed default keeps the numbers of a command line
-#: the same when another scheme's spatial builder lands (changing it is a decision, here).
-SPATIAL_DEFAULT_METHOD = "midpoint"
+from .spatial.values import SPATIAL_DEFAULT_METHOD
 
 #: The orders of the step each method takes (chaingen.scene.solver_rules), said once.
 ORDERS_TAKEN = (f"every method: {', '.join(map(str, ORDERS[:-1]))} and {ORDERS[-1]}; es at "
@@ -77,20 +71,12 @@ def load_command_scene(path: str | os.PathLike[str]) -> Scene | SpatialScene:
     return parse_spatial_scene(text, source, Path(source).stem)
 
 
-def scene_method(scene: Scene | SpatialScene, method: str | None) -> str | None:
-    """--method as given; for a spatial scene without it SPATIAL_DEFAULT_METHOD (a planar
-    scene's default is its [simulation].method, which run_settings reads)."""
-    if method is None and isinstance(scene, SpatialScene):
-        return SPATIAL_DEFAULT_METHOD
-    return method
-
-
 def add_scheme_options(parser: argparse.ArgumentParser,
                        order_default: str = "the scene's") -> None:
     parser.add_argument("scene", type=Path, help="scene file (TOML, see docs/scene-format.md)")
     parser.add_argument("--method", choices=METHODS,
                         help="time-stepping scheme (default: the scene's [simulation].method; "
-                             f"{SPATIAL_DEFAULT_METHOD} for a spatial scene)")
+                             f"{SPATIAL_DEFAULT_METHOD} for a spatial scene that names none)")
     # K's range is the rules' (run_settings): one message for 0 and for 21.
     parser.add_argument("--quadrature", type=integer, metavar="K",
                         help="Gauss-Legendre points for the spring terms of 'es' "

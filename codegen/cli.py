@@ -17,12 +17,10 @@ from .arguments import (
     newton_overrides,
     number,
     positive_int,
-    scene_method,
     seed,
 )
 from .errors import ChaingenError, NewtonError, SceneError, SettingsError, UnsupportedSceneError
 from .runtime.files import check_output_directory, check_output_file, reported_write
-from .scene import Simulation
 from .scene.shipped import scene_file
 from .spatial import SpatialScene
 from .spatial.urdf import add_import_arguments, command_import
@@ -197,7 +195,7 @@ def command_generate(args) -> int:
     from .simulation import run_settings
 
     scene = load_command_scene(args.scene)
-    settings = run_settings(scene, method=scene_method(scene, args.method),
+    settings = run_settings(scene, method=args.method,
                             quadrature=args.quadrature, order=args.order,
                             gradient=args.gradient, source=str(args.scene))
     # The generation stage (SymPy, CasADi) is imported once the input is known to be good.
@@ -225,8 +223,7 @@ def command_export(args) -> int:
 
     scene = load_command_scene(args.scene)
     spatial = isinstance(scene, SpatialScene)
-    # A spatial scene has no [simulation] table: its default step is the table's.
-    dt = (Simulation() if spatial else scene.simulation).dt if args.dt is None else args.dt
+    dt = scene.simulation.dt if args.dt is None else args.dt
     if not (dt > 0.0 and dt < float("inf")):
         raise SettingsError(f"--dt: must be > 0 s and finite, got {dt!r}")
     if args.integrator not in MUJOCO_INTEGRATORS:
@@ -255,7 +252,7 @@ def command_check(args) -> int:
     from .symbolic.schemes import build_scheme
 
     scene = load_command_scene(args.scene)
-    settings = run_settings(scene, method=scene_method(scene, args.method),
+    settings = run_settings(scene, method=args.method,
                             quadrature=args.quadrature, dt=args.dt, order=args.order,
                             gradient=args.gradient, source=str(args.scene))
     scheme = build_scheme(settings.solver_spec(scene, parameters=args.parameters))
@@ -272,7 +269,7 @@ def command_order(args) -> int:
 
     scene = load_command_scene(args.scene)
     # Without --order every order the method takes runs, whatever the scene's simulation.order.
-    settings = run_settings(scene, method=scene_method(scene, args.method),
+    settings = run_settings(scene, method=args.method,
                             quadrature=args.quadrature,
                             t_end=args.t_end, order=args.order or 2, gradient=args.gradient,
                             source=str(args.scene))
@@ -284,7 +281,7 @@ def command_order(args) -> int:
     if args.rtol is not None or args.atol is not None:
         raise SettingsError("--rtol/--atol: chaingen order fits the error of fixed steps; "
                             "leave out the adaptive tolerances")
-    orders = (args.order,) if args.order is not None else allowed_orders(settings.method)
+    orders = (args.order,) if args.order is not None else allowed_orders(settings.method, scene)
     studies = order_studies(scene, settings.method, settings.quadrature, orders=orders,
                             t_end=settings.t_end, overrides=overrides,
                             gradient=settings.gradient)
@@ -317,7 +314,7 @@ def command_simulate(args) -> int:
     from .views.run_summary import run_summary
 
     scene = load_command_scene(args.scene)
-    settings = run_settings(scene, method=scene_method(scene, args.method),
+    settings = run_settings(scene, method=args.method,
                             quadrature=args.quadrature, dt=args.dt, t_end=args.t_end,
                             every=args.every, order=args.order,
                             gradient=args.gradient, rtol=args.rtol, atol=args.atol,

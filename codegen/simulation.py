@@ -13,7 +13,7 @@ from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
 from .runtime.solver import MAX_SAMPLE_BYTES  # samples are held in memory before they are written
-from .scene import Scene, Simulation, SolverSpec
+from .scene import Scene, SolverSpec
 from .scene.solver_rules import REQUEST_KEYS, request_refusal
 from .spatial.values import SpatialScene
 
@@ -59,8 +59,7 @@ def run_settings(scene: Scene | SpatialScene, *, method=None, quadrature=None, d
     `source` (the scene file) prefixes errors about values that came from the scene.
     """
     scene_source = f"{source}: " if source else ""
-    # A spatial scene has no [simulation] table (yet): the table's defaults.
-    defaults = Simulation() if isinstance(scene, SpatialScene) else scene.simulation
+    defaults = scene.simulation
     settings = RunSettings(
         method=method if method is not None else defaults.method,
         quadrature=quadrature if quadrature is not None else defaults.quadrature,

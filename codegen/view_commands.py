@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 
-from .arguments import load_command_scene, newton_overrides, scene_method
+from .arguments import load_command_scene, newton_overrides
 from .errors import ChaingenError, NewtonError, RunFailedError
 from .runtime.files import check_output_file
 
@@ -46,7 +46,7 @@ def command_animate(args) -> int:
     else:
         from .views.animate import check_output
         check_output(args.output)
-        settings = run_settings(scene, method=scene_method(scene, args.method),
+        settings = run_settings(scene, method=args.method,
                                 quadrature=args.quadrature, dt=args.dt, t_end=args.t_end,
                                 order=args.order, gradient=args.gradient,
                                 source=str(args.scene))

@@ -271,16 +271,13 @@ REFUSALS = [
      'gravity = [0.5, 0.0, "down"]',
      'gravity[2]: must be a number (acceleration of gravity in m/s^2, world frame), not a'
      ' string, got "down"'),
-    ('top simulation', '[initial]',
-     '[simulation]\ndt = 0.01\n\n[initial]',
-     'simulation: a key of planar scenes, not of spatial ones: a spatial scene takes its'
-     ' run settings from the command line or the Python API, not from the file (yet); remove'
-     ' the table (allowed here:'
-     ' name, gravity, links, springs, actuation, initial), got {dt = 0.01}'),
+    ('simulation dt', '[initial]',
+     '[simulation]\ndt = 0.0\n\n[initial]',
+     'simulation.dt: must be > 0 (step in s), got 0.0'),
     ('top unknown key', 'name = "test-arm"',
      'name = "test-arm"\ngravty = 1.0',
      "gravty: unknown key (did you mean 'gravity'? allowed here: name, gravity, links,"
-     ' springs, actuation, initial), got 1.0'),
+     ' springs, actuation, initial, simulation), got 1.0'),
     ('name invalid', 'name = "test-arm"',
      'name = "3arm"',
      "name: must start with a letter and contain only letters, digits, '_' and '-' (it"
@@ -359,7 +356,7 @@ REFUSALS = [
      'velocities = [0.0, 0.1, -0.2]\n\n[base]\nfastening = 0.1\n',
      'base: a key of planar scenes, not of spatial ones: a spring is fastened to the base'
      ' by a route point on link 0 (allowed here: name, gravity, links, springs,'
-     ' actuation, initial), got {fastening = 0.1}'),
+     ' actuation, initial, simulation), got {fastening = 0.1}'),
     ('rpy length', 'rpy = [0.1, 0.2, 0.3]',
      'rpy = [0.1, 0.2]',
      'links[0].joint.rpy: must have 3 entries (roll, pitch, yaw), not 2, got [0.1, 0.2]'),
@@ -668,7 +665,9 @@ def test_mutations_load_or_raise_a_scene_error_naming_a_key_path(seed, data):
 
 # -- docs/scene-format.md, section 13 -----------------------------------------------------------
 
-DOC_VARIANTS = [   # the edits of scenes/spatial_three_link.toml behind section 13.5's examples
+DOC_VARIANTS = [   # the edits of scenes/spatial_three_link.toml behind section 13's examples
+    ("[initial]", "[simulation]\ndt = 0.0\n\n[initial]"),          # 13.4, [simulation]
+    ("[initial]", '[simulation]\nmethod = "rk4"\n\n[initial]'),
     ("mass = 1.8", "mass = -1.8"),
     ("axis = [0.0, 1.0, 0.2]", "axis = [0.0, 0.0, 0.0]"),
     ("inertia = [0.00311114, 0.012999, 0.0134399, 0.0033765, 0.00296193, -0.000935878]",

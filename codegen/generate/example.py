@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..scene import Scene, Simulation, kinematics
+from ..scene import Scene, kinematics
 from ..spatial import dynamics as spatial_dynamics
 from ..spatial.values import SpatialScene
 from ..symbolic.schemes.base import actuated_joints
@@ -54,8 +54,7 @@ def example_settings(scene: Scene | SpatialScene) -> ExampleSettings:
     target = (math.pi / 2,) + (0.0,) * (scene.n - 1)
     spatial = isinstance(scene, SpatialScene)
     if not actuated_joints(scene):   # free motion at the scene's own step
-        # A spatial scene has no [simulation] table: the table's default step.
-        dt = Simulation().dt if spatial else scene.simulation.dt
+        dt = scene.simulation.dt
         return ExampleSettings(target=target, kp=(), kd=(), dt=dt, duration=EXAMPLE_DURATION,
                                print_every=max(1, round(0.5 / dt)), bandwidth=0.0)
     dt = 1 / CONTROL_RATE

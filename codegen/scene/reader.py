@@ -6,6 +6,7 @@ a one-line SceneError that names the file, the key with its path and the value, 
 """
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import json
 import math
@@ -164,6 +165,9 @@ class SceneReader:
 
     #: How messages name [initial]'s numbers: an angle, a rate, and how many there are.
     INITIAL_MEANINGS = ("phi_i in rad", "phidot_i in rad/s", "one per link")
+    #: The run settings of a file without [simulation], and of the keys such a table leaves
+    #: out (the spatial reader's differ in the method alone).
+    SIMULATION_DEFAULTS = Simulation()
 
     def __init__(self, source: str, default_name: str):
         self.source = source
@@ -271,7 +275,7 @@ class SceneReader:
         springs: tuple[Spring, ...] = ()
         angles: tuple[float, ...] | None = None
         velocities: tuple[float, ...] | None = None
-        simulation = Simulation()
+        simulation = self.SIMULATION_DEFAULTS
         actuated: tuple[int, ...] = ()
 
         for key, value in document.items():
@@ -462,7 +466,7 @@ class SceneReader:
                 fields[key] = self.bounded(where, item, "duration in s")
             else:
                 self.unknown_key("simulation", key, item, _SIMULATION_KEYS)
-        simulation = Simulation(**fields)
+        simulation = dataclasses.replace(self.SIMULATION_DEFAULTS, **fields)
         # The rule between keys (es at order 6 needs K >= 2), after each key's own.
         self.refuse("simulation.quadrature", request_refusal(
             {"method": simulation.method, "quadrature": simulation.quadrature,

@@ -22,7 +22,7 @@ from .solver_rules import (
     quadrature_used,
     request_refusal,
 )
-from .values import Scene, Simulation
+from .values import Scene
 
 
 @dataclass(frozen=True)
@@ -72,10 +72,9 @@ class SolverSpec:
                order: int | None = None, parameters=(), sensitivities: bool = True,
                gradient: str | None = None) -> SolverSpec:
         """A spec with the scene's own method, quadrature, order and gradient ([simulation])
-        where they are None."""
-        # A spatial scene has no [simulation] table: the table's defaults.
-        defaults = (scene.simulation if isinstance(scene, Scene) else
-                    Simulation() if isinstance(scene, SpatialScene) else None)
+        where they are None; a spatial scene's method is midpoint unless its file names one."""
+        # A spatial scene's default method is midpoint (spatial.values.SPATIAL_DEFAULT_METHOD).
+        defaults = (scene.simulation if isinstance(scene, (Scene, SpatialScene)) else None)
         return cls(scene=scene,
                    method=defaults.method if method is None and defaults else method,
                    quadrature=(defaults.quadrature if quadrature is None and defaults

@@ -24,6 +24,7 @@ from ..scene.reader import SceneReader, parse_toml, read_scene_text, spatial_mar
 from . import dynamics
 from .values import (
     INERTIA_KEYS,
+    SPATIAL_SIMULATION_DEFAULTS,
     RoutePoint,
     SpatialJoint,
     SpatialLink,
@@ -38,7 +39,7 @@ DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 #: by this times the tensor's largest entry: the round-off of a tensor written in decimals.
 INERTIA_RELATIVE_TOLERANCE = 1e-12
 
-_TOP_KEYS = ("name", "gravity", "links", "springs", "actuation", "initial")
+_TOP_KEYS = ("name", "gravity", "links", "springs", "actuation", "initial", "simulation")
 _LINK_KEYS = ("mass", "com", "inertia", "joint", "damping")
 _LINK_REQUIRED = ("mass", "com", "inertia", "joint")
 _JOINT_KEYS = ("xyz", "rpy", "axis")
@@ -48,8 +49,6 @@ _SPRING_KEYS = ("route", "stiffness", "rest_length")
 # otherwise: the refusal says how.
 _PLANAR_KEYS = {
     ("", "base"): "a spring is fastened to the base by a route point on link 0",
-    ("", "simulation"): "a spatial scene takes its run settings from the command line or "
-                        "the Python API, not from the file (yet); remove the table",
     ("links", "length"): "the next link's joint.xyz places joint i + 1 on link i",
     ("links", "com_normal"): "com is the centre of mass's 3-vector in the link's frame",
     ("links", "fastening"): "a spring's route gives the points it passes through",
@@ -86,6 +85,7 @@ class SpatialSceneReader(SceneReader):
     """Validates one parsed spatial scene document; `fail` raises the one-line SceneError."""
 
     INITIAL_MEANINGS = ("q_i in rad", "qdot_i in rad/s", "one per joint")
+    SIMULATION_DEFAULTS = SPATIAL_SIMULATION_DEFAULTS
 
     def read(self, document: dict[str, Any]) -> SpatialScene:
         """The SpatialScene of a parsed document; the first violation in the file's order of
@@ -102,6 +102,7 @@ class SpatialSceneReader(SceneReader):
         angles: tuple[float, ...] | None = None
         velocities: tuple[float, ...] | None = None
         actuated: tuple[int, ...] = ()
+        simulation = self.SIMULATION_DEFAULTS
 
         for key, value in document.items():
             if key == "name":
@@ -117,6 +118,8 @@ class SpatialSceneReader(SceneReader):
                 actuated = self.actuation(value)
             elif key == "initial":
                 angles, velocities = self.initial(value)
+            elif key == "simulation":
+                simulation = self.simulation(value)    # the planar table's keys and rules
             else:
                 self.unknown_key("", key, value, _TOP_KEYS)
 
@@ -133,6 +136,7 @@ class SpatialSceneReader(SceneReader):
             initial_angles=angles if angles is not None else (0.0,) * n,
             initial_velocities=velocities if velocities is not None else (0.0,) * n,
             actuated=actuated,
+            simulation=simulation,
         )
         self.refuse_zero_length_segments(scene)
         return scene

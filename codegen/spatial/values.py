@@ -7,16 +7,31 @@ frame, its unit `axis` in its own frame, and link i's frame is the joint frame t
 joint angle q_i about that axis. Each link has its mass, its centre of mass `com` and its
 inertia tensor about the centre of mass, both in its own frame. Springs are linear elastic
 elements routed through points fixed on links (MuJoCo's spatial tendons through sites); the
-length of a spring is the sum of its straight segments.
+length of a spring is the sum of its straight segments. Its run settings are a [simulation]
+table of the planar format's keys and rules (chaingen.scene.values.Simulation), with its own
+default method.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..scene.values import Simulation
+
 Vector = tuple[float, float, float]
 
 #: The order of a link's inertia entries in a scene file: URDF's ixx iyy izz ixy ixz iyz.
 INERTIA_KEYS = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
+
+#: The method of a spatial scene whose file names none ([simulation].method): midpoint, the
+#: scheme every spatial feature has (orders 2, 4, 6, sensitivities, actuation, damping) and the
+#: cheapest step (docs/benchmarks.md, "Spatial arm"); fixed, so that a scene file and a command
+#: line keep their numbers when another scheme's spatial builder changes. The planar default,
+#: es, came to spatial scenes later and at order 2 first.
+SPATIAL_DEFAULT_METHOD = "midpoint"
+
+#: The run settings of a spatial scene whose file has no [simulation] table, and the defaults of
+#: the keys such a table leaves out: the planar table's (one definition), with midpoint.
+SPATIAL_SIMULATION_DEFAULTS = Simulation(method=SPATIAL_DEFAULT_METHOD)
 
 
 @dataclass(frozen=True)
@@ -80,6 +95,7 @@ class SpatialScene:
     initial_angles: tuple[float, ...]         # rad, one per joint
     initial_velocities: tuple[float, ...]     # rad/s, one per joint
     actuated: tuple[int, ...] = ()            # 1-based joints with a torque input, ascending
+    simulation: Simulation = SPATIAL_SIMULATION_DEFAULTS   # run settings ([simulation])
 
     @property
     def n(self) -> int:

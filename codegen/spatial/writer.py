@@ -6,10 +6,12 @@ the file gives back the scene exactly. Rendered to a string; writing it is the c
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Iterable, Sequence
 
+from ..scene.values import Simulation
 from .values import SpatialLink, SpatialScene, SpatialSpring
 
 
@@ -35,6 +37,8 @@ def scene_text(scene: SpatialScene, comment_lines: Iterable[str] = (),
     if scene.actuated:
         lines += ["", "[actuation]",
                   f"joints = [{', '.join(str(int(j)) for j in scene.actuated)}]"]
+    lines += ["", "[simulation]   # run settings; the command line's options override them"]
+    lines += _simulation_lines(scene.simulation)
     return "\n".join(lines) + "\n"
 
 
@@ -57,6 +61,18 @@ def _spring_lines(spring: SpatialSpring) -> list[str]:
             f"route = [{route}]",
             f"stiffness = {_number(spring.stiffness)}",
             f"rest_length = {_number(spring.rest_length)}"]
+
+
+def _simulation_lines(simulation: Simulation) -> list[str]:
+    """Every key of the table, Simulation's fields in their order (a string as a TOML string,
+    an int as an integer, a float by repr)."""
+    lines = []
+    for field in dataclasses.fields(simulation):
+        value = getattr(simulation, field.name)
+        text = (json.dumps(value) if isinstance(value, str) else str(value)
+                if isinstance(value, int) else _number(value))
+        lines.append(f"{field.name} = {text}")
+    return lines
 
 
 def _vector(values) -> str:

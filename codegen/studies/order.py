@@ -40,7 +40,7 @@ from ..runtime import NewtonOptions, SimulationResult, Solver
 from ..runtime.contract import JACOBIAN_EVERY_ITERATE, JACOBIAN_MODES
 from ..scene import METHODS, ORDERS, Scene, SolverSpec, SolverSpecError, load_scene
 from ..scene.labels import scheme_label
-from ..scene.solver_rules import orders_taken, request_refusal
+from ..scene.solver_rules import request_refusal
 from .order_fit import MIN_FIT_POINTS as MIN_FIT_POINTS
 from .order_fit import SLOPE_TOLERANCE as SLOPE_TOLERANCE
 from .order_fit import OrderFit as OrderFit
@@ -186,9 +186,10 @@ def _largest(values) -> float | None:
     return max(values) if values else None
 
 
-def allowed_orders(method: str) -> tuple[int, ...]:
-    """The order options `method` takes (chaingen.scene.solver_rules.orders_taken)."""
-    return orders_taken(method)
+def allowed_orders(method: str, scene=None) -> tuple[int, ...]:
+    """The orders `method` takes for `scene` (chaingen.symbolic.schemes.orders_taken)."""
+    from ..symbolic.schemes import orders_taken as scheme_orders_taken
+    return scheme_orders_taken(scene, method)
 
 
 def study_newton_options(order: int, overrides=None) -> dict:
@@ -396,13 +397,12 @@ def order_studies(scene: Scene | str | os.PathLike, method: str, quadrature: int
     """
     if isinstance(scene, (str, os.PathLike)):     # a file; a SpatialScene is taken as it is
         scene = load_scene(scene)
-    available = allowed_orders(method) if method in METHODS else ORDERS
+    available = allowed_orders(method, scene) if method in METHODS else ORDERS
     orders = available if orders is None else tuple(sorted(set(orders)))
     for order in orders:
         study_solver_spec(scene, method, quadrature, order, gradient)
-    solvers = dict(solvers or {})
     return tuple(order_study(scene, method, quadrature, t_end=t_end, order=order,
-                             solver=solvers.get(order), gradient=gradient,
+                             solver=(solvers or {}).get(order), gradient=gradient,
                              options=study_newton_options(order, overrides), **settings)
                  for order in orders)
 

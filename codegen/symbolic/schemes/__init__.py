@@ -6,14 +6,16 @@ as symbols (chaingen.scene.parameters.with_symbols), every other number as a con
 from __future__ import annotations
 
 import math
+import sys
 
 import sympy as sp
 from sympy import ImmutableMatrix
 
 from ...errors import UnsupportedSceneError
-from ...scene import METHODS, Scene, SolverSpec
+from ...scene import METHODS, ORDERS, Scene, SolverSpec
 from ...scene.kinematics import RUN_SEGMENT_RELATIVE_TOLERANCE
 from ...scene.parameters import with_symbols
+from ...scene.solver_rules import orders_taken as rules_orders_taken
 from ...spatial import parameters as spatial_parameters
 from ...spatial.values import SpatialScene
 from ..composition import FROM_ORDER_4, composition
@@ -26,6 +28,18 @@ if tuple(BUILDERS) != METHODS:
 #: The schemes a spatial scene (chaingen.spatial.values) has so far.
 SPATIAL_BUILDERS = {"midpoint": spatial_midpoint.build, "es": spatial_es.build,
                     "vi": spatial_vi.build}
+
+
+def orders_taken(scene: Scene | SpatialScene, method: str) -> tuple[int, ...]:
+    """The orders of the step the scheme of `method` takes for `scene`: those of the request
+    rules (solver_rules.orders_taken), and of a spatial scene only those its builder takes (the
+    builder module's ORDERS, the tuple its own refusal tests; every order where it has none).
+    Asked, not restated, so that a spatial scheme that gains an order is studied at it."""
+    orders = rules_orders_taken(method)
+    if isinstance(scene, SpatialScene) and method in SPATIAL_BUILDERS:
+        module = sys.modules[SPATIAL_BUILDERS[method].__module__]
+        orders = tuple(order for order in orders if order in getattr(module, "ORDERS", ORDERS))
+    return orders
 
 
 def build_scheme(scene: Scene | SolverSpec, method: str | None = None,

@@ -263,10 +263,14 @@ def joint_space_start(scene: SpatialScene, phi, phidot, defs: Definitions) -> li
     return q + v
 
 
+#: The orders of the step this builder takes (chaingen.symbolic.schemes.orders_taken asks it).
+ORDERS = (2,)
+
+
 def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) -> DiscreteScheme:
     """The spatial es scheme of `scene`. quadrature plays no role (the springs' discrete
     gradient is exact without it); order 2 only so far: UnsupportedSceneError otherwise."""
-    if order != 2:
+    if order not in ORDERS:
         raise UnsupportedSceneError(
             f"order {order}: es for a spatial scene (scene {scene.name!r}) is of order 2 so far")
     n = scene.n
