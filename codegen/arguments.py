@@ -10,7 +10,6 @@ from pathlib import Path
 
 from .runtime import contract
 from .scene import Scene
-from .scene.reader import parse_scene, parse_toml, read_scene_text, spatial_marker
 from .scene.solver_rules import (
     GALERKIN_MIN_QUADRATURE,
     GALERKIN_ORDER,
@@ -19,7 +18,8 @@ from .scene.solver_rules import (
     ORDERS,
     request_refusal,
 )
-from .spatial import SpatialScene, parse_spatial_scene
+from .spatial import SpatialScene
+from .spatial.reader import load_either_scene
 from .spatial.values import SPATIAL_DEFAULT_METHOD
 
 #: The orders of the step each method takes (chaingen.scene.solver_rules), said once.
@@ -65,10 +65,7 @@ def load_command_scene(path: str | os.PathLike[str]) -> Scene | SpatialScene:
     """The scene file a command is given, planar or spatial: its kind is told by its keys
     (chaingen.scene.reader.spatial_marker: a link's `joint` table or a gravity vector), and
     the reader of that kind validates it (SceneError: one line naming file, key and value)."""
-    source, text = read_scene_text(path)
-    if spatial_marker(parse_toml(text, source)) is None:
-        return parse_scene(text, source, Path(source).stem)
-    return parse_spatial_scene(text, source, Path(source).stem)
+    return load_either_scene(path)
 
 
 def add_scheme_options(parser: argparse.ArgumentParser,

@@ -166,20 +166,6 @@ def test_export_never_overwrites_its_scene(tmp_path):
     assert snapshot(tmp_path) == before
 
 
-# -- planar-only features refuse a spatial scene by name ------------------------------------------
-
-def test_a_sweep_of_a_spatial_scene_is_refused_by_name(tmp_path):
-    spatial_copy(tmp_path)
-    spec = tmp_path / "sweep.toml"
-    spec.write_text('scene = "arm.toml"\nmethod = "midpoint"\n\n[[axes]]\n'
-                    'path = "springs[0].stiffness"\nvalues = [100.0, 200.0]\n')
-    before = snapshot(tmp_path)
-    line = error_line(chaingen_in_process("sweep", spec, "-o", "out", cwd=tmp_path))
-    assert "sweep.toml: scene: " in line and "gravity: a spatial scene" in line, line
-    assert "sweeps" in line, line
-    assert snapshot(tmp_path) == before
-
-
 # -- the animation -----------------------------------------------------------------------------
 
 @pytest.mark.parametrize("seed", range(3))

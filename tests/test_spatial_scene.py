@@ -476,7 +476,7 @@ def test_a_planar_file_is_refused_by_the_spatial_loader(stem):
 
 def spatial_refusal(marker: str, source: str = SOURCE) -> str:
     return (f"{source}: {marker}: a spatial scene (scene-format.md, \"Spatial scenes\"), which "
-            "sweeps and the other planar-only readers do not take yet; read it with "
+            "the bench and the other planar-only readers do not take yet; read it with "
             "chaingen.spatial.load_spatial_scene")
 
 

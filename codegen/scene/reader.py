@@ -83,7 +83,7 @@ def parse_scene(text: str, source: str, default_name: str) -> Scene:
     if marker is not None:
         raise SpatialSceneFileError(
             f"{source}: {marker}: a spatial scene (scene-format.md, \"Spatial scenes\"), which "
-            "sweeps and the other planar-only readers do not take yet; read it with "
+            "the bench and the other planar-only readers do not take yet; read it with "
             "chaingen.spatial.load_spatial_scene")
     return SceneReader(source, default_name).read(document)
 
@@ -112,7 +112,7 @@ def parse_toml(text: str, source: str) -> dict[str, Any]:
 
 class SpatialSceneFileError(UnsupportedSceneError, SceneError):
     """A spatial scene file given to the planar reader: a scene the planar-only features
-    (sweeps, the bench, the Python API's Scene) cannot take yet (UnsupportedSceneError) and a
+    (the bench, the Python API's Scene) cannot take yet (UnsupportedSceneError) and a
     file this reader cannot use (SceneError, naming the file and the key that makes it
     spatial). The commands tell the two kinds apart before reading (chaingen.arguments)."""
 

@@ -20,7 +20,13 @@ from typing import Any
 import numpy as np
 
 from ..scene.kinematics import ZERO_SEGMENT_RELATIVE_TOLERANCE
-from ..scene.reader import SceneReader, parse_toml, read_scene_text, spatial_marker
+from ..scene.reader import (
+    SceneReader,
+    parse_scene,
+    parse_toml,
+    read_scene_text,
+    spatial_marker,
+)
 from . import dynamics
 from .values import (
     INERTIA_KEYS,
@@ -61,6 +67,15 @@ def load_spatial_scene(path: str | os.PathLike[str]) -> SpatialScene:
     """Read and validate the spatial scene file at `path` (a bare name of a shipped scene: its
     file); its default name is the file's stem. A planar scene file is refused, one line."""
     source, text = read_scene_text(path)
+    return parse_spatial_scene(text, source, Path(source).stem)
+
+
+def load_either_scene(path: str | os.PathLike[str]):
+    """The scene file at `path`, planar or spatial: its kind told by its keys (spatial_marker:
+    a link's `joint` table or a gravity vector), read and validated by that kind's reader."""
+    source, text = read_scene_text(path)
+    if spatial_marker(parse_toml(text, source)) is None:
+        return parse_scene(text, source, Path(source).stem)
     return parse_spatial_scene(text, source, Path(source).stem)
 
 

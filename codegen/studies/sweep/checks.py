@@ -21,7 +21,8 @@ from ...errors import SceneError
 from ...runtime.contract import lower_bound
 from ...scene import Scene
 from ...scene.kinematics import ZERO_SEGMENT_RELATIVE_TOLERANCE
-from ...scene.parameters import with_values
+from ...scene.solver_spec import numbers_of
+from ...spatial.values import SpatialScene
 
 #: Runs screened at once (bounded memory).
 BLOCK = 65_536
@@ -34,7 +35,8 @@ def _geometric(path: str) -> bool:
             or ".offsets[" in path)
 
 
-def suspects(scene: Scene, columns: dict[str, np.ndarray], first: int, count: int) -> np.ndarray:
+def suspects(scene: Scene | SpatialScene, columns: dict[str, np.ndarray], first: int,
+             count: int) -> np.ndarray:
     """Indices (from `first`) of runs [first, first + count) that the reader may refuse."""
     bad = np.zeros(count, dtype=bool)
     block = {path: column[first:first + count] for path, column in columns.items()}
@@ -44,7 +46,12 @@ def suspects(scene: Scene, columns: dict[str, np.ndarray], first: int, count: in
         if bound is not None:
             bad |= ~(values >= bound.value if bound.inclusive else values > bound.value)
     if scene.springs and any(_geometric(path) for path in block):
-        bad |= _short_segments(scene, block, count)
+        if isinstance(scene, SpatialScene):
+            # A spatial scene's varied geometry is its initial angles alone (its COMs, joints
+            # and routes are compiled): every such run is judged by the reader.
+            bad[:] = True
+        else:
+            bad |= _short_segments(scene, block, count)
     return np.flatnonzero(bad) + first
 
 
@@ -89,7 +96,7 @@ def _short_segments(scene: Scene, block: dict[str, np.ndarray], count: int) -> n
     return near
 
 
-def check_runs(scene: Scene, columns: dict[str, np.ndarray], source: str,
+def check_runs(scene: Scene | SpatialScene, columns: dict[str, np.ndarray], source: str,
                describe: Callable[[int], str], error: type[Exception]) -> None:
     """`error` (one line) naming the first run the scene reader refuses, with its values
     (`describe`) and the reader's message; `source` is the spec file."""
@@ -105,7 +112,7 @@ def check_runs(scene: Scene, columns: dict[str, np.ndarray], source: str,
             values = {path: value for path, value in run.items()
                       if not path.startswith("simulation.")}
             try:
-                with_values(scene, values, where="run")
+                numbers_of(scene).with_values(scene, values, where="run")
             except SceneError as refused:
                 message = str(refused).split(": ", 1)[1]
                 raise error(f"{source}: axes: run {index} ({describe(int(index))}): "
