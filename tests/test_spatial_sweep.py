@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from chaingen.spatial import load_spatial_scene
-from chaingen.spatial.parameters import SPATIAL_SIMULATION, with_values
+from chaingen.spatial.parameters import with_values
+from chaingen.spatial.values import SPATIAL_SIMULATION_DEFAULTS
 
 from helpers import ROOT, chaingen_in_process
 
@@ -35,8 +36,10 @@ def test_a_spatial_spec_takes_the_spatial_numbers_and_the_run_settings_defaults(
                                      "links[0].damping": [0.0, 0.1],
                                      "initial.angles[1]": [-0.5, 0.1]}))
     assert spec.scene == SCENE and len(spec.runs) == 24
-    assert spec.method == SPATIAL_SIMULATION.method == "midpoint"
-    assert spec.t_end == SPATIAL_SIMULATION.t_end and spec.simulation.dt == 0.01
+    # The scene file has no [simulation] table: its defaults, midpoint the method.
+    assert SCENE.simulation == SPATIAL_SIMULATION_DEFAULTS
+    assert spec.method == SPATIAL_SIMULATION_DEFAULTS.method == "midpoint"
+    assert spec.t_end == SPATIAL_SIMULATION_DEFAULTS.t_end and spec.n_steps({}) == 1000
     assert spec.parameters == ("springs[1].stiffness", "gravity[2]", "links[0].damping")
     assert spec.solver.parameters == spec.parameters and spec.solver.scene == SCENE
 

@@ -21,7 +21,6 @@ import re
 from ..errors import SceneError
 from ..runtime.keypaths import canonical_path, spelling_error
 from ..scene.parameters import RUN_NUMBERS, NumberPath
-from ..scene.values import Simulation
 from .reader import parse_spatial_scene
 from .values import SpatialScene
 from .writer import scene_text
@@ -31,9 +30,6 @@ LINK_NUMBERS = {"mass": "kg", "damping": "N m s/rad"}
 SPRING_NUMBERS = {"stiffness": "N/m", "rest_length": "m"}
 #: Keys of a spatial scene that shape the generated code: never run-time parameters.
 GEOMETRY = {"links": ("com", "inertia", "joint"), "springs": ("route",)}
-#: The run settings of a spatial scene, which has no [simulation] table: the table's defaults
-#: with the command line's default method for a spatial scene (chaingen.arguments).
-SPATIAL_SIMULATION = Simulation(method="midpoint")
 
 _PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>[0-9]+)\]\.(?P<key>\w+)(?P<rest>.*)"
                    r"|gravity\[(?P<axis>[0-9]+)\]|(?P<vector>gravity)"
@@ -42,12 +38,6 @@ _PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>[0-9]+)\]\.(?P<key>\w+)
 _STRUCTURE = re.compile(r"actuation(?:\.joints(?:\[[0-9]+\])?)?|links|springs|name", re.ASCII)
 _NUMBERS = ("gravity[0..2], links[i].mass, links[i].damping, springs[i].stiffness, "
             "springs[i].rest_length")
-
-
-def run_defaults(scene) -> Simulation:
-    """The run settings a scene's study starts from: a planar scene's [simulation] table, a
-    spatial scene's SPATIAL_SIMULATION."""
-    return SPATIAL_SIMULATION if isinstance(scene, SpatialScene) else scene.simulation
 
 
 def number_path(scene: SpatialScene, path: str, *, where: str = "") -> NumberPath:
@@ -114,7 +104,7 @@ def value(scene: SpatialScene, path: str):
     if match["axis"] is not None:
         return scene.gravity[int(match["axis"])]
     if match["setting"]:
-        return getattr(SPATIAL_SIMULATION, path.split(".")[1])
+        return getattr(scene.simulation, path.split(".")[1])
     if match["run"]:
         values = (scene.initial_angles if match["run"] == "initial.angles"
                   else scene.initial_velocities)
@@ -130,6 +120,9 @@ def _replaced(scene: SpatialScene, path: str, number) -> SpatialScene:
         gravity = list(scene.gravity)
         gravity[int(match["axis"])] = number
         return dataclasses.replace(scene, gravity=tuple(gravity))
+    if match["setting"]:
+        return dataclasses.replace(scene, simulation=dataclasses.replace(
+            scene.simulation, **{path.split(".")[1]: number}))
     if match["run"]:
         name = "initial_angles" if match["run"] == "initial.angles" else "initial_velocities"
         values = list(getattr(scene, name))
@@ -154,10 +147,9 @@ def with_values(scene: SpatialScene, values: dict[str, float], *,
                 where: str = "") -> SpatialScene:
     """`scene` with the numbers at `values`' paths replaced, judged by the spatial reader (its
     rules and messages: a mass > 0, a segment of zero length at the initial angles); SceneError
-    names the path and value. simulation.* paths are no numbers of the scene: not taken."""
+    names the path and value."""
     changed = scene
     for path, number in values.items():
         number_path(scene, path, where=where)
-        if not path.startswith("simulation."):
-            changed = _replaced(changed, path, float(number))
+        changed = _replaced(changed, path, float(number))
     return parse_spatial_scene(scene_text(changed), where or "values", scene.name)

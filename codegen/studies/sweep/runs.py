@@ -82,7 +82,7 @@ def run_chunk(spec: SweepSpec, solver: Solver, first: int, count: int,
                 phi0[int(path[len("initial.angles["):-1])] = value
             elif path.startswith("initial.velocities["):
                 omega0[int(path[len("initial.velocities["):-1])] = value
-        dt = run.get("simulation.dt", spec.simulation.dt)
+        dt = run.get("simulation.dt", spec.scene.simulation.dt)
         steps = int(spec.steps[index])
         parameters = {path: run[path] for path in spec.parameters}
         row = {"run": index, **{axis.path: run[axis.path] for axis in spec.axes},

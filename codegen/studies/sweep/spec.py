@@ -29,12 +29,11 @@ import numpy as np
 
 from ...errors import ChaingenError, SceneError
 from ...runtime.contract import ADAPTIVE_TOLERANCES
-from ...scene import Scene, Simulation, SolverSpec
+from ...scene import Scene, SolverSpec
 from ...scene.parameters import NumberPath
 from ...scene.solver_rules import REQUEST_KEYS, request_refusal
 from ...scene.solver_spec import numbers_of
 from ...simulation import MAX_SAMPLE_BYTES, MAX_STEPS
-from ...spatial.parameters import run_defaults
 from ...spatial.reader import load_either_scene
 from ...spatial.values import SpatialScene
 from .checks import check_runs
@@ -160,12 +159,6 @@ class SweepSpec:
         return {"rtol": self.rtol, "atol": self.atol}
 
     @property
-    def simulation(self) -> Simulation:
-        """The base scene's run settings: its [simulation] table, a spatial scene's defaults
-        (chaingen.spatial.parameters.run_defaults: midpoint, dt = 0.01 s, t_end = 10 s)."""
-        return run_defaults(self.scene)
-
-    @property
     def parameters(self) -> tuple[str, ...]:
         """The varied numbers compiled into the solver, which it takes as parameters."""
         return tuple(axis.path for axis in self.axes if axis.number.compiled)
@@ -177,7 +170,7 @@ class SweepSpec:
         (simulation.gradient)."""
         return SolverSpec(self.scene, self.method, self.quadrature, order=self.order,
                           parameters=self.parameters, sensitivities=False,
-                          gradient=self.simulation.gradient)
+                          gradient=self.scene.simulation.gradient)
 
     @functools.cached_property
     def digest(self) -> str:
@@ -193,14 +186,14 @@ class SweepSpec:
     @functools.cached_property
     def steps(self) -> np.ndarray:
         """Every run's step count (int64), as n_steps gives it (checked: at most MAX_STEPS)."""
-        return _step_counts(self.runs, self.simulation.dt, self.t_end)
+        return _step_counts(self.runs, self.scene.simulation.dt, self.t_end)
 
     @property
     def chunk(self) -> int:
         return chunk_size(len(self.runs))
 
     def n_steps(self, run: dict[str, float]) -> int:
-        dt = run.get("simulation.dt", self.simulation.dt)
+        dt = run.get("simulation.dt", self.scene.simulation.dt)
         t_end = run.get("simulation.t_end", self.t_end)
         return max(1, round(t_end / dt))
 
@@ -253,7 +246,7 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
         scene = load_either_scene(scene_path)
     except SceneError as error:
         raise SweepError(f"{source}: scene: {error}") from None
-    request = {key: document.get(key, getattr(run_defaults(scene), key)) for key in REQUEST_KEYS}
+    request = {key: document.get(key, getattr(scene.simulation, key)) for key in REQUEST_KEYS}
     refused = request_refusal(request)
     if refused:
         raise fail(refused.key, refused.message)
@@ -275,7 +268,7 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
                                   f"\"sample\", got {samples!r}")
     elif samples is not None:
         raise fail("samples", f"only with mode = \"sample\" (this sweep's mode is {mode!r})")
-    t_end = document.get("t_end", run_defaults(scene).t_end)
+    t_end = document.get("t_end", scene.simulation.t_end)
     if not (_number(t_end) and math.isfinite(t_end) and t_end > 0):
         raise fail("t_end", f"must be > 0 and finite (s), got {t_end!r}")
     every = document.get("every", 0)
@@ -447,7 +440,7 @@ def _check_sizes(spec: SweepSpec) -> None:
     """Step counts and sample sizes within simulate's limits (MAX_STEPS, MAX_SAMPLE_BYTES):
     a run's steps, the samples a chunk of runs holds in memory, the trajectories on disk."""
     runs, n = spec.runs, spec.scene.n
-    dts = runs.columns.get("simulation.dt", np.full(len(runs), spec.simulation.dt))
+    dts = runs.columns.get("simulation.dt", np.full(len(runs), spec.scene.simulation.dt))
     ends = runs.columns.get("simulation.t_end", np.full(len(runs), spec.t_end))
     with np.errstate(all="ignore"):
         ratio = ends / dts

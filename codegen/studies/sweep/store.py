@@ -366,7 +366,7 @@ class SweepStore:
             coordinate("run", np.arange(runs), "run")
             coordinate("joint", np.arange(1, n + 1), "joint")
             shared_time = self._shared_time()
-            coordinate("t", np.arange(samples) * spec.every * spec.simulation.dt
+            coordinate("t", np.arange(samples) * spec.every * spec.scene.simulation.dt
                        if shared_time else np.arange(samples), "t")
             for axis in spec.axes:
                 coordinate(axis.path, spec.runs.column(axis.path), "run")
