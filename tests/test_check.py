@@ -162,3 +162,42 @@ def test_check_with_full_newton_at_its_floor_on_a_long_vi_chain():
     scene = scaling_scene(18)
     report = check_solver(build_scheme(scene, "vi"), build_solver(scene, "vi"), samples=2)
     assert report.passed, report.table()
+
+
+class NoisyLinear:
+    """A reference whose residual A z - b carries round-off-sized noise (1e-13 of b, a
+    deterministic function of z): Newton's updates stall at the noise through A^-1, above the
+    1e-14 |z| of an absolute tolerance."""
+
+    def __init__(self, size=6, noise=1e-13, seed=3):
+        rng = np.random.default_rng(seed)
+        self.a = rng.standard_normal((size, size)) + 3 * np.eye(size)
+        self.b = rng.standard_normal(size)
+        self.noise = noise
+        self.size = size
+
+    def residual(self, *args):
+        z = np.array(args[:self.size])
+        jitter = np.random.default_rng(abs(hash(z.tobytes())) % 2 ** 32).uniform(-1, 1, self.size)
+        return self.a @ z - self.b + self.noise * np.abs(self.b).max() * jitter
+
+
+def test_the_reference_newton_stops_at_the_round_off_floor():
+    """chaingen check's own Newton (studies/check.py) accepts an iterate at the round-off
+    floor: updates that stop shrinking once below ROUND_OFF_GATE of z (spatial es's next
+    state, whose updates stall near 3e-14 |z|, failed with no reference before)."""
+    from chaingen.studies.check import _converged_unknowns
+
+    reference = NoisyLinear()
+    z = _converged_unknowns(reference, [], 0.01, [], [], reference.size)
+    assert z is not None
+    exact = np.linalg.solve(reference.a, reference.b)
+    assert np.abs(z - exact).max() <= 1e-11 * np.abs(exact).max()
+    # Without noise the absolute tolerance ends it, as before; without a root it fails.
+    assert _converged_unknowns(NoisyLinear(noise=0.0), [], 0.01, [], [], 6) is not None
+
+    class NoRoot:
+        def residual(self, *args):
+            return np.array([(args[0] - 0.5) ** 2 + 1.0])
+
+    assert _converged_unknowns(NoRoot(), [], 0.01, [], [], 1) is None
