@@ -331,9 +331,9 @@ REFUSALS = [
      ' gives the links it passes (allowed here: route, stiffness, rest_length), got [1, 1]'),
     ('zero segment', 'route = [[0, 0.05, 0.0, 0.05], [1, 0.05, 0.0, 0.2]]',
      'route = [[0, 0.0, 0.0, 0.1], [1, 0.0, 0.0, 0.0]]',
-     'springs[0]: segment 1 (route[0] to route[1]) has zero length at the initial angles'
-     ' (initial.angles), where its direction is undefined; move a route point or change'
-     ' the initial angles (limit 7.5e-10 m), got 0.0'),
+     'springs[0]: route[0] and route[1] are one point at every angle (on the axis of joint'
+     " 1): segment 1 has no length, and its length's gradient is undefined; move one of them"
+     ' (limit 7.5e-10 m), got [[0, 0.0, 0.0, 0.1], [1, 0.0, 0.0, 0.0]]'),
     ('angles count', 'angles = [0.3, -0.4, 0.5]',
      'angles = [0.3, -0.4]',
      'initial.angles: must have 3 entries (one per joint), not 2, got [0.3, -0.4]'),

@@ -329,6 +329,16 @@ class SpatialSceneReader(SceneReader):
             tolerance = ZERO_SEGMENT_RELATIVE_TOLERANCE * min(
                 largest, size + sum(math.hypot(*point.point) for point in spring.route))
             for k, length in enumerate(lengths):
+                if length < tolerance and _zero_at_every_angle(scene, index, k, tolerance):
+                    ends = sorted(point.link for point in spring.route[k:k + 2])
+                    joints = (f"the axis of joint {ends[1]}" if ends[1] == ends[0] + 1 else
+                              f"the axes of joints {ends[0] + 1} to {ends[1]}")
+                    self.fail(f"springs[{index}]",
+                              f"route[{k}] and route[{k + 1}] are one point at every angle (on "
+                              f"{joints}): segment {k + 1} has no length, and its length's "
+                              "gradient is undefined; move one of them (limit "
+                              f"{tolerance:.3g} m)", [[point.link, *point.point]
+                                                      for point in spring.route[k:k + 2]])
                 if length < tolerance:
                     self.fail(f"springs[{index}]",
                               f"segment {k + 1} (route[{k}] to route[{k + 1}]) has zero length at "
@@ -336,3 +346,15 @@ class SpatialSceneReader(SceneReader):
                               "undefined; move a route point or change the initial angles "
                               f"(limit {tolerance:.3g} m)", float(length))
 
+
+
+def _zero_at_every_angle(scene: SpatialScene, spring: int, segment: int, tolerance: float) -> bool:
+    """Whether segment `segment` of spring `spring` is shorter than `tolerance` at two generic
+    postures besides the initial one: its points coincide at every angle (both on the axes of
+    the joints between them), which no choice of initial angles mends."""
+    for shift in (0.7, -1.9):
+        q = [angle + shift * (1 + 0.31 * i) for i, angle in enumerate(scene.initial_angles)]
+        points = dynamics.route_positions(scene, q)[spring]
+        if np.linalg.norm(points[segment + 1] - points[segment]) >= tolerance:
+            return False
+    return True
