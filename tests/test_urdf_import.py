@@ -565,21 +565,45 @@ def test_cli_writes_the_scene(tmp_path):
 
 
 def test_cli_replaces_an_existing_output_whole_and_never_the_input(tmp_path):
-    """The commands' convention (tests/test_output_paths.py): an existing regular file that is
-    no input is replaced by rename; the URDF itself, by any spelling, is refused."""
+    """An existing file that is not an unedited output of chaingen import (a scene a user
+    wrote, an import with springs added) is refused without --force, one line, unchanged; with
+    --force it is replaced by rename (the commands' convention, tests/test_output_paths.py),
+    and an import's own output is replaced without. The URDF itself, by any spelling, is
+    refused even with --force."""
     require_module("pinocchio", "robots")
+    from chaingen.spatial.urdf import is_unedited_import
+
     urdf = tmp_path / "robot.urdf"
     urdf.write_text(small_urdf(("shoulder", "revolute", "base", "a")))
     out = tmp_path / "scene.toml"
     out.write_text("old")
     os.link(out, tmp_path / "other_name")
+    before = snapshot(tmp_path)
     result = chaingen_in_process("import", urdf, "-o", out, cwd=tmp_path)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result
+    assert result.stderr.startswith(f"chaingen: error: -o: {out} exists and is not a scene "
+                                    "chaingen import wrote (or it was edited since): give "
+                                    "--force to replace it"), result.stderr
+    assert snapshot(tmp_path) == before
+    result = chaingen_in_process("import", urdf, "-o", out, "--force", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert out.read_text().startswith("# Imported by `chaingen import` from robot.urdf")
     assert (tmp_path / "other_name").read_text() == "old"
+    assert is_unedited_import(out) and not is_unedited_import(tmp_path / "other_name")
+    # Its own output: replaced without --force, the same bytes.
+    written = out.read_bytes()
+    result = chaingen_in_process("import", urdf, "-o", out, cwd=tmp_path)
+    assert result.returncode == 0 and out.read_bytes() == written, result.stderr
+    # Edited (a spring added, or one byte of a number): refused again.
+    for edit in (written + b"\n[[springs]]\n", written.replace(b"mass = ", b"mass = 1", 1)):
+        out.write_bytes(edit)
+        assert not is_unedited_import(out)
+        assert chaingen_in_process("import", urdf, "-o", out, cwd=tmp_path).returncode == 2
+        assert out.read_bytes() == edit
     before = snapshot(tmp_path)
     for spelling in ("robot.urdf", "./robot.urdf", tmp_path / "robot.urdf"):
-        result = chaingen_in_process("import", "robot.urdf", "-o", spelling, cwd=tmp_path)
+        result = chaingen_in_process("import", "robot.urdf", "-o", spelling, "--force",
+                                     cwd=tmp_path)
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1, (spelling, result.stderr)
         assert snapshot(tmp_path) == before

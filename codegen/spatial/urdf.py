@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import hashlib
 import os
 import re
 import sys
@@ -147,16 +148,46 @@ def import_chain(path: str | os.PathLike, tip: str | None = None,
 
 
 def write_scene(urdf: str | os.PathLike, output: str | os.PathLike, tip: str | None = None,
-                name: str | None = None) -> ImportedChain:
+                name: str | None = None, force: bool = False) -> ImportedChain:
     """Import the chain of `urdf` and write its scene file to `output`, all or nothing; the
-    output is checked first as every command's (never the URDF itself, a directory, a link)."""
+    output is checked first as every command's (never the URDF itself, a directory, a link).
+    An existing `output` is replaced only when it is an import's output as written (its last
+    line, IMPORT_DIGEST, holds the sha256 of the text above it), or with `force`: a scene a
+    user wrote, or an import edited since (springs added), is never replaced unasked."""
     check_output_file(output, "-o", [urdf])
+    if not force and os.path.lexists(output) and not is_unedited_import(output):
+        raise ChaingenError(f"-o: {output} exists and is not a scene chaingen import wrote "
+                            "(or it was edited since): give --force to replace it, or another "
+                            "file name")
     chain = import_chain(urdf, tip=tip, name=name)
     text = scene_text(chain.scene, comment_lines=chain.comment_lines(),
                       link_comments=chain.link_comments())
     with reported_write(output, "the scene"):
-        write_text(output, text)
+        write_text(output, text + IMPORT_DIGEST.format(_digest(text)) + "\n")
     return chain
+
+
+#: The last line of a scene `chaingen import` writes: the sha256 of the text above it, which
+#: tells an import's unedited output (which a new import may replace) from any other file.
+IMPORT_DIGEST = "# chaingen import: sha256 of the lines above {}"
+#: Larger files are no import's output (the Panda's is 3 kB): not read to be hashed.
+_LARGEST_IMPORT = 1 << 20
+
+
+def _digest(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def is_unedited_import(path: str | os.PathLike) -> bool:
+    """Whether the file at `path` is a scene `chaingen import` wrote, unchanged since."""
+    try:
+        if os.path.getsize(path) > _LARGEST_IMPORT:
+            return False
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeError):
+        return False
+    body, _, last = text.rstrip("\n").rpartition("\n")
+    return bool(body) and last == IMPORT_DIGEST.format(_digest(body + "\n"))
 
 
 # -- the command: `chaingen import ROBOT.urdf -o SCENE.toml [--tip LINK] [--name NAME]` ---------
@@ -169,10 +200,13 @@ def add_import_arguments(command: argparse.ArgumentParser) -> None:
     command.add_argument("--tip", metavar="LINK",
                          help="the chain's last link (default: the single leaf of the tree)")
     command.add_argument("--name", help="the scene's name (default: the robot's)")
+    command.add_argument("--force", action="store_true",
+                         help="replace SCENE.toml even if it is not an unedited output of "
+                              "chaingen import (an input is never replaced)")
 
 
 def command_import(args) -> int:
-    chain = write_scene(args.urdf, args.output, tip=args.tip, name=args.name)
+    chain = write_scene(args.urdf, args.output, tip=args.tip, name=args.name, force=args.force)
     print(f"wrote {args.output}: {chain.summary()}")
     return 0
 
