@@ -104,7 +104,8 @@ def build_solver(scene: Scene | SpatialScene | SolverSpec, method: str | None = 
     """Generate and build (or load from the cache) the solver of a SolverSpec, or of `scene`
     with the keywords a SolverSpec is made of; on a terminal a progress bar names the stage
     (SymPy, CasADi, C, compiling), which for large n takes a while.
-    method, quadrature and order: the scene's own ([simulation]) by default.
+    method, quadrature and order: the scene's own ([simulation]) by default; a spatial
+    scene's method is midpoint where its file names none (SPATIAL_DEFAULT_METHOD).
     parameters: key paths of the scene's numbers the solver takes at run time (every call
     then takes their values, the scene's own by default). order: of the step, 2 (the
     scheme's own), 4 or 6 (a symmetric composition of its steps). gradient: es's discrete

@@ -588,6 +588,7 @@ def test_cli_replaces_an_existing_output_whole_and_never_the_input(tmp_path):
     result = chaingen_in_process("import", urdf, "-o", out, "--force", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert out.read_text().startswith("# Imported by `chaingen import` from robot.urdf")
+    assert "base to a, 1 revolute joint, each actuated;" in out.read_text()
     assert (tmp_path / "other_name").read_text() == "old"
     assert is_unedited_import(out) and not is_unedited_import(tmp_path / "other_name")
     # Its own output: replaced without --force, the same bytes.

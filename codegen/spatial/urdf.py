@@ -81,7 +81,7 @@ class ImportedChain:
         """Where the scene came from, for the head of its file."""
         lines = [f"Imported by `chaingen import` from {self.source} (robot {self.robot!r}):",
                  f"the serial chain from {self.root} to {self.tip}, {len(self.joints)} revolute "
-                 "joints, each actuated;",
+                 f"joint{'s' if len(self.joints) > 1 else ''}, each actuated;",
                  "fixed links merged into the link before them with their inertia."]
         if self.left_out:
             lines.append(f"Left out beyond the tip: {', '.join(self.left_out)}.")
