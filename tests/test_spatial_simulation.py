@@ -227,3 +227,22 @@ def test_order_studies_each_order_the_spatial_scheme_takes(tmp_path, settings_ta
         chaingen_in_process("order", ROOT / "scenes" / "three_link_mono.toml", "--method",
                             method, cwd=tmp_path)
     assert settings_taken["study"][2] == (2, 4, 6)
+
+
+def test_the_docs_give_each_keys_message_as_the_reader_prints_it():
+    """scene-format.md 13.4: each `# line` of the [simulation] block, then the message the
+    reader prints for the shipped scene with that table; every key of the table has one."""
+    import re
+
+    from chaingen.errors import SceneError
+
+    doc = (ROOT / "docs" / "scene-format.md").read_text(encoding="utf-8")
+    section = doc.split("### 13.4")[1].split("### 13.5")[0]
+    block = re.search(r"```\n(# method = .*?)```", section, re.DOTALL).group(1)
+    pairs = re.findall(r"^# (.*)\n(arm\.toml: .*)$", block, re.MULTILINE)
+    assert {line.split(" = ")[0] for line, _ in pairs} >= {
+        field.name for field in dataclasses.fields(Simulation)}
+    for line, message in pairs:
+        with pytest.raises(SceneError) as caught:
+            parse_spatial_scene(SPATIAL.read_text() + f"\n[simulation]\n{line}\n", "arm.toml")
+        assert str(caught.value) == message
