@@ -83,9 +83,11 @@ def run_settings(scene: Scene | SpatialScene, *, method=None, quadrature=None, d
         if not (math.isfinite(value) and value > 0):
             raise SettingsError(f"--{name.replace('_', '-')}: must be > 0 and finite, got {value}")
     steps = settings.t_end / settings.dt
-    if steps > MAX_STEPS:
+    if steps > MAX_STEPS:   # named where the values came from: options, or the scene's table
+        where = ("--dt/--t-end" if dt is not None or t_end is not None
+                 else f"{scene_source}simulation.dt/t_end")
         raise SettingsError(
-            f"--dt/--t-end: t_end / dt = {steps:.3g} steps, more than the {MAX_STEPS:.0e} a run "
+            f"{where}: t_end / dt = {steps:.3g} steps, more than the {MAX_STEPS:.0e} a run "
             f"may take (dt = {settings.dt:g} s, t_end = {settings.t_end:g} s)")
     samples = (settings.n_steps // settings.every + 1) * (2 * scene.n + 3) * 8
     if samples > MAX_SAMPLE_BYTES:

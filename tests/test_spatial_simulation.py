@@ -246,3 +246,14 @@ def test_the_docs_give_each_keys_message_as_the_reader_prints_it():
         with pytest.raises(SceneError) as caught:
             parse_spatial_scene(SPATIAL.read_text() + f"\n[simulation]\n{line}\n", "arm.toml")
         assert str(caught.value) == message
+
+
+def test_a_run_too_long_is_named_by_where_its_numbers_came_from(tmp_path):
+    """t_end / dt beyond the steps a run may take: named simulation.dt/t_end with the file when
+    both came from the table, --dt/--t-end when an option gave one."""
+    scene = with_table(tmp_path, "[simulation]\ndt = 1e-300\n")
+    line = chaingen_in_process("simulate", scene, cwd=tmp_path).stderr.strip()
+    assert line.startswith(f"chaingen: error: {scene}: simulation.dt/t_end: t_end / dt = 1e+301 "
+                           "steps, more than the 1e+12 a run may take"), line
+    line = chaingen_in_process("simulate", scene, "--t-end", "1", cwd=tmp_path).stderr.strip()
+    assert line.startswith("chaingen: error: --dt/--t-end: t_end / dt = 1e+300 steps"), line
