@@ -101,3 +101,33 @@ def require_module(module: str, extra: str):
         if os.environ.get("CHAINGEN_REQUIRE_TOOLS") == "1":
             pytest.fail(f"{message} (CHAINGEN_REQUIRE_TOOLS=1)", pytrace=False)
         pytest.skip(message)
+
+
+def run_example_checked(package: Path, work: Path, seconds: str) -> list[str]:
+    """The example program of a written package (its directory), compiled with the strict
+    flags for memcheck and for ASan/UBSan, run for `seconds` under each: asserts that both
+    build and run clean, and returns their standard outputs."""
+    import json
+
+    from chaingen.runtime import contract
+
+    sources = [package / name for name in json.loads((package / "chaingen.json").read_text())
+               ["sources"]]
+    outputs = []
+    for name, flags, runner in (
+            ("memcheck", ["-g", "-O1"], ["valgrind", "--error-exitcode=99",
+                                         "--track-origins=yes", "--leak-check=full"]),
+            ("sanitized", ["-g", "-fsanitize=address,undefined", "-fno-omit-frame-pointer",
+                           "-fno-sanitize-recover=all"], [])):
+        binary = work / name
+        built = subprocess.run(["gcc", *flags, *contract.STRICT_FLAGS, f"-I{package}",
+                                *map(str, sources), str(package / "example.c"), "-lm", "-o",
+                                str(binary)], capture_output=True, text=True, timeout=300)
+        assert built.returncode == 0, built.stderr
+        run = subprocess.run([*runner, str(binary), seconds], capture_output=True, text=True,
+                             timeout=600)
+        assert run.returncode == 0, run.stdout + run.stderr
+        if runner:
+            assert "ERROR SUMMARY: 0 errors" in run.stderr, run.stderr
+        outputs.append(run.stdout)
+    return outputs

@@ -21,9 +21,11 @@ from test_spatial_midpoint import reference_run, wrapped
 
 from chaingen.spatial import dynamics
 from chaingen.spatial.dynamics import rpy_matrix
-from chaingen.symbolic import spatial_recursion
+from chaingen.symbolic import spatial_mass, spatial_recursion
 from chaingen.symbolic.recursion import Definitions
 from chaingen.symbolic.schemes import build_scheme, spatial_vi
+
+from helpers import require_tools, run_example_checked
 
 
 def discrete_lagrangian(scene, q0, q1, dt):
@@ -63,8 +65,10 @@ def forced_scene(seed, n):
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 5), dt=st.floats(1e-3, 0.05))
 def test_residual_vanishes_at_a_numeric_solution_of_the_del_equations(seed, n, dt):
     """q_0, q_1 at random, p_0, p_1 by central differences of the numeric L_d (and the
-    forcing dt/2 (tau - d v)), w_0 = M(q_0)^-1 p_0, w_1 = M(q_1)^-1 p_1: the scheme's residual
-    at (theta = q_1 - q_0, w_1) vanishes to the differences' error, and a wrong w_1 does not."""
+    forcing dt/2 (tau - d v)), w_0 = M(q_0)^-1 p_0: the scheme's residual at
+    v = (q_1 - q_0)/dt vanishes to the differences' error, and at a wrong v it does not; the
+    update gives
+    q_1 and w_1 = M(q_1)^-1 p_1 (through the Cholesky factor of the composite-rigid-body M)."""
     scene = forced_scene(seed, n)
     scheme = spatial_vi.build(scene)
     rng = np.random.default_rng(seed + 1)
@@ -76,13 +80,44 @@ def test_residual_vanishes_at_a_numeric_solution_of_the_del_equations(seed, n, d
     force = tau - np.array([link.damping for link in scene.links]) * theta / dt
     p0, p1 = numeric_transforms(scene, q0, q0 + theta, dt, force)
     w0 = np.linalg.solve(dynamics.mass_matrix(scene, q0), p0)
-    w1 = np.linalg.solve(dynamics.mass_matrix(scene, q0 + theta), p1)
     residual = scheme.step_function(list(scheme.step.residual))
     scale = max(1.0, np.abs(p0).max(), np.abs(p1).max())
-    ours = np.array(residual(*theta, *w1, *q0, *w0, *u, dt), dtype=float).ravel()
+    ours = np.array(residual(*theta / dt, *q0, *w0, *u, dt), dtype=float).ravel()
     assert np.abs(ours).max() <= 1e-7 * scale, ours
-    wrong = np.array(residual(*theta, *(w1 + 1e-3), *q0, *w0, *u, dt), dtype=float).ravel()
-    assert np.abs(wrong[n:]).max() > 1e-6 * np.abs(p1).max()
+    wrong = np.array(residual(*(theta / dt + 1e-3), *q0, *w0, *u, dt), dtype=float).ravel()
+    assert np.abs(wrong).max() > 1e-6 * np.abs(p1).max()
+    update = scheme.step_function(list(scheme.step.next_state))
+    x1 = np.array(update(*theta / dt, *q0, *w0, *u, dt), dtype=float).ravel()
+    np.testing.assert_allclose(x1[:n], q0 + theta, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(dynamics.mass_matrix(scene, q0 + theta) @ x1[n:], p1,
+                               rtol=0, atol=1e-7 * scale)
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7))
+def test_composite_rigid_body_mass_matrix_and_its_cholesky_solve(seed, n):
+    """spatial_mass.mass_matrix against chaingen.spatial.dynamics.mass_matrix (checked against
+    Pinocchio's crba in test_spatial_dynamics), and cholesky_solve against numpy's solve."""
+    scene = random_scene(seed, n)
+    rng = np.random.default_rng(seed + 5)
+    q, b = rng.uniform(-np.pi, np.pi, n), rng.normal(size=n)
+    angles = sp.symbols(f"q1:{n + 1}", real=True)
+    right = sp.symbols(f"b1:{n + 1}", real=True)
+    defs = Definitions("t_")
+    matrix = spatial_mass.mass_matrix(
+        scene, spatial_recursion.link_frames(scene, angles, defs), defs)
+    solution = spatial_mass.cholesky_solve(spatial_mass.cholesky_factor(matrix, defs), right,
+                                           defs)
+    from chaingen.symbolic.schemes.base import numpy_function
+    values = np.array(numpy_function([*angles, *right], defs.items,
+                                     [*(m for row in matrix for m in row), *solution])(*q, *b),
+                      dtype=float).ravel()
+    expected = dynamics.mass_matrix(scene, q)
+    np.testing.assert_allclose(values[:n * n].reshape(n, n), expected, rtol=0,
+                               atol=1e-13 * np.abs(expected).max())
+    np.testing.assert_allclose(expected @ values[n * n:], b, rtol=0, atol=1e-11)
+    # O(n^2) entries of the factor and the solves, not one expanded expression per entry
+    assert max(sp.count_ops(expression) for _, expression in defs.items) <= 8 * n + 40
 
 
 @settings(max_examples=8, deadline=None)
@@ -125,7 +160,8 @@ def cyclic_scene(seed, n, gravity=True):
 def test_vi_is_offered_for_spatial_scenes_and_builds_the_scheme():
     scene = random_scene(1, 3, springs=True)
     scheme = build_scheme(scene, "vi", order=4)
-    assert scheme.metadata.method == "vi" and scheme.step.unknowns.shape[0] == 6
+    # Newton's unknowns are the increments alone: w_1 comes from the update
+    assert scheme.metadata.method == "vi" and scheme.step.unknowns.shape[0] == 3
     assert scheme.order == 4
 
 
@@ -343,3 +379,22 @@ def test_composed_steps_of_order_4_and_6_converge_to_dop853():
             result = solver.simulate(q0, w0, dt=dt, n_steps=steps, every=steps)
             errors.append(np.abs(wrapped(result.phi[-1] - expected)).max())
         assert 0.7 * 2 ** order <= errors[0] / errors[1] <= 1.3 * 2 ** order, (order, errors)
+
+
+@pytest.mark.tools
+@pytest.mark.parametrize("actuated", [(), (1, 3)])
+def test_spatial_vi_example_is_clean_under_valgrind_and_the_sanitizers(tmp_path, actuated):
+    """The vi package of a spatial chain as a user gets it (free motion, and an actuated,
+    damped chain): its example program, compiled with the strict flags, runs clean under
+    memcheck and under ASan/UBSan (the Cholesky solve of the update among what they watch)."""
+    require_tools("gcc", "valgrind")
+    from chaingen.generate.package import generate_package, write_package
+
+    plain = random_scene(121, 4, springs=True)
+    scene = dataclasses.replace(plain, name="spatial-vi-example", actuated=actuated,
+                                links=tuple(dataclasses.replace(link, damping=0.2)
+                                            for link in plain.links))
+    package = write_package(generate_package(scene, "vi", 3, sensitivities=False),
+                            tmp_path / "package")
+    for output in run_example_checked(package, tmp_path, "0.5"):
+        assert ("final tracking error" in output) == bool(actuated), output
