@@ -174,3 +174,18 @@ def test_a_parameter_outside_its_range_is_refused_and_a_downward_gravity_is_not(
     run = solver.simulate(SCENE.initial_angles, SCENE.initial_velocities, dt=0.01, n_steps=2,
                           parameters={"gravity[2]": -20.0, "gravity[0]": -1.0})
     assert np.isfinite(run.phi).all()
+
+
+@pytest.mark.compile
+def test_check_compares_the_parameter_derivatives_of_a_spatial_solver():
+    """`chaingen check --parameters all` on the spatial scene: d s1 / d p against central
+    differences, gravity's zero components and the zero damping of links 1 and 3 among them
+    (drawn around 0.1, within their ranges)."""
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", "chaingen", "check", str(SPATIAL),
+                             "--method", "midpoint", "--parameters", "all", "--samples", "3"],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "d s1 / d p" in result.stdout and "FAIL" not in result.stdout

@@ -131,8 +131,10 @@ def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
                              rng.uniform(-1.0, 1.0, n)])
         u = rng.uniform(-1.0, 1.0, nu) if nu else None
         u_list = list(u) if nu else []
-        # Parameters (if any) 10 % around the scene's own values.
-        p = solver.default_parameters * (1 + 0.1 * rng.uniform(-1, 1, len(solver.parameters)))
+        # Parameters (if any) 10 % around the scene's own values; a zero one (no damping, no
+        # gravity) around 0.1, so that its central differences stay within its range (>= 0).
+        defaults = solver.default_parameters
+        p = np.where(defaults == 0, 0.1, defaults) * (1 + 0.1 * rng.uniform(-1, 1, len(defaults)))
         p_list = list(p)
         x0 = solver.initial_state(s0[:n], s0[n:], p)
         z = 0.01 * rng.standard_normal(solver.nz)
