@@ -199,10 +199,7 @@ def test_driven_three_link_differs_from_mujoco_by_the_truncation_error_alone(met
     error grows about 3.5-fold each 0.1 s of the second half), so a scheme of order 2 misses
     1e-4 rad at t = 1 s at DT (midpoint: 3.7e-3 rad measured). That it is the step's
     truncation error and not a disagreement of the models: the order-2 difference falls by 4
-    per halving of dt, and the step composed to order 4 agrees within TOLERANCE at DT (a
-    scheme of order 2 only, spatial es so far: the Richardson extrapolation of its runs at DT
-    and 2 DT, (4 q(DT) - q(2 DT)) / 3, whose error is of higher order, does)."""
-    from chaingen.errors import UnsupportedSceneError
+    per halving of dt, and the step composed to order 4 agrees within TOLERANCE at DT."""
     from chaingen.simulation import build_solver
 
     scene = load_spatial_scene(scene_path("spatial_three_link"))
@@ -213,14 +210,8 @@ def test_driven_three_link_differs_from_mujoco_by_the_truncation_error_alone(met
                                   - reference)).max() for dt in (4 * DT, 2 * DT, DT)]
     ratios = np.array(differences[:-1]) / np.array(differences[1:])
     assert np.all((3.8 <= ratios) & (ratios <= 4.2)), (differences, ratios)
-    try:
-        composed = build_solver(scene, method, sensitivities=False, order=4)
-    except UnsupportedSceneError:
-        finals = [our_final_angles(solver, scene, torques, dt) for dt in (2 * DT, DT)]
-        difference = np.abs(wrapped((4 * finals[1] - finals[0]) / 3 - reference)).max()
-    else:
-        difference = np.abs(wrapped(our_final_angles(composed, scene, torques)
-                                    - reference)).max()
+    composed = build_solver(scene, method, sensitivities=False, order=4)
+    difference = np.abs(wrapped(our_final_angles(composed, scene, torques) - reference)).max()
     print(f"\nspatial_three_link driven, {method}: order 2 {differences} rad at dt = "
           f"{4 * DT:g}, {2 * DT:g}, {DT:g} s; order 4 {difference:.2e} rad at {DT:g} s")
     assert difference <= TOLERANCE

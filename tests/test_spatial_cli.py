@@ -112,8 +112,8 @@ def test_generate_without_method_writes_the_default_schemes_package(tmp_path):
 
 
 @pytest.mark.parametrize("args, fragments", [
-    (["--method", "es", "--order", "4"], ["order 4: es for a spatial scene",
-                                          "is of order 2 so far"]),
+    (["--method", "es", "--order", "6"], ["order 6: es for a spatial scene",
+                                          "order 4 at most"]),
     (["--order", "3"], ["--order"]),
 ])
 def test_generate_refuses_what_a_spatial_scene_cannot_take_and_writes_nothing(

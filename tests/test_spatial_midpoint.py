@@ -129,9 +129,10 @@ def test_every_scheme_takes_spatial_scenes_and_their_geometry_is_no_parameter():
 
 # -- compiled runs --------------------------------------------------------------------------
 
-def reference_run(scene, q0, w0, torques, t_end):
+def reference_run(scene, q0, w0, torques, t_end, *, with_rates=False):
     """scipy's DOP853 (rtol = atol = 1e-12) on qddot = M^-1 (tau - d qdot - C qdot - g -
-    dV_s/dq): M by chaingen.spatial.dynamics, C qdot + g by Pinocchio's rnea."""
+    dV_s/dq): M by chaingen.spatial.dynamics, C qdot + g by Pinocchio's rnea. The angles at
+    t_end; with_rates: (angles, rates)."""
     pin = require_module("pinocchio", "robots")
     from scipy.integrate import solve_ivp
 
@@ -148,6 +149,8 @@ def reference_run(scene, q0, w0, torques, t_end):
 
     solution = solve_ivp(rhs, (0.0, t_end), np.concatenate([q0, w0]), method="DOP853",
                          rtol=1e-12, atol=1e-12)
+    if with_rates:
+        return solution.y[:n, -1], solution.y[n:, -1]
     return solution.y[:n, -1]
 
 

@@ -25,7 +25,7 @@ import sympy as sp
 from sympy import ImmutableMatrix
 
 from ...errors import UnsupportedSceneError
-from ...runtime.contract import JACOBIAN_PER_STEP
+from ...runtime.contract import JACOBIAN_CHORD_ACROSS_STEPS
 from ...spatial.dynamics import rpy_matrix
 from ...spatial.values import SpatialScene
 from .. import spatial_recursion as vectors
@@ -52,6 +52,8 @@ FLOWS = FlowDescription(
     "phidot_i(m) = n_i . (omega_i - omega_{i-1}) at the step's mid-point, omega = 1/2 sum_a "
     "d_a x ddot_a. The scheme is passive: H_1 - H_0 = flows[0] - flows[1] to round-off and the "
     "Newton tolerance (docs/model.md, section 4.8).")
+#: The step's Newton tolerances on the update of the turns w (the contract's are 1e-10, 1e-13).
+UPDATE_TOLERANCES = (("update_rtol", 1e-14), ("update_atol", 1e-17))
 #: The names of a link's 12 coordinates, in the state's order.
 COORDINATE_NAMES = tuple(f"{body}_{axis}" for body in ("x", "d1", "d2", "d3") for axis in "xyz")
 
@@ -263,41 +265,166 @@ def joint_space_start(scene: SpatialScene, phi, phidot, defs: Definitions) -> li
     return q + v
 
 
-#: The orders of the step this builder takes (chaingen.symbolic.schemes.orders_taken asks it).
-ORDERS = (2,)
+#: The orders of the step this builder takes (chaingen.symbolic.schemes.orders_taken asks it):
+#: order 2 and its composition to order 4 (order 6 would stall at 4, docs/model.md 14).
+ORDERS = (2, 4)
+
+
+def turned_frames(scene: SpatialScene, q0, increments, defs: Definitions) -> list:
+    """dq = F(q_0, w) - q_0, the nodal reparametrisation (docs/model.md 4.8): link i turned
+    by Q_i = Q_{i-1} Rot(n_i0, theta_i), n_i0 = R_{i-1,0} J_i a_i joint i's axis at the step's
+    start, theta_i = 2 atan(|n_i0| w_i / 2) (w_i = 2 tan(theta_i / 2) for a unit axis). Q_i is
+    the rotation of the quaternion p_i = p_{i-1} (1, w_i n_i0 / 2) taken with its norm, so
+    orthogonal to round-off for any w and n_i0, with no sine, cosine or square root:
+    Q - 1 = 2 (p_v p_v^T - |p_v|^2 1 + p_w [p_v]) / |p|^2, computed as the difference (no
+    cancellation against 1). Then
+
+        dd_ia = (Q_i - 1) d_ia0,    dx_i = dx_{i-1} + dR_{i-1} (o_i - c_{i-1}) + dR_i c_i,
+
+    so the directors keep the start's orthonormality and the joints the start's errors
+    (carried, not grown), whatever w. dq, not q_1: the residual's M (v_1 - v_0) takes
+    v_m = dq / dt, and q_1 - q_0 recomputed from a rounded q_1 would carry eps |q| / dt into
+    it, 1e-13 of |v| at dt = 1 ms, which the energy then shows."""
+    centres = coms(scene)
+    quaternion = (sp.Integer(1),) + (sp.Integer(0),) * 3
+    shift = (sp.Integer(0),) * 3        # dx_{i-1}
+    turned_parent = None                # dR_{i-1} as Link-like directors; None for the base
+    dq = []
+    for i, (link, w) in enumerate(zip(scene.links, increments), start=1):
+        own, parent = Link(q0, i), Link(q0, i - 1)
+        axis = parent.turn(rpy_matrix(link.joint.rpy) @ np.asarray(link.joint.axis))
+        if i > 1:
+            axis = vectors.define_vector(defs, f"n0_{i}", axis)
+        half = scale(w / 2, axis)
+        pw, pv = quaternion[0], quaternion[1:]
+        quaternion = (defs.define(f"p{i}_w", pw - dot(pv, half)),
+                      *vectors.define_vector(defs, f"p{i}", add(scale(pw, half), pv,
+                                                                cross(pv, half))))
+        pw, pv = quaternion[0], quaternion[1:]
+        square = defs.define(f"pvv{i}", dot(pv, pv))
+        twice = defs.define(f"pn{i}", 2 / (pw ** 2 + square))
+        scaled = vectors.define_vector(defs, f"ps{i}", scale(twice, pv))
+        rows = [[scaled[r] * pv[c] - (square * twice if r == c else 0)
+                 + (0 if r == c else (1 if (c - r) % 3 == 2 else -1) * scaled[3 - r - c] * pw)
+                 for c in range(3)] for r in range(3)]
+        rows = [[defs.define(f"U{i}_{r}{c}", rows[r][c]) for c in range(3)] for r in range(3)]
+        turns = [vectors.define_vector(defs, f"dd{i}_{a + 1}", vectors.apply(rows, d))
+                 for a, d in enumerate(own.d)]
+        turned = Link([], 0)
+        turned.d = tuple(turns)
+        arm = np.asarray(link.joint.xyz, dtype=float) - centres[i - 1]
+        joint = shift if turned_parent is None else add(shift, turned_parent.turn(arm))
+        shift = vectors.define_vector(defs, f"dx{i}", add(joint, turned.turn(centres[i])))
+        turned_parent = turned
+        dq += list(shift) + [c for d in turns for c in d]
+    return dq
+
+
+def joint_moments(scene: SpatialScene, qm, forces, axes, defs: Definitions,
+                  tag: str = "") -> list:
+    """P(q_m)^T F: the generalized force F (12n) against the joint twists at q_m, the columns of
+    the null space of G(q_m) (link k >= j turned about joint j's axis n_j through its point o_j:
+    xdot_k = n_j x (x_k - o_j), ddot_ka = n_j x d_ka). Link by link, F's resultant f_k (on x_k)
+    and moment about the origin m_k = x_k x f_k + sum_a d_ka x F_ka, summed from the tip:
+    (P^T F)_j = n_j . (sum_{k>=j} m_k - o_j x sum_{k>=j} f_k), O(n)."""
+    centres = coms(scene)
+    resultant = moment = (sp.Integer(0),) * 3
+    rows = []
+    for i in range(scene.n, 0, -1):
+        link = Link(qm, i)
+        block = forces[12 * (i - 1):12 * i]
+        force = tuple(block[:3])
+        own = add(cross(link.x, force),
+                  *(cross(d, tuple(block[3 * (a + 1):3 * (a + 2)])) for a, d in enumerate(link.d)))
+        resultant = vectors.define_vector(defs, f"{tag}f{i}", add(resultant, force))
+        moment = vectors.define_vector(defs, f"{tag}m{i}", add(moment, own))
+        joint = Link(qm, i - 1).point(scene.links[i - 1].joint.xyz, centres[i - 1])
+        rows.append(dot(axes[i - 1], add(moment, scale(-1, cross(joint, resultant)))))
+    return rows[::-1]
+
+
+def joint_twists(scene: SpatialScene, q, axes) -> list:
+    """The columns xi_j of P(q), 12n entries each: links k >= j turned about joint j's axis
+    n_j through its point o_j, xdot_k = n_j x (x_k - o_j), ddot_ka = n_j x d_ka."""
+    centres = coms(scene)
+    twists = []
+    for j, axis in enumerate(axes, start=1):
+        joint = Link(q, j - 1).point(scene.links[j - 1].joint.xyz, centres[j - 1])
+        column = [sp.Integer(0)] * (12 * (j - 1))
+        for k in range(j, scene.n + 1):
+            link = Link(q, k)
+            column += list(cross(axis, add(link.x, scale(-1, joint))))
+            column += [c for d in link.d for c in cross(axis, d)]
+        twists.append(column)
+    return twists
+
+
+def projected_rates(scene: SpatialScene, q, v, axes, defs: Definitions) -> list:
+    """The joint rates of v projected M-orthogonally onto the constraints' tangent space at q
+    (docs/model.md 14): (P^T M P) w = P^T M v, P = P(q) the joint twists, solved by Gaussian
+    elimination without pivoting (P^T M P is the joint-space mass matrix, positive definite).
+    A composed step's nodal v meets G(q) v = 0 only to O(dt^2); its projected rates are of the
+    composition's order."""
+    n = scene.n
+    twists = joint_twists(scene, q, axes)
+    matrix = [joint_moments(scene, q, mass_times(scene, column), axes, defs, f"P{j}")
+              for j, column in enumerate(twists, start=1)]
+    matrix = [[defs.define(f"A{r}_{c}", matrix[c][r]) for c in range(n)] for r in range(n)]
+    right = [defs.define(f"b{r}", e) for r, e in enumerate(
+        joint_moments(scene, q, mass_times(scene, v), axes, defs, "Mv"))]
+    for k in range(n):
+        for r in range(k + 1, n):
+            factor = defs.define(f"l{r}_{k}", matrix[r][k] / matrix[k][k])
+            for c in range(k + 1, n):
+                matrix[r][c] = defs.define(f"A{r}_{c}_{k}", matrix[r][c] - factor * matrix[k][c])
+            right[r] = defs.define(f"b{r}_{k}", right[r] - factor * right[k])
+    rates = [sp.Integer(0)] * n
+    for r in range(n - 1, -1, -1):
+        rates[r] = defs.define(f"wp{r}", (right[r] - sp.Add(*(matrix[r][c] * rates[c]
+                                                              for c in range(r + 1, n))))
+                               / matrix[r][r])
+    return rates
 
 
 def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) -> DiscreteScheme:
-    """The spatial es scheme of `scene`. quadrature plays no role (the springs' discrete
-    gradient is exact without it); order 2 only so far: UnsupportedSceneError otherwise."""
+    """The spatial es scheme of `scene`, by the discrete null space method with nodal
+    reparametrisation (Betsch and Leyendecker 2006; docs/model.md 4.8): n unknowns, one turn per
+    joint. quadrature plays no role (the springs' discrete gradient is exact without it).
+    Order 2, and 4 by composition (chaingen.symbolic.composition); order 6 stalls at 4 as the
+    planar es's composition does (model.md 14): UnsupportedSceneError."""
     if order not in ORDERS:
         raise UnsupportedSceneError(
-            f"order {order}: es for a spatial scene (scene {scene.name!r}) is of order 2 so far")
+            f"order {order}: es for a spatial scene (scene {scene.name!r}) composes its step to "
+            "order 4 at most (a composition of its steps stalls at order 4, docs/model.md 14)")
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
     names = [f"{name[0]}{i}{name[1:]}" for i in range(1, n + 1) for name in COORDINATE_NAMES]
     q0 = ImmutableMatrix(sp.symbols(names, real=True))
     v0 = ImmutableMatrix(sp.symbols([f"v{name}" for name in names], real=True))
-    dv = ImmutableMatrix(sp.symbols([f"dv{name}" for name in names], real=True))
-    mu_names = [f"mu{i}_{k}" for i in range(1, n + 1) for k in range(1, LINK_CONSTRAINTS + 1)]
-    mu = ImmutableMatrix(sp.symbols(mu_names, real=True))
+    turns = ImmutableMatrix(sp.symbols(f"w1:{n + 1}", real=True))
 
     step = Definitions("step_")
-    vm = [step.define(f"vm_{k}", v + d / 2) for k, (v, d) in enumerate(zip(v0, dv))]
-    q1 = [step.define(f"q1_{k}", q + dt * v) for k, (q, v) in enumerate(zip(q0, vm))]
-    qm = [step.define(f"qm_{k}", q + dt * v / 2) for k, (q, v) in enumerate(zip(q0, vm))]
+    dq = turned_frames(scene, q0, turns, step)
+    q1 = [step.define(f"q1_{k}", q + d) for k, (q, d) in enumerate(zip(q0, dq))]
+    vm = [step.define(f"vm_{k}", d / dt) for k, d in enumerate(dq)]
+    qm = [step.define(f"qm_{k}", q + d / 2) for k, (q, d) in enumerate(zip(q0, dq))]
+    dv = [step.define(f"dv_{k}", 2 * (v - w)) for k, (v, w) in enumerate(zip(vm, v0))]
     axes, rates = joint_rates(scene, qm, vm, step, "m")
     inputs = input_symbols(scene)
     applied = joint_torques(scene, inputs)
     torques = [step.define(f"tau{i}", u - number(link.damping) * rate)
                for i, (u, link, rate) in enumerate(zip(applied, scene.links, rates), start=1)]
-    momentum = [a + b + dt * (c - d) for a, b, c, d in zip(
-        mass_times(scene, dv), constraint_forces(scene, qm, mu),
-        potential_gradient(scene, q0, q1, step), torque_forces(scene, qm, axes, torques))]
-    residual = ImmutableMatrix(momentum + constraint_values(scene, q1))
+    momentum = [a + dt * (c - d) for a, c, d in zip(
+        mass_times(scene, dv), potential_gradient(scene, q0, q1, step),
+        torque_forces(scene, qm, axes, torques))]
+    residual = ImmutableMatrix(joint_moments(scene, qm, momentum, axes, step))
 
     at_state = Definitions("state_")
-    _, state_rates = joint_rates(scene, q0, v0, at_state, "")
+    state_axes, state_rates = joint_rates(scene, q0, v0, at_state, "")
+    # A composed step (order 4) reports the rates of v projected onto the tangent space
+    # (model.md 14), as the planar es does.
+    outputs_rates = (projected_rates(scene, q0, v0, state_axes, at_state) if order > 2
+                     else state_rates)
     potential_energy, segments = potential(scene, q0, at_state)
     energy = sp.Add(*(v * f for v, f in zip(v0, mass_times(scene, v0)))) / 2 + potential_energy
 
@@ -317,24 +444,25 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         method="es", quadrature=None, gradient="chain", scene=scene, summary=SUMMARY, dt=dt,
         quadrature_rule="none: the springs' discrete gradient is exact (chain rule)",
         state=ImmutableMatrix.vstack(q0, v0),
-        unknowns=ImmutableMatrix.vstack(dv, mu), residual=residual,
-        next_state=ImmutableMatrix(q1 + [v + d for v, d in zip(v0, dv)]),
-        predictor=ImmutableMatrix.zeros(23 * n, 1),
+        unknowns=turns, residual=residual,
+        next_state=ImmutableMatrix(q1 + [2 * v - w for v, w in zip(vm, v0)]),
+        # theta_i ~ dt phidot_i: the turn of each joint at the start's rates.
+        predictor=ImmutableMatrix([dt * rate for rate in state_rates]),
         joint_angles=ImmutableMatrix(joint_angles(scene, q0)),
-        joint_velocities=ImmutableMatrix(state_rates), energy=energy,
+        joint_velocities=ImmutableMatrix(outputs_rates), energy=energy,
         constraint_residuals=ImmutableMatrix(constraint_values(scene, q0)),
         initial_angles=phi, initial_velocities=phidot,
         initial_state=ImmutableMatrix(initial_state),
         state_layout=Layout(tuple(layout), (
             "per link i: COM x_i (m) and directors d_i1, d_i2, d_i3 (the columns of its "
             "rotation), world frame; then their velocities in the same layout (m/s, 1/s)")),
-        unknowns_layout=Layout(tuple(f"dv{name}" for name in names) + tuple(mu_names), (
-            "the increment dv = v_1 - v_0 of the coordinates' velocities over the step, then "
-            "the constraint impulses mu, 11 per link (orthonormality 6, joint point 3, "
-            "joint axis 2)")),
+        unknowns_layout=Layout(tuple(f"w{i}" for i in range(1, n + 1)), (
+            "per joint i, w_i = 2 tan(theta_i / 2) of the turn theta_i of link i about joint "
+            "i's axis over the step (relative to link i-1; w ~ theta for a short step)")),
         residual_description=(
-            "dt-scaled momentum balance M dv + G(q_m)^T mu + dt (gradV~ - f(q_m)) (12 entries "
-            "per link), then the constraints g(q_1) (11 per link)"),
+            "the momentum balance M dv + dt (gradV~ - f(q_m)) projected on the joint twists at "
+            "the mid-point, P(q_m)^T (...): per joint, its moment about the joint's axis "
+            "(kg m^2/s); the constraint impulses drop out"),
         inputs=inputs,
         input_work=dt * sp.Add(*(u * rate for u, rate in zip(applied, rates))),
         dissipated=dt * sp.Add(*(number(link.damping) * rate ** 2
@@ -342,7 +470,10 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         segment_vectors=ImmutableMatrix([c for d in segments for c in d]),
         definitions=tuple(step.items), state_definitions=tuple(at_state.items),
         flow_description=FLOWS if has_energy_flows(scene) else None,
-        # Newton-chord, the Jacobian once a step: on the Panda with three springs (dt = 1 ms,
-        # 2000 steps) 2.0 iterations a step and 0.43 ms against full Newton's 3.3 and 1.4 ms,
-        # the balance error 1.8e-13 J with either (docs/model.md 4.8).
-        jacobian_reuse=JACOBIAN_PER_STEP, state_from_joint_space=False, **extra)
+        # Newton-chord, its Jacobian kept across chained steps (model.md 13), to a tighter
+        # update tolerance than the contract's: dF/dw ~ 2 M / dt is large, so an error of the
+        # turns w within 1e-10 relative leaves the energy balance of the Panda with three
+        # springs (dt = 1 ms, 2000 steps) at 4.1e-11 J; at 1e-14 at 6.7e-13 J, for 2.16
+        # iterations a step against 2.00 (docs/model.md 4.8).
+        jacobian_reuse=JACOBIAN_CHORD_ACROSS_STEPS, newton_overrides=UPDATE_TOLERANCES,
+        state_from_joint_space=False, **extra)
