@@ -376,6 +376,39 @@ def test_turns_keep_the_constraints_and_the_twists_span_their_null_space(seed, n
     np.testing.assert_allclose(at_start, twists @ f, rtol=1e-8, atol=1e-8 * np.abs(f).max())
 
 
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
+def test_newton_matrix_is_the_mass_matrix_at_rest_and_near_dF_dw(seed, n):
+    """Newton's matrix A (spatial_es.newton_matrix, the composite rigid bodies with the
+    mid-point and end configurations): at w = 0 it is 2/dt times the joint-space mass matrix
+    of chaingen.spatial.dynamics (itself checked against Pinocchio); at the step's root at
+    dt = 1 ms its chord contracts fast, |eig(1 - A^-1 dF/dw)| <= 0.05 (dF/dw by central
+    differences)."""
+    scene, u, angles, rates = actuated_damped(seed, n)
+    scheme = build_scheme(scene, "es")
+    model = directors.director_model(scene)
+    q, v = directors.joint_space_start(model, angles, rates)
+    dt = 1e-3
+    matrix = scheme.step_function(list(scheme.newton_matrix))
+    residual = scheme.step_function(list(scheme.residual))
+
+    def A(w):
+        return np.array(matrix(*w, *q, *v, *u, dt), dtype=float).reshape(n, n)
+
+    expected = dynamics.mass_matrix(scene, angles)
+    np.testing.assert_allclose(A(np.zeros(n)) * dt / 2, expected, rtol=0,
+                               atol=1e-12 * np.abs(expected).max())
+    w, _ = reduced_step(scheme, q, v, u, dt)
+
+    def F(w):
+        return np.array(residual(*w, *q, *v, *u, dt), dtype=float).ravel()
+
+    h = 1e-7 * max(1e-3, np.abs(w).max())
+    jacobian = np.array([(F(w + h * e) - F(w - h * e)) / (2 * h) for e in np.eye(n)]).T
+    rate = np.abs(np.linalg.eigvals(np.eye(n) - np.linalg.solve(A(w), jacobian))).max()
+    assert rate <= 0.05, rate
+
+
 def test_order_6_refused_order_4_composed():
     """Order 4 composes the step (docs/model.md 14); order 6 would stall at 4, as the planar
     es's composition does: refused, saying so."""

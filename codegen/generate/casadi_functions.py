@@ -64,6 +64,9 @@ class SchemeFunctions:
     # pattern, (rows, columns) of its nonzeros in that order. None: dense LU of dF/dz.
     newton_factors: ca.Function | None = None
     arm_pattern: tuple[tuple[int, ...], tuple[int, ...]] | None = None
+    # -> (F, A): the scheme's Newton matrix A ~ dF/dz (StepSystem.newton_matrix), which Newton
+    # takes in place of dF/dz; None: dF/dz.
+    newton_matrix: ca.Function | None = None
 
     def all(self) -> tuple[ca.Function, ...]:
         """The functions of the generated C. A package with newton_factors forms its
@@ -73,7 +76,7 @@ class SchemeFunctions:
                      self.outputs, self.initial_state, self.sensitivity_rhs,
                      self.sensitivity_map, self.joint_maps, self.holding_torques,
                      self.segment_margins, self.energy_check, self.newton_factors,
-                     self.parameters)
+                     self.parameters, self.newton_matrix)
         return tuple(function for function in functions if function is not None)
 
 
@@ -278,6 +281,18 @@ def newton_factors(t: SchemeTranslation) -> tuple[GeneratedFunction | None, tupl
     return t.step_function("newton_factors", [t.residual, factors], ["F", "factors"]), pattern
 
 
+def newton_matrix(t: SchemeTranslation) -> GeneratedFunction | None:
+    """-> (F, A), the scheme's Newton matrix A ~ dF/dz (StepSystem.newton_matrix), dense,
+    column-major; None for a scheme without one."""
+    matrix = t.scheme.step.newton_matrix
+    if matrix is None:
+        return None
+    entries = t.translated("newton_matrix", list(matrix), t.step, t.step_symbols)
+    # list(matrix) is row by row; the runtime reads A column by column
+    return t.step_function("newton_matrix", [t.residual, ca.reshape(entries, t.nz, t.nz).T],
+                           ["F", "A"])
+
+
 def predictor(t: SchemeTranslation) -> GeneratedFunction:
     """(x0, p, dt) -> z: the first Newton guess; it may use the state definitions (vi:
     w = M^-1 p by its recursion)."""
@@ -314,6 +329,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     found["energy_check"] = energy_check(t)
     found["holding_torques"] = holding_torques(t)
     found["newton_factors"], pattern = newton_factors(t)
+    found["newton_matrix"] = newton_matrix(t)
     jacobian = t.residual if t.jacobian is None else t.jacobian
     found.update(
         residual=t.step_function("residual", [t.residual], ["F"]),

@@ -58,7 +58,7 @@ MODEL_FUNCTIONS = (
     ("predictor", "predictor"), ("next_state", "next_state"),
     ("segment_margins", "segment_margins"), ("energy_terms", "energy_check"),
     ("sensitivity_rhs", "sensitivity_rhs"), ("sensitivity_map", "sensitivity_map"),
-    ("joint_maps", "joint_maps"),
+    ("joint_maps", "joint_maps"), ("newton_matrix", "newton_matrix"),
 )
 
 #: A generated model source larger than this is compiled with LARGE_MODEL_FLAGS in place of the

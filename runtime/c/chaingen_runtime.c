@@ -807,7 +807,8 @@ static int cg_choose_warm_start(const chaingen_model *table, const cg_solver *c,
 }
 
 /* F (with_jacobian: and dF/dz, factorised later, and the residual's scale at it) at z, for
- * Newton. Returns nonzero when an evaluation failed. */
+ * Newton; with_jacobian 2: the model's Newton matrix in place of dF/dz where it has one.
+ * Returns nonzero when an evaluation failed. */
 static int cg_newton_evaluate(const chaingen_model *table, const cg_solver *c, const double *x0,
                               const double *u, const double *p, double dt, int with_jacobian)
 {
@@ -829,8 +830,20 @@ static int cg_newton_evaluate(const chaingen_model *table, const cg_solver *c, c
         }
         return evaluated;
     }
-    evaluated = cg_evaluate_residual_jacobian(model, c, z, x0, u, p, dt, c->residual,
-                                              c->jacobian);
+    if (model->newton_matrix && with_jacobian == 2) {
+        /* The scheme's own Newton matrix, an approximation of dF/dz that is cheaper to
+         * evaluate (spatial es); dF/dz itself stays for the sensitivities and the checks. */
+        evaluated = cg_derive(model, c, p);
+        if (!evaluated) {
+            cg_step_arguments(model, c, z, x0, u, &dt);
+            c->res[0] = c->residual;
+            c->res[1] = c->jacobian;
+            evaluated = cg_evaluate(model->newton_matrix, c);
+        }
+    } else {
+        evaluated = cg_evaluate_residual_jacobian(model, c, z, x0, u, p, dt, c->residual,
+                                                  c->jacobian);
+    }
     /* The residual's scale at this Jacobian: 1 + sum_j |dF_i/dz_j| |z_j|. */
     for (i = 0; i < nz; ++i) {
         c->residual_scale[i] = 1.0;
@@ -934,7 +947,11 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
              * predictor with a fresh Jacobian would repeat this solve. */
             *cold = here && !(s->chained && s->warm_choice != 1);
         }
-        if (cg_newton_evaluate(model, c, x0, u, p, dt, here)) {
+        /* The model's Newton matrix (an approximation of dF/dz, spatial es) for the chord's
+         * first matrix of a step; dF/dz itself for full Newton and wherever that matrix had to
+         * be replaced within the step (it contracted poorly: a long step of a fast chain). */
+        if (cg_newton_evaluate(model, c, x0, u, p, dt,
+                               here && evaluations == 0 && chord ? 2 : here)) {
             status = CHAINGEN_EVALUATION_FAILED;
             break;
         }

@@ -129,6 +129,11 @@ class StepSystem:
     # Where dF/dz is evaluated through a local function of several nodes (NodeSpace), that
     # structure; None: by the residual as a whole.
     node_space: NodeSpace | None = None
+    # A matrix A ~ dF/dz that Newton's method takes in place of dF/dz (its entries in the
+    # step's inputs and definitions, row by row: A[i, j] at i * nz + j), where it is much
+    # cheaper and contracts almost as well (spatial es: 2 P^T M P / dt, docs/model.md 4.8);
+    # the exact dF/dz stays for the step sensitivities and `check`. None: dF/dz.
+    newton_matrix: ImmutableMatrix | None = None
 
 
 @dataclass(frozen=True)

@@ -53,7 +53,7 @@ FLOWS = FlowDescription(
     "d_a x ddot_a. The scheme is passive: H_1 - H_0 = flows[0] - flows[1] to round-off and the "
     "Newton tolerance (docs/model.md, section 4.8).")
 #: The step's Newton tolerances on the update of the turns w (the contract's are 1e-10, 1e-13).
-UPDATE_TOLERANCES = (("update_rtol", 1e-14), ("update_atol", 1e-17))
+UPDATE_TOLERANCES = (("update_rtol", 1e-12), ("update_atol", 1e-15))
 #: The names of a link's 12 coordinates, in the state's order.
 COORDINATE_NAMES = tuple(f"{body}_{axis}" for body in ("x", "d1", "d2", "d3") for axis in "xyz")
 
@@ -265,11 +265,6 @@ def joint_space_start(scene: SpatialScene, phi, phidot, defs: Definitions) -> li
     return q + v
 
 
-#: The orders of the step this builder takes (chaingen.symbolic.schemes.orders_taken asks it):
-#: order 2 and its composition to order 4 (order 6 would stall at 4, docs/model.md 14).
-ORDERS = (2, 4)
-
-
 def turned_frames(scene: SpatialScene, q0, increments, defs: Definitions) -> list:
     """dq = F(q_0, w) - q_0, the nodal reparametrisation (docs/model.md 4.8): link i turned
     by Q_i = Q_{i-1} Rot(n_i0, theta_i), n_i0 = R_{i-1,0} J_i a_i joint i's axis at the step's
@@ -386,6 +381,91 @@ def projected_rates(scene: SpatialScene, q, v, axes, defs: Definitions) -> list:
     return rates
 
 
+def newton_matrix(scene: SpatialScene, qm, q1, axes, turns, dt, defs: Definitions):
+    """Newton's matrix A = 2/dt P(q_m)^T M P(q_1) diag(1 / (1 + w_k^2/4)) ~ dF/dw: the
+    derivative of the residual's leading term P(q_m)^T 2 M dq / dt, with dq/dw_k = P_k(q_1)
+    dtheta_k/dw_k (the twist of joint k at the step's end; |n_k| = 1), without the terms of
+    order dt^2 (the springs' stiffness, the impulses' turning of P) and dt (damping).
+
+    P(q_m)^T M P(q_1) by composite rigid bodies (Featherstone's CRBA, in the world frame about
+    its origin, with the two sides at q_m and q_1): for joints j, k and the links i from
+    max(j, k) on, sum_i xi_j(q_m)^T M_i xi_k(q_1) = v_j . L + n_j . H, with the twists
+    (v, n) = (o x n, n), L = m v_k + n_k x h_1 and H = K n_k + h_m x v_k from the composites
+    m = sum m_i, h_m = sum m_i x_im, h_1 = sum m_i x_i1 and
+    K = sum m_i ((x_im . x_i1) 1 - x_i1 x_im^T) + tr(Y_i) 1 - Y_i, Y_i = D_i1 E_i D_im^T (E the
+    Euler tensor, D the directors: M's rotational part in director form). O(n^2), about 2000
+    operations on the Panda, half the residual's; the exact dF/dw, by forward derivatives
+    through the whole residual, costs 16 residuals there, and this A's chord contracts by
+    about 3e-4 per iteration (at the mid-point on both sides, 1e-3; docs/model.md 4.8)."""
+    n = scene.n
+    centres = coms(scene)
+    composites = [None] * (n + 1)
+    mass, start, end, inertia = sp.Integer(0), (sp.Integer(0),) * 3, (sp.Integer(0),) * 3, None
+    for i in range(n, 0, -1):
+        link = scene.links[i - 1]
+        middle, final = Link(qm, i), Link(q1, i)
+        euler = euler_tensor(link.inertia_matrix())
+        # T = E D_m^T (rows a), then Y = D_1 T
+        rows = [add(*(scale(number(euler[a][b]), middle.d[b]) for b in range(3)
+                      if euler[a][b] != 0)) for a in range(3)]
+        rows = [vectors.define_vector(defs, f"T{i}_{a}", row) for a, row in enumerate(rows)]
+        second = [[sp.Add(*(final.d[a][r] * rows[a][c] for a in range(3))) for c in range(3)]
+                  for r in range(3)]
+        second = [[defs.define(f"Y{i}_{r}{c}", second[r][c]) for c in range(3)]
+                  for r in range(3)]
+        m = number(link.mass)
+        both = defs.define(f"xx{i}", dot(middle.x, final.x))
+        trace = second[0][0] + second[1][1] + second[2][2]
+        own = [[(trace + m * both if r == c else 0) - second[r][c] - m * final.x[r] * middle.x[c]
+                for c in range(3)] for r in range(3)]
+        mass = mass + m
+        start = vectors.define_vector(defs, f"hm{i}", add(start, scale(m, middle.x)))
+        end = vectors.define_vector(defs, f"h1{i}", add(end, scale(m, final.x)))
+        inertia = [[defs.define(f"K{i}_{r}{c}", own[r][c] + (0 if inertia is None
+                                                             else inertia[r][c]))
+                    for c in range(3)] for r in range(3)]
+        composites[i] = (mass, start, end, inertia)
+
+    def twist(q, j, name, axis):
+        joint = Link(q, j - 1).point(scene.links[j - 1].joint.xyz, centres[j - 1])
+        return vectors.define_vector(defs, f"{name}{j}", cross(joint, axis)), axis
+
+    end_axes = [Link(q1, j - 1).turn(rpy_matrix(link.joint.rpy) @ np.asarray(link.joint.axis))
+                for j, link in enumerate(scene.links, start=1)]
+    end_axes = [axis if j == 1 else vectors.define_vector(defs, f"n1_{j}", axis)
+                for j, axis in enumerate(end_axes, start=1)]
+    projections = [twist(qm, j, "vm", axes[j - 1]) for j in range(1, n + 1)]
+    motions = [twist(q1, k, "v1", end_axes[k - 1]) for k in range(1, n + 1)]
+    matrix = [[None] * n for _ in range(n)]
+    for c in range(1, n + 1):
+        mass, start, end, inertia = composites[c]
+        transposed = [[inertia[r][k] for r in range(3)] for k in range(3)]
+        velocity, axis = motions[c - 1]
+        linear = vectors.define_vector(defs, f"L{c}", add(scale(mass, velocity),
+                                                          cross(axis, end)))
+        angular = vectors.define_vector(defs, f"H{c}", add(vectors.apply(inertia, axis),
+                                                           cross(start, velocity)))
+        for j in range(1, c + 1):           # column c, rows j <= c: composite c
+            v_j, n_j = projections[j - 1]
+            matrix[j - 1][c - 1] = dot(v_j, linear) + dot(n_j, angular)
+        velocity, axis = projections[c - 1]
+        linear = vectors.define_vector(defs, f"Lt{c}", add(scale(mass, velocity),
+                                                           cross(axis, start)))
+        angular = vectors.define_vector(defs, f"Ht{c}", add(vectors.apply(transposed, axis),
+                                                            cross(end, velocity)))
+        for k in range(1, c):               # row c, columns k < c: composite c
+            v_k, n_k = motions[k - 1]
+            matrix[c - 1][k - 1] = dot(v_k, linear) + dot(n_k, angular)
+    scales = [defs.define(f"dtheta{k}", 2 / dt / (1 + w ** 2 / 4))
+              for k, w in enumerate(turns, start=1)]
+    return ImmutableMatrix([[matrix[r][c] * scales[c] for c in range(n)] for r in range(n)])
+
+
+#: The orders of the step this builder takes (chaingen.symbolic.schemes.orders_taken asks it):
+#: order 2 and its composition to order 4 (order 6 would stall at 4, docs/model.md 14).
+ORDERS = (2, 4)
+
+
 def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) -> DiscreteScheme:
     """The spatial es scheme of `scene`, by the discrete null space method with nodal
     reparametrisation (Betsch and Leyendecker 2006; docs/model.md 4.8): n unknowns, one turn per
@@ -418,6 +498,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         mass_times(scene, dv), potential_gradient(scene, q0, q1, step),
         torque_forces(scene, qm, axes, torques))]
     residual = ImmutableMatrix(joint_moments(scene, qm, momentum, axes, step))
+    newton = newton_matrix(scene, qm, q1, axes, turns, dt, step)
 
     at_state = Definitions("state_")
     state_axes, state_rates = joint_rates(scene, q0, v0, at_state, "")
@@ -444,7 +525,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         method="es", quadrature=None, gradient="chain", scene=scene, summary=SUMMARY, dt=dt,
         quadrature_rule="none: the springs' discrete gradient is exact (chain rule)",
         state=ImmutableMatrix.vstack(q0, v0),
-        unknowns=turns, residual=residual,
+        unknowns=turns, residual=residual, newton_matrix=newton,
         next_state=ImmutableMatrix(q1 + [2 * v - w for v, w in zip(vm, v0)]),
         # theta_i ~ dt phidot_i: the turn of each joint at the start's rates.
         predictor=ImmutableMatrix([dt * rate for rate in state_rates]),
@@ -470,10 +551,11 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         segment_vectors=ImmutableMatrix([c for d in segments for c in d]),
         definitions=tuple(step.items), state_definitions=tuple(at_state.items),
         flow_description=FLOWS if has_energy_flows(scene) else None,
-        # Newton-chord, its Jacobian kept across chained steps (model.md 13), to a tighter
-        # update tolerance than the contract's: dF/dw ~ 2 M / dt is large, so an error of the
-        # turns w within 1e-10 relative leaves the energy balance of the Panda with three
-        # springs (dt = 1 ms, 2000 steps) at 4.1e-11 J; at 1e-14 at 6.7e-13 J, for 2.16
-        # iterations a step against 2.00 (docs/model.md 4.8).
+        # Newton-chord with Newton's matrix A (newton_matrix), evaluated at each step's first
+        # guess (and again when it contracts poorly, model.md 13), to a tighter update
+        # tolerance than the contract's: dF/dw ~ 2 M / dt is large, so the turns' error shows
+        # in the energy. On the Panda with three springs (dt = 1 ms, 2000 steps) the balance
+        # error is 9.4e-11 J at update_rtol 1e-10 (2.8 iterations a step), 9.1e-12 J at 1e-11,
+        # 2.2e-12 J at 1e-12 (3.3) and no smaller below (round-off's random walk).
         jacobian_reuse=JACOBIAN_CHORD_ACROSS_STEPS, newton_overrides=UPDATE_TOLERANCES,
         state_from_joint_space=False, **extra)
