@@ -380,8 +380,9 @@ def test_turns_keep_the_constraints_and_the_twists_span_their_null_space(seed, n
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
 def test_newton_matrix_is_the_mass_matrix_at_rest_and_near_dF_dw(seed, n):
     """Newton's matrix A (spatial_es.newton_matrix, the composite rigid bodies with the
-    mid-point and end configurations): at w = 0 it is 2/dt times the joint-space mass matrix
-    of chaingen.spatial.dynamics (itself checked against Pinocchio); at the step's root at
+    mid-point and end configurations, and the damping): at w = 0 it is 2/dt times the
+    joint-space mass matrix of chaingen.spatial.dynamics (itself checked against Pinocchio)
+    plus the damping d_j on the diagonal; at the step's root at
     dt = 1 ms its chord contracts fast, |eig(1 - A^-1 dF/dw)| <= 0.05 (dF/dw by central
     differences)."""
     scene, u, angles, rates = actuated_damped(seed, n)
@@ -395,7 +396,8 @@ def test_newton_matrix_is_the_mass_matrix_at_rest_and_near_dF_dw(seed, n):
     def A(w):
         return np.array(matrix(*w, *q, *v, *u, dt), dtype=float).reshape(n, n)
 
-    expected = dynamics.mass_matrix(scene, angles)
+    damping = np.array([link.damping for link in scene.links])
+    expected = dynamics.mass_matrix(scene, angles) + dt / 2 * np.diag(damping)
     np.testing.assert_allclose(A(np.zeros(n)) * dt / 2, expected, rtol=0,
                                atol=1e-12 * np.abs(expected).max())
     w, _ = reduced_step(scheme, q, v, u, dt)

@@ -456,9 +456,12 @@ def newton_matrix(scene: SpatialScene, qm, q1, axes, turns, dt, defs: Definition
         for k in range(1, c):               # row c, columns k < c: composite c
             v_k, n_k = motions[k - 1]
             matrix[c - 1][k - 1] = dot(v_k, linear) + dot(n_k, angular)
-    scales = [defs.define(f"dtheta{k}", 2 / dt / (1 + w ** 2 / 4))
-              for k, w in enumerate(turns, start=1)]
-    return ImmutableMatrix([[matrix[r][c] * scales[c] for c in range(n)] for r in range(n)])
+    turning = [defs.define(f"dtheta{k}", 1 / (1 + w ** 2 / 4))
+               for k, w in enumerate(turns, start=1)]
+    # the joints' damping, -dt P^T f with tau_j = -d_j phidot_j(m), phidot_j(m) ~ theta_j / dt
+    return ImmutableMatrix([[(2 / dt * matrix[r][c]
+                              + (number(scene.links[c].damping) if r == c else 0)) * turning[c]
+                             for c in range(n)] for r in range(n)])
 
 
 #: The orders of the step this builder takes (chaingen.symbolic.schemes.orders_taken asks it):
