@@ -382,10 +382,11 @@ def projected_rates(scene: SpatialScene, q, v, axes, defs: Definitions) -> list:
 
 
 def newton_matrix(scene: SpatialScene, qm, q1, axes, turns, dt, defs: Definitions):
-    """Newton's matrix A = 2/dt P(q_m)^T M P(q_1) diag(1 / (1 + w_k^2/4)) ~ dF/dw: the
-    derivative of the residual's leading term P(q_m)^T 2 M dq / dt, with dq/dw_k = P_k(q_1)
-    dtheta_k/dw_k (the twist of joint k at the step's end; |n_k| = 1), without the terms of
-    order dt^2 (the springs' stiffness, the impulses' turning of P) and dt (damping).
+    """Newton's matrix A = (2/dt P(q_m)^T M P(q_1) + diag(d)) diag(1 / (1 + w_k^2/4)), an
+    approximation of dF/dw: the derivative of the residual's leading terms, P(q_m)^T 2 M dq / dt
+    with dq/dw_k = P_k(q_1) dtheta_k/dw_k (the twist of joint k at the step's end; |n_k| = 1),
+    and the damping; without the terms of order dt^2 (the springs' stiffness, the impulses'
+    turning of P) and dt (the torques' turning).
 
     P(q_m)^T M P(q_1) by composite rigid bodies (Featherstone's CRBA, in the world frame about
     its origin, with the two sides at q_m and q_1): for joints j, k and the links i from
@@ -393,10 +394,12 @@ def newton_matrix(scene: SpatialScene, qm, q1, axes, turns, dt, defs: Definition
     (v, n) = (o x n, n), L = m v_k + n_k x h_1 and H = K n_k + h_m x v_k from the composites
     m = sum m_i, h_m = sum m_i x_im, h_1 = sum m_i x_i1 and
     K = sum m_i ((x_im . x_i1) 1 - x_i1 x_im^T) + tr(Y_i) 1 - Y_i, Y_i = D_i1 E_i D_im^T (E the
-    Euler tensor, D the directors: M's rotational part in director form). O(n^2), about 2000
+    Euler tensor, D the directors: M's rotational part in director form). O(n^2), about 2200
     operations on the Panda, half the residual's; the exact dF/dw, by forward derivatives
     through the whole residual, costs 16 residuals there, and this A's chord contracts by
-    about 3e-4 per iteration (at the mid-point on both sides, 1e-3; docs/model.md 4.8)."""
+    about 3e-4 per iteration (at the mid-point on both sides, 1e-3; docs/model.md 4.8). The
+    joints' damping d_j adds to the diagonal (-dt P^T f with tau_j = -d_j phidot_j(m) and
+    phidot_j(m) ~ theta_j / dt)."""
     n = scene.n
     centres = coms(scene)
     composites = [None] * (n + 1)
@@ -558,7 +561,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         # guess (and again when it contracts poorly, model.md 13), to a tighter update
         # tolerance than the contract's: dF/dw ~ 2 M / dt is large, so the turns' error shows
         # in the energy. On the Panda with three springs (dt = 1 ms, 2000 steps) the balance
-        # error is 9.4e-11 J at update_rtol 1e-10 (2.8 iterations a step), 9.1e-12 J at 1e-11,
-        # 2.2e-12 J at 1e-12 (3.3) and no smaller below (round-off's random walk).
+        # error is 9.4e-11 J at update_rtol 1e-10, 9.1e-12 J at 1e-11, 2.2e-12 J at 1e-12
+        # (2.95 iterations a step) and no smaller below (round-off's random walk).
         jacobian_reuse=JACOBIAN_CHORD_ACROSS_STEPS, newton_overrides=UPDATE_TOLERANCES,
         state_from_joint_space=False, **extra)
