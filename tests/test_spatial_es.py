@@ -338,7 +338,7 @@ def test_turns_keep_the_constraints_and_the_twists_span_their_null_space(seed, n
     import sympy as sp
 
     from chaingen.symbolic.recursion import Definitions
-    from chaingen.symbolic.schemes import spatial_es
+    from chaingen.symbolic.schemes import spatial_es, spatial_null_space
 
     scene = random_scene(seed, n, springs=True)
     model, _, _, q0, _ = random_state(scene, seed)
@@ -348,10 +348,10 @@ def test_turns_keep_the_constraints_and_the_twists_span_their_null_space(seed, n
     w_symbols = sp.symbols(f"w0:{n}", real=True)
     f_symbols = sp.symbols(f"f0:{12 * n}", real=True)
     defs = Definitions("t_")
-    dq = spatial_es.turned_frames(scene, q_symbols, w_symbols, defs)
+    dq = spatial_null_space.turned_frames(scene, q_symbols, w_symbols, defs)
     qm = [q + d / 2 for q, d in zip(q_symbols, dq)]
     axes, _ = spatial_es.joint_rates(scene, qm, [sp.Integer(0)] * (12 * n), defs, "m")
-    moments = spatial_es.joint_moments(scene, qm, f_symbols, axes, defs)
+    moments = spatial_null_space.joint_moments(scene, qm, f_symbols, axes, defs)
     inputs = [*q_symbols, *w_symbols, *f_symbols]
     evaluate = sp.lambdify(inputs, list(dq) + moments, modules="numpy",
                            cse=lambda e: (list(defs.items) + sp.cse(e)[0], sp.cse(e)[1]))
@@ -379,7 +379,7 @@ def test_turns_keep_the_constraints_and_the_twists_span_their_null_space(seed, n
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
 def test_newton_matrix_is_the_mass_matrix_at_rest_and_near_dF_dw(seed, n):
-    """Newton's matrix A (spatial_es.newton_matrix, the composite rigid bodies with the
+    """Newton's matrix A (spatial_null_space.newton_matrix, the composite rigid bodies with the
     mid-point and end configurations, and the damping): at w = 0 it is 2/dt times the
     joint-space mass matrix of chaingen.spatial.dynamics (itself checked against Pinocchio)
     plus the damping d_j on the diagonal; at the step's root at
