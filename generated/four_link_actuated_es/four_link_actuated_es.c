@@ -66,6 +66,7 @@ static const chaingen_model MODEL = {
     .sensitivity_rhs = four_link_actuated_es_model_sensitivity_rhs,
     .sensitivity_map = four_link_actuated_es_model_sensitivity_map,
     .joint_maps = NULL,
+    .newton_matrix = NULL,
 };
 
 /* The runtime, compiled here with the model a constant it sees (its loops specialised to the

@@ -57,6 +57,7 @@ static const chaingen_model MODEL = {
     .sensitivity_rhs = three_link_gravity_vi_model_sensitivity_rhs,
     .sensitivity_map = three_link_gravity_vi_model_sensitivity_map,
     .joint_maps = NULL,
+    .newton_matrix = NULL,
 };
 
 /* The runtime, compiled here with the model a constant it sees (its loops specialised to the

@@ -42,6 +42,8 @@ typedef struct {
     int refresh_first;      /* the next solve evaluates the Jacobian at its first guess:
                              * simplified Newton, when the last replaced one evaluated within
                              * it; the chord kept across steps, when the last did not */
+    int exact_first;        /* the model's Newton matrix had to be replaced within a recent
+                             * solve: so many more solves start with dF/dz instead */
     int energy_valid;       /* energy_ends belong to energy_x */
     int q_valid;            /* q = Q(p) belongs to q_of */
     int composed_valid;     /* composed_x1 and the stages' records are usable */

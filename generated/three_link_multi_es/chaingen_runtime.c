@@ -67,6 +67,10 @@
  * than this many further updates to meet the tolerance: a Newton step converges quadratically,
  * in about as many. */
 #define CG_REFRESH_ITERATIONS 2.0
+/* A model's Newton matrix (an approximation of dF/dz, spatial es) that had to be replaced within
+ * a solve (it contracted poorly: a long step of a fast chain) is not tried again for this many
+ * solves: they start with dF/dz itself, as the model's matrix would only cost them iterations. */
+#define CG_EXACT_SOLVES 16
 /* The adaptive steps' controller (see adaptive_interval). */
 #define CG_SAFETY 0.9
 #define CG_MIN_FACTOR 0.2
@@ -807,7 +811,8 @@ static int cg_choose_warm_start(const chaingen_model *table, const cg_solver *c,
 }
 
 /* F (with_jacobian: and dF/dz, factorised later, and the residual's scale at it) at z, for
- * Newton. Returns nonzero when an evaluation failed. */
+ * Newton; with_jacobian 2: the model's Newton matrix in place of dF/dz where it has one.
+ * Returns nonzero when an evaluation failed. */
 static int cg_newton_evaluate(const chaingen_model *table, const cg_solver *c, const double *x0,
                               const double *u, const double *p, double dt, int with_jacobian)
 {
@@ -829,8 +834,20 @@ static int cg_newton_evaluate(const chaingen_model *table, const cg_solver *c, c
         }
         return evaluated;
     }
-    evaluated = cg_evaluate_residual_jacobian(model, c, z, x0, u, p, dt, c->residual,
-                                              c->jacobian);
+    if (model->newton_matrix && with_jacobian == 2) {
+        /* The scheme's own Newton matrix, an approximation of dF/dz that is cheaper to
+         * evaluate (spatial es); dF/dz itself stays for the sensitivities and the checks. */
+        evaluated = cg_derive(model, c, p);
+        if (!evaluated) {
+            cg_step_arguments(model, c, z, x0, u, &dt);
+            c->res[0] = c->residual;
+            c->res[1] = c->jacobian;
+            evaluated = cg_evaluate(model->newton_matrix, c);
+        }
+    } else {
+        evaluated = cg_evaluate_residual_jacobian(model, c, z, x0, u, p, dt, c->residual,
+                                                  c->jacobian);
+    }
     /* The residual's scale at this Jacobian: 1 + sum_j |dF_i/dz_j| |z_j|. */
     for (i = 0; i < nz; ++i) {
         c->residual_scale[i] = 1.0;
@@ -908,6 +925,10 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     int evaluated_at = 0;   /* the iteration at whose iterate dF/dz was last evaluated (0: none) */
     int evaluations = 0;    /* of dF/dz within this call */
     int refreshed = 0;      /* dF/dz evaluated at an iterate after the first guess */
+    /* The model's Newton matrix may be this solve's first (chord, and it did not fail lately),
+     * and was. */
+    const int approximate = chord && model->newton_matrix && s->exact_first == 0;
+    int approximated = 0;
     z = c->z;
     dz = c->dz;
     residual = c->residual;
@@ -934,7 +955,14 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
              * predictor with a fresh Jacobian would repeat this solve. */
             *cold = here && !(s->chained && s->warm_choice != 1);
         }
-        if (cg_newton_evaluate(model, c, x0, u, p, dt, here)) {
+        /* The model's Newton matrix (an approximation of dF/dz, spatial es) for the chord's
+         * first matrix of a step; dF/dz itself for full Newton and wherever that matrix had to
+         * be replaced within the step (it contracted poorly: a long step of a fast chain). */
+        if (here && evaluations == 0) {
+            approximated = approximate;
+        }
+        if (cg_newton_evaluate(model, c, x0, u, p, dt,
+                               here && evaluations == 0 && approximate ? 2 : here)) {
             status = CHAINGEN_EVALUATION_FAILED;
             break;
         }
@@ -1042,6 +1070,13 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
             }
             previous_update = update_norm;
             previous_residual = residual_norm;
+        }
+    }
+    if (model->newton_matrix && chord) {
+        if (approximated && refreshed) {
+            s->exact_first = CG_EXACT_SOLVES;
+        } else if (s->exact_first > 0) {
+            --s->exact_first;
         }
     }
     if (simplified) {

@@ -51,7 +51,9 @@ typedef int (*chaingen_function)(const double **arg, double **res, long long int
  *   energy_check      (x, q) -> (H, T)                         when energy_check
  *   sensitivity_rhs   (z, x0, u, q, dt) -> (R[nz x ncols])     when sensitivities
  *   sensitivity_map   (z, x0, u, q, dt) -> (S_z, S_s0, S_u, S_p)  when sensitivities
- *   joint_maps        (x0, x1, q) -> (x0_s0, s1_x1, x0_p, s1_p)   composed, chain_state */
+ *   joint_maps        (x0, x1, q) -> (x0_s0, s1_x1, x0_p, s1_p)   composed, chain_state
+ *   newton_matrix     (z, x0, u, q, dt) -> (F, A)   A ~ dF/dz, Newton's matrix in place of
+ *                                                   dF/dz where the scheme has one */
 typedef struct {
     int n_joints;           /* links and revolute joints N */
     int nx;                 /* entries of a state x */
@@ -91,6 +93,7 @@ typedef struct {
     chaingen_function sensitivity_rhs;
     chaingen_function sensitivity_map;
     chaingen_function joint_maps;
+    chaingen_function newton_matrix;
 } chaingen_model;
 
 /* The size a chaingen_dimension query names, -1 for an unknown one. */
