@@ -376,6 +376,7 @@ def test_turns_keep_the_constraints_and_the_twists_span_their_null_space(seed, n
     np.testing.assert_allclose(at_start, twists @ f, rtol=1e-8, atol=1e-8 * np.abs(f).max())
 
 
+@pytest.mark.heavy  # SymPy on up to six links: tens of seconds, too slow for the fast tier
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
 def test_newton_matrix_is_the_mass_matrix_at_rest_and_near_dF_dw(seed, n):

@@ -61,6 +61,7 @@ def forced_scene(seed, n):
         for link, d in zip(plain.links, rng.uniform(0.0, 2.0, n))))
 
 
+@pytest.mark.heavy  # SymPy on up to six links: tens of seconds, too slow for the fast tier
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 5), dt=st.floats(1e-3, 0.05))
 def test_residual_vanishes_at_a_numeric_solution_of_the_del_equations(seed, n, dt):
