@@ -50,34 +50,54 @@ class NumberPath:
         return float(_get(scene, self.path))
 
 
+
+def path_match(path: str, prefix: str, structure: re.Pattern, pattern: re.Pattern,
+               compiled: str, numbers: str) -> re.Match:
+    """The match of the canonical `path` against `pattern`, or SceneError (prefixed): another
+    spelling of a number, a structural path (`compiled`: what the solver compiles in) or a path
+    that names no number (`numbers`: of what, and what its numbers are). Planar and spatial
+    number paths share it."""
+    refused = spelling_error(path)
+    if refused:
+        raise SceneError(f"{prefix}{refused}")
+    if structure.fullmatch(path):
+        raise SceneError(f"{prefix}{path}: is structure, compiled into the solver ({compiled}): "
+                         "a study varies numbers only; make a scene per structure")
+    match = pattern.fullmatch(path) if canonical_path(path) == path else None
+    if not match:
+        raise SceneError(f"{prefix}{path}: names no number of {numbers}")
+    return match
+
+
+def run_number_path(n: int, path: str, match: re.Match, prefix: str) -> NumberPath | None:
+    """The run's own numbers (a simulation setting, an initial angle or rate of a joint of the
+    n) that `match` names, or None when it names a number of the scene's model."""
+    if match["setting"]:
+        return NumberPath(path, RUN_NUMBERS[path], False)
+    if match["run"]:
+        joint = int(match["joint"])
+        if joint >= n:
+            raise SceneError(f"{prefix}{path}: joint {joint + 1} does not exist: the chain has "
+                             f"{n} (indices 0..{n - 1})")
+        return NumberPath(path, RUN_NUMBERS[match["run"]], False)
+    return None
+
 def number_path(scene: Scene, path: str, *, where: str = "") -> NumberPath:
     """The number of `scene` at `path`, or SceneError naming the path and why it names no
     number (an unknown key, an index beyond the chain, a structural integer) or why it is
     not the number's one spelling (chaingen.runtime.keypaths: written otherwise, it names
     the canonical spelling)."""
     prefix = f"{where}: " if where else ""
-    refused = spelling_error(path)
-    if refused:
-        raise SceneError(f"{prefix}{refused}")
-    if _STRUCTURE.fullmatch(path):
-        raise SceneError(f"{prefix}{path}: is structure, compiled into the solver (n, the "
-                         "joints a spring spans, the actuated joints, the method, K): a study "
-                         "varies numbers only; make a scene per structure")
-    match = _PATH.fullmatch(path) if canonical_path(path) == path else None
-    if not match:
-        raise SceneError(f"{prefix}{path}: names no number of the scene (a key path such as "
-                         "links[0].mass, springs[1].stiffness, springs[0].offsets[1], "
-                         "base.fastening, gravity, initial.angles[0] or simulation.dt)")
+    match = path_match(path, prefix, _STRUCTURE, _PATH,
+                       "n, the joints a spring spans, the actuated joints, the method, K",
+                       "the scene (a key path such as links[0].mass, springs[1].stiffness, "
+                       "springs[0].offsets[1], base.fastening, gravity, initial.angles[0] or "
+                       "simulation.dt)")
     if match["top"]:
         return NumberPath(path, "m/s^2" if path == "gravity" else "m", True)
-    if match["setting"]:
-        return NumberPath(path, RUN_NUMBERS[path], False)
-    if match["run"]:
-        joint = int(match["joint"])
-        if joint >= scene.n:
-            raise SceneError(f"{prefix}{path}: joint {joint + 1} does not exist: the chain has "
-                             f"{scene.n} (indices 0..{scene.n - 1})")
-        return NumberPath(path, RUN_NUMBERS[match["run"]], False)
+    run = run_number_path(scene.n, path, match, prefix)
+    if run:
+        return run
     table, index, key, entry = match["table"], int(match["index"]), match["key"], match["entry"]
     rows = scene.links if table == "links" else scene.springs
     if index >= len(rows):

@@ -19,8 +19,7 @@ import dataclasses
 import re
 
 from ..errors import SceneError
-from ..runtime.keypaths import canonical_path, spelling_error
-from ..scene.parameters import RUN_NUMBERS, NumberPath
+from ..scene.parameters import NumberPath, path_match, run_number_path
 from .reader import parse_spatial_scene
 from .values import SpatialScene
 from .writer import scene_text
@@ -45,18 +44,9 @@ def number_path(scene: SpatialScene, path: str, *, where: str = "") -> NumberPat
     names no number a solver or a study can vary (compiled geometry, structure, an index beyond
     the chain, another spelling)."""
     prefix = f"{where}: " if where else ""
-    refused = spelling_error(path)
-    if refused:
-        raise SceneError(f"{prefix}{refused}")
-    if _STRUCTURE.fullmatch(path):
-        raise SceneError(f"{prefix}{path}: is structure, compiled into the solver (n, the "
-                         "actuated joints): a study varies numbers only; make a scene per "
-                         "structure")
-    match = _PATH.fullmatch(path) if canonical_path(path) == path else None
-    if not match:
-        raise SceneError(f"{prefix}{path}: names no number of the spatial scene (its numbers: "
-                         f"{_NUMBERS}, initial.angles[i], initial.velocities[i], "
-                         "simulation.dt, simulation.t_end)")
+    match = path_match(path, prefix, _STRUCTURE, _PATH, "n, the actuated joints",
+                       f"the spatial scene (its numbers: {_NUMBERS}, initial.angles[i], "
+                       "initial.velocities[i], simulation.dt, simulation.t_end)")
     if match["vector"]:
         raise SceneError(f"{prefix}{path}: a vector; name one component, gravity[0], "
                          "gravity[1] or gravity[2] (m/s^2, world frame)")
@@ -64,14 +54,9 @@ def number_path(scene: SpatialScene, path: str, *, where: str = "") -> NumberPat
         if int(match["axis"]) > 2:
             raise SceneError(f"{prefix}{path}: gravity has 3 components (indices 0..2)")
         return NumberPath(path, "m/s^2", True)
-    if match["setting"]:
-        return NumberPath(path, RUN_NUMBERS[path], False)
-    if match["run"]:
-        joint = int(match["joint"])
-        if joint >= scene.n:
-            raise SceneError(f"{prefix}{path}: joint {joint + 1} does not exist: the chain has "
-                             f"{scene.n} (indices 0..{scene.n - 1})")
-        return NumberPath(path, RUN_NUMBERS[match["run"]], False)
+    run = run_number_path(scene.n, path, match, prefix)
+    if run:
+        return run
     table, index, key = match["table"], int(match["index"]), match["key"]
     rows = scene.links if table == "links" else scene.springs
     if index >= len(rows):
