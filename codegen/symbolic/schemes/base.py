@@ -181,6 +181,11 @@ class EnergyFlows:
     input_work: sp.Expr = sp.Integer(0)
     dissipated: sp.Expr = sp.Integer(0)
     description: FlowDescription | None = None   # None for a scene without energy flows
+    # The torque each actuated joint applies over the step (issue 34, a scene with a [control]
+    # table): NU expressions, in the scene's actuated order, in the step's inputs (z, x0, u, p,
+    # dt; DiscreteScheme.step_inputs) and its definitions, evaluated at the converged z by the
+    # package's control_torques. None for every scene without control: nothing is generated.
+    applied_torques: ImmutableMatrix | None = None
 
 
 @dataclass(frozen=True)
