@@ -51,6 +51,8 @@ def input_hash(spec: SolverSpec | Scene, method: str | None = None,
     code_relevant = dataclasses.asdict(scene)
     for key in ("initial_angles", "initial_velocities", "simulation"):
         code_relevant.pop(key, None)     # a spatial scene has no simulation defaults
+    if code_relevant.get("control", 0) is None:
+        del code_relevant["control"]     # the hash of a scene without control is unchanged
     payload = {
         "scene": code_relevant, "method": method,
         "quadrature": quadrature_used(scene, method, quadrature, order),

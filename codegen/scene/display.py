@@ -49,3 +49,20 @@ def shown(value: Any, depth: int = 0) -> str:
 def printable(text: str) -> str:
     """Control characters (newlines, carriage returns, ...) written as escapes: one line."""
     return _CONTROL.sub(lambda match: match.group().encode("unicode_escape").decode(), text)
+
+
+def kind(value: Any) -> str:
+    """What a message calls a value's TOML type: "a boolean", "an array" ..."""
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a float"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    return "a date/time"

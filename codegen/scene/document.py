@@ -23,6 +23,12 @@ def scene_document(scene: Scene) -> dict:
                 "base": {"fastening": scene.base_fastening}, "links": links, "springs": springs}
     if scene.actuated_joints:
         document["actuation"] = {"joints": list(scene.actuated_joints)}
+    if scene.control is not None:
+        control = scene.control
+        document["control"] = {"target": list(control.target),
+                               "stiffness": list(control.stiffness),
+                               "damping": list(control.damping),
+                               "compensate": control.compensate, "law": control.law}
     document["initial"] = {"angles": list(scene.initial_angles),
                            "velocities": list(scene.initial_velocities)}
     simulation = scene.simulation
@@ -37,7 +43,7 @@ def scene_toml(scene: Scene) -> str:
     study made, e.g. one run of a sweep to simulate on its own."""
     document = scene_document(scene)
     lines = [f"name = {_value(document['name'])}", f"gravity = {_value(document['gravity'])}"]
-    for table in ("base", "actuation", "initial", "simulation"):
+    for table in ("base", "actuation", "control", "initial", "simulation"):
         if table in document:
             lines += ["", f"[{table}]"]
             lines += [f"{key} = {_value(value)}" for key, value in document[table].items()]
@@ -49,6 +55,8 @@ def scene_toml(scene: Scene) -> str:
 
 
 def _value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, str):
         return json.dumps(value)
     if isinstance(value, (list, tuple)):

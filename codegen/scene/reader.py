@@ -20,16 +20,18 @@ from ..errors import SceneError, UnsupportedSceneError
 from ..runtime import contract
 from ..runtime.contract import ADAPTIVE_TOLERANCES
 from . import kinematics
+from .control_table import read_control
+from .display import kind as _kind
 from .display import printable as _printable
 from .display import shown as _show
 from .shipped import scene_file
 from .solver_rules import REQUEST_KEYS, Refusal, request_refusal
-from .values import LINK_FIELDS, Link, Scene, Simulation, Spring
+from .values import LINK_FIELDS, Control, Link, Scene, Simulation, Spring
 
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 """A scene name: a letter, then letters, digits, '_' or '-' (usable in C after `c_identifier`)."""
 
-_TOP_KEYS = ("name", "gravity", "base", "links", "springs", "actuation", "initial",
+_TOP_KEYS = ("name", "gravity", "base", "links", "springs", "actuation", "control", "initial",
              "simulation")
 _ACTUATION_KEYS = ("joints",)
 _BASE_KEYS = ("fastening",)
@@ -134,22 +136,6 @@ def spatial_marker(document: dict[str, Any]) -> str | None:
 def _key(key: str) -> str:
     """A key as it would be written in a key path: bare if it can be, else quoted."""
     return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key, ensure_ascii=False)
-
-
-def _kind(value: Any) -> str:
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, int):
-        return "an integer"
-    if isinstance(value, float):
-        return "a float"
-    if isinstance(value, str):
-        return "a string"
-    if isinstance(value, list):
-        return "an array"
-    if isinstance(value, dict):
-        return "a table"
-    return "a date/time"
 
 
 def _entries(count: int) -> str:
@@ -277,6 +263,7 @@ class SceneReader:
         velocities: tuple[float, ...] | None = None
         simulation = self.SIMULATION_DEFAULTS
         actuated: tuple[int, ...] = ()
+        control_table: Any = _MISSING
 
         for key, value in document.items():
             if key == "name":
@@ -291,6 +278,8 @@ class SceneReader:
                 springs = self.springs(value)
             elif key == "actuation":
                 actuated = self.actuation(value)
+            elif key == "control":
+                control_table = self.table("control", value, "[control]")
             elif key == "initial":
                 angles, velocities = self.initial(value)
             elif key == "simulation":
@@ -303,6 +292,8 @@ class SceneReader:
         if links is None:
             self.fail("links", "missing: at least one [[links]] table is required")
         n = len(links)
+        control = (None if control_table is _MISSING
+                   else self.control(control_table, n, actuated))
         scene = Scene(
             name=name,
             gravity=gravity,
@@ -313,6 +304,7 @@ class SceneReader:
             initial_velocities=velocities if velocities is not None else (0.0,) * n,
             simulation=simulation,
             actuated_joints=actuated,
+            control=control,
         )
         self.refuse_zero_length_segments(scene)
         return scene
@@ -421,6 +413,10 @@ class SceneReader:
             self.fail("actuation.joints", "missing: list the actuated joints (1-based), "
                                           "or remove the [actuation] table")
         return joints
+
+    def control(self, table: dict[str, Any], n: int, actuated: tuple[int, ...]) -> Control:
+        """[control] (chaingen.scene.control_table)."""
+        return read_control(self, table, n, actuated)
 
     def actuated_joints(self, path: str, value: Any) -> tuple[int, ...]:
         if not isinstance(value, list) or not all(_is_integer(item) for item in value):

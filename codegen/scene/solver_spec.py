@@ -54,6 +54,9 @@ class SolverSpec:
                                    "order": self.order, "gradient": self.gradient})
         if refused:
             raise SolverSpecError(refused)
+        refused = control_refusal(self.scene, self.method, self.order)
+        if refused:
+            raise SolverSpecError(refused)
         paths = ((self.parameters,) if isinstance(self.parameters, str)
                  else tuple(self.parameters))
         if paths == ("all",):
@@ -104,6 +107,24 @@ class SolverSpec:
     def quadrature_used(self) -> int | None:
         """The K the scheme runs with, None where K plays no role (solver_rules.quadrature_used)."""
         return quadrature_used(self.scene, self.method, self.quadrature, self.order)
+
+
+#: The methods that have a controlled step (docs/controllers.md, "Passivity-based control").
+CONTROLLED_METHODS = ("es", "midpoint")
+
+
+def control_refusal(scene: Scene | SpatialScene, method: str, order: int) -> Refusal | None:
+    """Why a scene with a [control] table cannot have this solver, or None: the control law
+    is built into es's and midpoint's own step (order 2)."""
+    if getattr(scene, "control", None) is None:
+        return None
+    if method not in CONTROLLED_METHODS:
+        return Refusal("method", f"{method!r} has no controlled step: scene {scene.name!r} has "
+                                 "a [control] table, which es and midpoint take")
+    if order != 2:
+        return Refusal("order", "a controlled scene's step is the scheme's own (order 2): the "
+                                "control torque is held over one step", order)
+    return None
 
 
 def numbers_of(scene: Scene | SpatialScene):

@@ -86,6 +86,25 @@ class Spring:
         return tuple(range(self.first, self.last + 1))
 
 
+#: The control laws of a [control] table: "discrete", the discrete-gradient law solved inside
+#: the step (es and midpoint), and "sampled", the same law held from the step's start.
+CONTROL_LAWS = ("discrete", "sampled")
+
+
+@dataclass(frozen=True)
+class Control:
+    """Energy shaping and damping injection on the actuated joints (docs/controllers.md,
+    "Passivity-based control"): the shaping potential V_s = 1/2 sum k_a (phi_a - phi*_a)^2
+    minus, with `compensate`, the scene's own potential at the actuated angles (the others at
+    their target), and the injected torque -D_a phidot_a."""
+
+    target: tuple[float, ...]      # phi*_i (rad), one per joint
+    stiffness: tuple[float, ...]   # k_a >= 0 (N m/rad), one per actuated joint
+    damping: tuple[float, ...]     # D_a >= 0 (N m s/rad), one per actuated joint
+    compensate: bool = True
+    law: str = CONTROL_LAWS[0]
+
+
 @dataclass(frozen=True)
 class Simulation:
     """Defaults for `simulate`; command-line options override them."""
@@ -114,6 +133,7 @@ class Scene:
     initial_velocities: tuple[float, ...]  # phidot_i (rad/s)
     simulation: Simulation
     actuated_joints: tuple[int, ...] = ()  # 1-based joints driven by an input torque, ascending
+    control: Control | None = None         # a [control] table: the actuated joints' control law
 
     @property
     def n(self) -> int:

@@ -124,7 +124,7 @@ class EsStep(NamedTuple):
 
 
 def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
-            defs: Definitions, gradient: str = "exact") -> EsStep:
+            defs: Definitions, gradient: str = "exact", control=None) -> EsStep:
     """The es residual (model.md 4.4) by recursions.
 
     Everything but the COM masses and gravity acts on the arms d_k = x_k - X_k = (B q)_k and is
@@ -137,7 +137,10 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
     h_k a function of w_{k-1}, w_k, w_{k+1} and of the w_k over each spring's span: the
     Newton Jacobian's factors dh/dw (banded), dh/dmu and dc/dw (block diagonal) are local,
     and the dense matrix M + B^T (dh/dw) B needs never be formed (chaingen_schur.h).
-    torques_of(rates): the joint torques tau_i (inputs and damping) at the mid-point rates."""
+    torques_of(rates): the joint torques tau_i (inputs and damping) at the mid-point rates.
+    control(arms0, arm_rates0, arm_steps, rates): a control law's joint torques (one per joint),
+    which may depend on the whole step (chaingen.symbolic.schemes.control); they are added to
+    torques_of's."""
     n = scene.n
     chain = ComChain(scene, defs)
 
@@ -183,6 +186,8 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
                 for k, (a, r, link) in enumerate(zip(arms, arm_rates_mid, scene.links), start=1)]
     rates = [after - before for before, after in zip([sp.Integer(0)] + absolute[:-1], absolute)]
     torques = torques_of(rates)
+    if control is not None:
+        torques = [t + c for t, c in zip(torques, control(arms0, arm_rates0, arm_steps, rates))]
     if any(t != 0 for t in torques):
         following = list(torques[1:]) + [sp.Integer(0)]
         for k, link in enumerate(scene.links):

@@ -33,6 +33,7 @@ from .base import (
     input_symbols,
     joint_torques,
 )
+from .control import StepControl, es_control, state_shaping
 
 #: The composed step's Newton tolerance on the update, relative: each stage starts from its own
 #: previous solution (the warm start), so the chord stops after fewer iterations, nearer the
@@ -52,6 +53,12 @@ FLOWS = FlowDescription(
     "passive: H_1 - H_0 = flows[0] - flows[1] to quadrature and solver accuracy (docs/model.md, "
     "section 7).")
 
+CONTROLLED_FLOWS = FlowDescription(
+    "dt sum_i u_i phidot_i(m)", "dt sum_i d_i phidot_i(m)^2 + injected",
+    "u the inputs added to the control law's torques, injected the control law's damping "
+    "injection (docs/controllers.md). The energy is the closed loop's H_d = T + V + V_s; with "
+    "the discrete law H_d1 - H_d0 = flows[0] - flows[1] to round-off at any dt.")
+
 
 def build(scene: Scene, quadrature: int, order: int = 2,
           arm_solve: bool | None = None, gradient: str = "exact") -> DiscreteScheme:
@@ -68,7 +75,9 @@ def build(scene: Scene, quadrature: int, order: int = 2,
                          "chaingen.symbolic.schemes.galerkin's")
     n = scene.n
     if arm_solve is None:
-        arm_solve = n >= ARM_SOLVE_MIN_LINKS
+        # A control law's torques couple every actuated joint (its compensation of gravity
+        # and the springs): not the local forces the factors take.
+        arm_solve = n >= ARM_SOLVE_MIN_LINKS and scene.control is None
     dt = sp.Symbol("dt", positive=True)
     q0, v0 = coordinates(scene)
     # The unknown is the velocity increment dv = v_1 - v_0 (then dq = dt (v_0 + dv/2), the
@@ -92,13 +101,16 @@ def build(scene: Scene, quadrature: int, order: int = 2,
                 for u, link, rate in zip(applied, scene.links, rates)]
 
     step = Definitions("step_")
+    law = StepControl(scene, dt)
     parts = es_step(scene, q0, v0, dv, mu, dt, quadrature if scene.springs else 1, torques_of,
-                    step, gradient=gradient)
+                    step, gradient=gradient,
+                    control=es_control(scene, dt, step, law) if scene.control else None)
     rates_mid = parts.rates
     definitions = tuple(step.items)
     input_work = dt * sp.Add(*(u * rate for u, rate in zip(applied, rates_mid)))
     dissipated = dt * sp.Add(*(number(link.damping) * rate ** 2
                                for link, rate in zip(scene.links, rates_mid) if link.damping))
+    dissipated += law.injected
     residual = ImmutableMatrix(list(parts.momentum) + list(parts.constraint_increments))
     arm_space = None
     if arm_solve:
@@ -123,6 +135,12 @@ def build(scene: Scene, quadrature: int, order: int = 2,
     at_start = Definitions("initial_")
     initial_state = ImmutableMatrix(joint_space_start(scene, phi, phidot, at_start))
 
+    energy = quantities["energy"]
+    applied_torques = None
+    if scene.control:
+        energy += state_shaping(scene, quantities["angles"])
+        applied_torques = ImmutableMatrix([u + t for u, t in zip(inputs, law.actuated_torques)])
+
     names = [f"x_{i}" for i in range(1, n + 1)] + [f"y_{i}" for i in range(1, n + 1)]
     return DiscreteScheme.of(
         method="es", quadrature=quadrature_used(scene, "es", quadrature), scene=scene,
@@ -135,7 +153,7 @@ def build(scene: Scene, quadrature: int, order: int = 2,
         predictor=ImmutableMatrix.zeros(3 * n, 1),
         joint_angles=ImmutableMatrix(quantities["angles"]),
         joint_velocities=ImmutableMatrix(velocities),
-        energy=quantities["energy"],
+        energy=energy, applied_torques=applied_torques,
         constraint_residuals=ImmutableMatrix(quantities["constraints"]),
         initial_angles=phi, initial_velocities=phidot, initial_state=initial_state,
         state_layout=Layout(
@@ -152,7 +170,8 @@ def build(scene: Scene, quadrature: int, order: int = 2,
         segment_vectors=ImmutableMatrix(quantities["segment_vectors"]),
         definitions=definitions, state_definitions=tuple(at_state.items),
         initial_definitions=tuple(at_start.items),
-        flow_description=FLOWS if has_energy_flows(scene) else None,
+        flow_description=(CONTROLLED_FLOWS if scene.control else
+                          FLOWS if has_energy_flows(scene) else None),
         # Newton-chord: from the warm start the chord update is already at round-off, so a step
         # costs one Jacobian, one factorisation and two residuals, with the energy balance of
         # full Newton (docs/benchmarks.md, speed knobs). The order-2 step keeps the chord's

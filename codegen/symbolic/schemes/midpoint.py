@@ -29,12 +29,19 @@ from .base import (
     joint_space_state,
     joint_torques,
 )
+from .control import StepControl, midpoint_control, state_shaping
 
 SUMMARY = "Implicit midpoint rule in relative joint angles (docs/model.md, section 6)."
 FLOWS = FlowDescription(
     "dt sum_i tau_i w_i(m)", "dt sum_i d_i w_i(m)^2",
     "w(m) the mid-point joint rates. H_1 - H_0 - flows[0] + flows[1] is the scheme's energy "
     "error, O(dt^2).")
+
+CONTROLLED_FLOWS = FlowDescription(
+    "dt sum_i u_i w_i(m)", "dt sum_i d_i w_i(m)^2 + injected",
+    "u the inputs added to the control law's torques, injected the control law's damping "
+    "injection (docs/controllers.md). The energy is the closed loop's H_d = T + V + V_s; "
+    "H_d1 - H_d0 - flows[0] + flows[1] is the scheme's energy error, O(dt^2).")
 
 
 def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
@@ -57,6 +64,10 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     springs, _ = recursion.spring_gradient(scene, frames, step)
     inputs = input_symbols(scene)
     torques = joint_torques(scene, inputs)
+    law = StepControl(scene, dt)
+    if scene.control:
+        controlled = midpoint_control(scene, dt, phi0, w0, wm, step, law)
+        torques = [t + c for t, c in zip(torques, controlled)]
     residual = [moment + dt * (spring - torque + number(link.damping) * w)
                 for moment, spring, torque, link, w
                 in zip(moments, springs, torques, scene.links, wm)]
@@ -69,6 +80,11 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
     _, spring_energy = recursion.spring_gradient(scene, frames0, at_state)
     kinetic = recursion.kinetic_energy(scene, rates0, velocities)
     energy = kinetic + recursion.gravity_potential(scene, frames0, at_state) + spring_energy
+    applied_torques = None
+    if scene.control:
+        energy += state_shaping(scene, phi0)
+        applied_torques = ImmutableMatrix([torques[joint - 1]
+                                           for joint in scene.actuated_joints])
 
     return DiscreteScheme.of(
         method="midpoint", quadrature=None, scene=scene, summary=SUMMARY, dt=dt, unknowns=dw,
@@ -82,9 +98,12 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
                               "(Coriolis + grad V - tau) at the mid-point (N m s)"),
         inputs=inputs, segment_vectors=recursion.segment_vector_entries(scene, frames0),
         definitions=tuple(step.items), state_definitions=tuple(at_state.items),
-        input_work=dt * sp.Add(*(tau * w for tau, w in zip(torques, wm))),
+        input_work=dt * sp.Add(*(tau * w for tau, w in zip(joint_torques(scene, inputs), wm))),
         dissipated=dt * sp.Add(*(number(link.damping) * w ** 2
-                                 for link, w in zip(scene.links, wm) if link.damping)),
-        flow_description=FLOWS if has_energy_flows(scene) else None,
+                                 for link, w in zip(scene.links, wm) if link.damping))
+        + law.injected,
+        applied_torques=applied_torques,
+        flow_description=(CONTROLLED_FLOWS if scene.control else
+                          FLOWS if has_energy_flows(scene) else None),
         jacobian_reuse=JACOBIAN_PER_STEP, kinetic_energy=kinetic,
     )
