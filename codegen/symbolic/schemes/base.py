@@ -181,10 +181,6 @@ class EnergyFlows:
     input_work: sp.Expr = sp.Integer(0)
     dissipated: sp.Expr = sp.Integer(0)
     description: FlowDescription | None = None   # None for a scene without energy flows
-    # The torque each actuated joint applies over the step (NU entries, in the scene's order
-    # of actuation), a function of (z, x0, u, p, dt) and the step's definitions: u plus a
-    # [control] table's law (chaingen.symbolic.schemes.control). None without control.
-    applied_torques: ImmutableMatrix | None = None
     # The torque each actuated joint applies over the step (issue 34, a scene with a [control]
     # table): NU expressions, in the scene's actuated order, in the step's inputs (z, x0, u, p,
     # dt; DiscreteScheme.step_inputs) and its definitions, evaluated at the converged z by the
