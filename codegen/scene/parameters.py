@@ -27,7 +27,11 @@ RUN_NUMBERS = {"initial.angles": "rad", "initial.velocities": "rad/s", "simulati
 _PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>[0-9]+)\]\.(?P<key>\w+)"
                    r"(?:\[(?P<entry>[0-9]+)\])?|(?P<top>gravity|base\.fastening)"
                    r"|(?P<run>initial\.angles|initial\.velocities)\[(?P<joint>[0-9]+)\]"
-                   r"|(?P<setting>simulation\.dt|simulation\.t_end)", re.ASCII)
+                   r"|(?P<setting>simulation\.dt|simulation\.t_end)"
+                   r"|control\.(?P<gain>target|stiffness|damping)\[(?P<gain_entry>[0-9]+)\]",
+                   re.ASCII)
+#: The numbers of a [control] table, one per joint (target) or per actuated joint (the gains).
+CONTROL_NUMBERS = {"target": "rad", "stiffness": "N m/rad", "damping": "N m s/rad"}
 
 #: Keys that are the structure of a solver, not numbers: named as such when a study tries them.
 _STRUCTURE = re.compile(r"springs\[[0-9]+\]\.joints(?:\[[0-9]+\])?|actuation(?:\.joints"
@@ -91,10 +95,18 @@ def number_path(scene: Scene, path: str, *, where: str = "") -> NumberPath:
     match = path_match(path, prefix, _STRUCTURE, _PATH,
                        "n, the joints a spring spans, the actuated joints, the method, K",
                        "the scene (a key path such as links[0].mass, springs[1].stiffness, "
-                       "springs[0].offsets[1], base.fastening, gravity, initial.angles[0] or "
-                       "simulation.dt)")
+                       "springs[0].offsets[1], base.fastening, gravity, initial.angles[0], "
+                       "control.stiffness[0] or simulation.dt)")
     if match["top"]:
         return NumberPath(path, "m/s^2" if path == "gravity" else "m", True)
+    if match["gain"]:
+        if scene.control is None:
+            raise SceneError(f"{prefix}{path}: the scene has no [control] table")
+        count = len(getattr(scene.control, match["gain"]))
+        if int(match["gain_entry"]) >= count:
+            raise SceneError(f"{prefix}{path}: control.{match['gain']} has {count} entries "
+                             f"(indices 0..{count - 1})")
+        return NumberPath(path, CONTROL_NUMBERS[match["gain"]], True)
     run = run_number_path(scene.n, path, match, prefix)
     if run:
         return run
@@ -144,6 +156,8 @@ def _get(scene: Scene, path: str):
         return values[parts[2]]
     if parts[0] == "simulation":
         return getattr(scene.simulation, parts[1])
+    if parts[0] == "control":
+        return getattr(scene.control, parts[1])[parts[2]]
     row = (scene.links if parts[0] == "links" else scene.springs)[parts[1]]
     value = getattr(row, parts[2])
     return value[parts[3]] if len(parts) > 3 else value
@@ -164,6 +178,11 @@ def _replaced(scene: Scene, path: str, value) -> Scene:
     if parts[0] == "simulation":
         return dataclasses.replace(
             scene, simulation=dataclasses.replace(scene.simulation, **{parts[1]: value}))
+    if parts[0] == "control":
+        entries = list(getattr(scene.control, parts[1]))
+        entries[parts[2]] = value
+        return dataclasses.replace(scene, control=dataclasses.replace(
+            scene.control, **{parts[1]: tuple(entries)}))
     field = "links" if parts[0] == "links" else "springs"
     rows = list(getattr(scene, field))
     row = rows[parts[1]]
@@ -209,4 +228,7 @@ def compiled_paths(scene: Scene) -> tuple[str, ...]:
         if spring.offsets is not None:
             paths += [f"springs[{index}].offsets[{entry}]"
                       for entry in range(len(spring.offsets))]
+    if scene.control is not None:
+        paths += [f"control.{key}[{entry}]" for key in CONTROL_NUMBERS
+                  for entry in range(len(getattr(scene.control, key)))]
     return tuple(paths)
