@@ -138,7 +138,8 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
     Newton Jacobian's factors dh/dw (banded), dh/dmu and dc/dw (block diagonal) are local,
     and the dense matrix M + B^T (dh/dw) B needs never be formed (chaingen_schur.h).
     torques_of(rates): the joint torques tau_i (inputs and damping) at the mid-point rates.
-    control(arms0, arm_rates0, arm_steps, rates): a control law's joint torques (one per joint),
+    control(arms0, arm_rates0, arm_steps, rates, joints0, com_rates0): a control law's joint
+    torques (one per joint),
     which may depend on the whole step (chaingen.symbolic.schemes.control); they are added to
     torques_of's."""
     n = scene.n
@@ -187,7 +188,8 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
     rates = [after - before for before, after in zip([sp.Integer(0)] + absolute[:-1], absolute)]
     torques = torques_of(rates)
     if control is not None:
-        torques = [t + c for t, c in zip(torques, control(arms0, arm_rates0, arm_steps, rates))]
+        torques = [t + c for t, c in zip(torques, control(arms0, arm_rates0, arm_steps, rates,
+                                                          joints0, v0v))]
     if any(t != 0 for t in torques):
         following = list(torques[1:]) + [sp.Integer(0)]
         for k, link in enumerate(scene.links):

@@ -25,7 +25,7 @@ import sympy as sp
 
 from ...scene import Scene
 from ..com_model import com_frame_map, number
-from ..com_recursion import apply
+from ..com_recursion import apply, projected_rates
 from ..recursion import Definitions, cross
 from ..shaping import discrete_shaping_gradient, shaping_gradient, shaping_potential, sinc
 
@@ -55,7 +55,7 @@ def es_control(scene: Scene, dt, defs: Definitions, law: StepControl):
     actuated = scene.actuated_joints
     maps = [com_frame_map(link) for link in scene.links]
 
-    def hook(arms0, arm_rates0, arm_steps, rates):
+    def hook(arms0, arm_rates0, arm_steps, rates, joints0, com_rates0):
         n = scene.n
         base = (sp.Integer(1), sp.Integer(0))
         e0 = [base] + [defs.vector(f"ctl_e0_{k}", apply(R, a))
@@ -86,8 +86,10 @@ def es_control(scene: Scene, dt, defs: Definitions, law: StepControl):
                                     / number(link.com ** 2 + link.com_normal ** 2))
                         for k, (a, r, link) in enumerate(zip(arms0, arm_rates0, scene.links),
                                                          start=1)]
-            rates0 = [after - before for before, after
-                      in zip([sp.Integer(0)] + absolute[:-1], absolute)]
+            # The joint rates a controller measures: of the velocity's projection onto the
+            # constraints (es's state carries a normal component that alternates in sign
+            # and that no joint sees; com_recursion.projected_rates).
+            rates0 = projected_rates(scene, joints0, arms0, e0[1:], com_rates0, absolute, defs)
             gradient = shaping_gradient(scene, [angles0[joint - 1] for joint in actuated])
             for joint, g, d in zip(actuated, gradient, control.damping):
                 torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) \

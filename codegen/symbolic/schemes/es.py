@@ -127,8 +127,11 @@ def build(scene: Scene, quadrature: int, order: int = 2,
     # C(q) v = 0 (the nodal v meets it only to O(dt^2), which a composition cannot cancel;
     # model.md 14), by recursions in O(n) (com_recursion.projected_rates).
     at_state = Definitions("state_")
-    quantities = state_quantities(scene, q0, v0, at_state, projected=order > 2)
-    velocities = quantities["projected_rates" if order > 2 else "rates"]
+    # A controlled scene's too: at rest, the normal component's sign flips every step and
+    # would show in the plain rates (docs/controllers.md).
+    projected = order > 2 or scene.control is not None
+    quantities = state_quantities(scene, q0, v0, at_state, projected=projected)
+    velocities = quantities["projected_rates" if projected else "rates"]
 
     phi = ImmutableMatrix(sp.symbols(f"phi1:{n + 1}", real=True))
     phidot = ImmutableMatrix(sp.symbols(f"phidot1:{n + 1}", real=True))

@@ -106,4 +106,8 @@ def build(scene: Scene, quadrature: int, order: int = 2) -> DiscreteScheme:
         flow_description=(CONTROLLED_FLOWS if scene.control else
                           FLOWS if has_energy_flows(scene) else None),
         jacobian_reuse=JACOBIAN_PER_STEP, kinetic_energy=kinetic,
+        # A controlled loop comes to rest: T -> 0 while H_d's round-off stays, and the energy
+        # check (|balance| <= energy_tol (T_0 + T_1)) would refuse steps at rest. Off by
+        # default there; a caller may still set it.
+        newton_overrides=(("energy_tol", 0.0),) if scene.control else (),
     )

@@ -1,0 +1,123 @@
+"""Passivity-based control, compiled (issue 34; docs/controllers.md, "Passivity-based control"):
+the closed loop's balance on every step at any dt, regulation, the equilibrium a partly
+actuated chain settles at, the sampled law for comparison, and gains as run-time parameters."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import chaingen
+from chaingen.errors import NewtonError
+from chaingen.scene import load_scene
+from chaingen.scene.parameters import with_values
+from chaingen.studies.control import closed_loop_potential, predicted_equilibrium
+
+pytestmark = pytest.mark.compile
+
+SCENES = {name: load_scene(name) for name in ("four_link_pbc", "four_link_pbc_partial")}
+GAINS = {name: [f"control.stiffness[{i}]" for i in range(len(scene.control.stiffness))]
+         + [f"control.damping[{i}]" for i in range(len(scene.control.damping))]
+         for name, scene in SCENES.items()}
+
+
+@pytest.fixture(scope="module")
+def solvers():
+    return {name: chaingen.build_solver(scene, "es", 3, sensitivities=False,
+                                        parameters=GAINS[name])
+            for name, scene in SCENES.items()}
+
+
+def _gains(scene, scale):
+    control = scene.control
+    return [k * scale for k in control.stiffness] + [d * scale for d in control.damping]
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+@pytest.mark.parametrize("dt", [1e-3, 1e-2, 0.1])
+@pytest.mark.parametrize("scale", [1.0, 100.0])
+def test_the_discrete_law_keeps_the_closed_loop_balance_on_every_step(solvers, name, dt, scale):
+    """H_d(k+1) - H_d(k) - work + dissipated at round-off on every step (H_d = T + V + V_s,
+    u = 0 so work = 0), the dissipation of each step >= 0, so H_d never increases: at dt from
+    1e-3 to 0.1 s and with gains x1 and x100."""
+    scene = SCENES[name]
+    steps = min(int(round(5.0 / dt)), 2000)
+    result = solvers[name].simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
+                                    n_steps=steps, parameters=_gains(scene, scale))
+    storage = result.energy
+    balance = np.diff(storage - result.input_work + result.dissipated)
+    size = np.abs(storage).max()
+    assert np.abs(balance).max() <= 1e-13 * max(size, 1.0) * 10, np.abs(balance).max()
+    assert np.all(np.diff(result.dissipated) >= 0)
+    assert np.diff(storage).max() <= 1e-12 * max(size, 1.0)
+    assert not np.any(result.input_work)
+
+
+def test_a_fully_actuated_chain_is_regulated_to_the_target(solvers):
+    scene = SCENES["four_link_pbc"]
+    result = solvers["four_link_pbc"].simulate(scene.initial_angles, scene.initial_velocities,
+                                               dt=0.01, n_steps=4000,
+                                               parameters=_gains(scene, 1.0))
+    assert np.abs(result.phi[-1] - scene.control.target).max() < 1e-6
+    assert np.abs(result.omega[-1]).max() < 1e-6
+
+
+def test_a_partly_actuated_chain_settles_where_the_theory_predicts(solvers):
+    """The passive joint 3 cannot be held at its target: the loop settles at the stationary
+    point of V + V_s (predicted from the numpy potential, from the target as the guess),
+    which is a strict minimum (positive definite Hessian)."""
+    scene = SCENES["four_link_pbc_partial"]
+    predicted, hessian = predicted_equilibrium(scene, scene.control.target)
+    assert np.linalg.eigvalsh(hessian).min() > 0
+    assert abs(predicted[2] - scene.control.target[2]) > 1e-2
+    result = solvers["four_link_pbc_partial"].simulate(
+        scene.initial_angles, scene.initial_velocities, dt=0.01, n_steps=4000,
+        parameters=_gains(scene, 1.0))
+    assert np.abs(result.phi[-1] - predicted).max() < 1e-6
+    assert closed_loop_potential(scene, result.phi[-1]) <= closed_loop_potential(
+        scene, scene.initial_angles)
+
+
+def test_the_sampled_law_gains_energy_where_the_discrete_one_does_not():
+    """At dt = 0.05 s the zero-order hold of the same law raises H_d and loses the arm; the
+    discrete law on the same scene, dt and gains keeps H_d falling and regulates."""
+    scene = SCENES["four_link_pbc"]
+    sampled = chaingen.build_solver(
+        dataclasses.replace(scene, control=dataclasses.replace(scene.control, law="sampled")),
+        "es", 3, sensitivities=False)
+    try:
+        result = sampled.simulate(scene.initial_angles, scene.initial_velocities, dt=0.05,
+                                  n_steps=400)
+    except NewtonError as error:
+        result = error.result
+    assert (result.energy - result.energy[0]).max() > 1.0
+    discrete = chaingen.build_solver(scene, "es", 3, sensitivities=False)
+    result = discrete.simulate(scene.initial_angles, scene.initial_velocities, dt=0.05,
+                               n_steps=400)
+    assert np.diff(result.energy).max() <= 1e-12 * np.abs(result.energy).max()
+
+
+def test_the_midpoint_scheme_takes_both_laws():
+    scene = SCENES["four_link_pbc"]
+    solver = chaingen.build_solver(scene, "midpoint", 3, sensitivities=False)
+    result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                             n_steps=4000)
+    assert np.abs(result.phi[-1] - scene.control.target).max() < 1e-6
+
+
+def test_gains_as_run_time_parameters_equal_a_scene_with_those_gains(solvers):
+    """A differential check of the run-time gains: the same run from a scene whose table has
+    the gains compiled in gives the same samples."""
+    scene = SCENES["four_link_pbc"]
+    values = {"control.stiffness[0]": 90.0, "control.damping[2]": 1.5,
+              "control.stiffness[3]": 12.0}
+    changed = with_values(scene, values)
+    compiled = chaingen.build_solver(changed, "es", 3, sensitivities=False)
+    expected = compiled.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                                 n_steps=300)
+    gains = _gains(changed, 1.0)
+    got = solvers["four_link_pbc"].simulate(scene.initial_angles, scene.initial_velocities,
+                                            dt=0.01, n_steps=300, parameters=gains)
+    assert np.allclose(got.phi, expected.phi, rtol=0, atol=1e-11)
+    assert np.allclose(got.energy, expected.energy, rtol=1e-12, atol=1e-12)
