@@ -18,13 +18,14 @@ from .contract import (
 )
 from .errors import BuildError, ChaingenError, NewtonError, RunFailedError
 from .interface import NewtonOptions
-from .results import Sensitivities, SimulationResult, StepResult
+from .results import ControlledStep, Sensitivities, SimulationResult, StepResult
 from .solver import Solver, StopSignal
 from .stepper import Stepper
 from .trajectory import read_trajectory, write_trajectory
 
 __all__ = ["JACOBIAN_ACROSS_STEPS", "JACOBIAN_CHORD_ACROSS_STEPS", "JACOBIAN_EVERY_ITERATE",
            "JACOBIAN_PER_STEP",
-           "BuildError", "ChaingenError", "NewtonError", "NewtonOptions", "RunFailedError",
+           "BuildError", "ChaingenError", "ControlledStep", "NewtonError", "NewtonOptions",
+           "RunFailedError",
            "Sensitivities", "SimulationResult", "Solver", "StepResult", "Stepper", "StopSignal",
            "build_shared_library", "cache_directory", "read_trajectory", "write_trajectory"]

@@ -15,7 +15,8 @@ The features a package may have:
 - ``segments``: the scene has springs, whose segments are watched for collapse;
 - ``parameters``: the package takes some of the scene's numbers as run-time parameters p;
 - ``energy_check``: the scheme's step does not keep the energy balance exactly (vi, midpoint), so
-  a converged step is checked against it (a spurious Newton root, docs/model.md, section 13).
+  a converged step is checked against it (a spurious Newton root, docs/model.md, section 13);
+- ``control``: a control law solved inside the step sets the actuated joints' torques (issue 34).
 
 This module is plain data: it imports nothing of chaingen and nothing beyond the standard library.
 """
@@ -25,7 +26,7 @@ import re
 from dataclasses import dataclass
 
 #: The features an entry point, a parameter or a status may depend on.
-FEATURES = ("inputs", "flows", "sensitivities", "segments", "parameters", "energy_check")
+FEATURES = ("inputs", "flows", "sensitivities", "segments", "parameters", "energy_check", "control")
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,7 @@ class Features:
     segments: bool = False
     parameters: bool = False
     energy_check: bool = False
+    control: bool = False
 
     @classmethod
     def from_manifest(cls, manifest: dict) -> Features:
@@ -45,8 +47,8 @@ class Features:
         return cls(inputs=bool(manifest["nu"]), flows=bool(manifest["energy_flows"]),
                    sensitivities=bool(manifest["sensitivities"]),
                    segments=manifest["segment_tolerance"] is not None,
-                   parameters=bool(manifest["parameters"]),
-                   energy_check=bool(manifest["energy_check"]))
+                   energy_check=bool(manifest["energy_check"]),
+                   parameters=bool(manifest["parameters"]), control=bool(manifest.get("control")))
 
     def has(self, when: str | None) -> bool:
         """Whether something present `when` a feature is there (None: always)."""
@@ -114,9 +116,9 @@ STATUSES = (
                                 "bound, a value the scene format refuses (see p above)",
            "a run-time parameter is not finite or below its lower bound (a value the scene "
            "format refuses)"),
-    Status("UNAVAILABLE", 11, "the package was generated without this function: "
-                              "step_sensitivities without the sensitivities, holding_torques "
-                              "and simulate_controlled for a scene without actuated joints",
+    Status("UNAVAILABLE", 11, "the package was generated without this function: step_sensitivities "
+                              "without the sensitivities, holding_torques and simulate_controlled "
+                              "without actuated joints, control_torques without a control law",
            "the package was generated without this function"),
 )
 STATUS_CODES = {status.name: status.code for status in STATUSES}
@@ -300,8 +302,7 @@ CONTROL_FIELDS = (
     StructField("steps", "volatile long", "steps completed so far, written after every step"),
 )
 #: The fallback ladder of a step that fails: the kept Jacobian, then full Newton from the
-#: predictor, then the step split into halves, at most this many times in a row (2^depth
-#: substeps).
+#: predictor, then the step split into halves, at most this many times in a row (2^depth substeps).
 MAX_SPLIT_DEPTH = 4
 
 #: Energy flows of one step (flows[2]): the work of the joint torques, then the energy
@@ -327,9 +328,8 @@ class SampleColumn:
 
     def names(self, n: int) -> tuple[str, ...]:
         """The names of its columns in a row of a chain of n joints."""
-        if self.per_joint:
-            return tuple(self.name.format(i=i) for i in range(1, n + 1))
-        return (self.name,)
+        return tuple(self.name.format(i=i) for i in range(1, n + 1)) if self.per_joint else (
+            self.name,)
 
     def described(self, i: int | None = None) -> str:
         """Its meaning with the unit, as the header's comments give it."""
@@ -389,11 +389,8 @@ class EntryPoint:
 
 def _parameters(text: str) -> tuple[Parameter, ...]:
     """Parameters from 'type name, type name, ...' (the tables below stay readable)."""
-    parameters = []
-    for item in text.split(","):
-        c_type, name = re.fullmatch(r"(.*?[\s*])(\w+)", item.strip()).groups()
-        parameters.append(Parameter(name, c_type.strip()))
-    return tuple(parameters)
+    pairs = (re.fullmatch(r"(.*?[\s*])(\w+)", item.strip()).groups() for item in text.split(","))
+    return tuple(Parameter(name, c_type.strip()) for c_type, name in pairs)
 
 
 _WORKSPACE = "{prefix}_workspace *workspace"
@@ -430,6 +427,9 @@ ENTRY_POINTS = (
         f"const double *x0, {U_ARGUMENTS}, {P_ARGUMENTS}, double dt, double *x1, "
         f"double *ds_ds, double *ds_du, double *ds_dp, {_OPTIONS}, {_WORKSPACE}, "
         "int *iterations"), when="sensitivities"),
+    EntryPoint("control_torques", "int", _parameters(
+        f"const double *x0, {U_ARGUMENTS}, {P_ARGUMENTS}, double dt, double *tau, double *x1, "
+        f"{_OPTIONS}, {_WORKSPACE}, int *iterations"), when="control"),
     EntryPoint("sample_count", "long", _parameters("long n_steps, long every")),
     EntryPoint("simulate", "int", _parameters(
         "const double *x0, double t0, double dt, long n_steps, long every, "

@@ -200,6 +200,16 @@ class StepResult:
 
 
 @dataclass(frozen=True)
+class ControlledStep:
+    """A step of a scheme with a control law (Solver.control_torques): the torque each actuated
+    joint applied over it, the next state, and the Newton iterations spent."""
+
+    tau: np.ndarray     # (nu,): in the order of the actuated joints (N m)
+    x1: np.ndarray
+    iterations: int
+
+
+@dataclass(frozen=True)
 class Sensitivities:
     """A step and its Jacobians in the joint-space state s = (phi, omega)."""
 

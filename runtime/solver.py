@@ -44,7 +44,7 @@ from .interface import (
 )
 from .parameters import parameter_bounds as _parameter_bounds
 from .parameters import parameter_vector
-from .results import Sensitivities, SimulationResult, StepResult
+from .results import ControlledStep, Sensitivities, SimulationResult, StepResult
 from .runs import StopSignal, run_watched
 from .stepper import Stepper
 from .workspaces import Workspaces
@@ -320,6 +320,30 @@ class Solver:
         if status:
             raise self._step_failed(status, iterations.value)
         return StepResult(x1, iterations.value, float(flows[0]), float(flows[1]))
+
+    def control_torques(self, x0, u=None, dt: float | None = None, *,
+                        options: NewtonOptions | dict | None = None,
+                        parameters=None) -> ControlledStep:
+        """The step `step` takes from x0 (the same workspace history: x1 and the iterations are
+        bitwise step's), and tau, the torque each actuated joint applies over it as the
+        scheme's control law determines it inside the step; the arguments in C's order.
+        Raises NewtonError if the step fails, and also where step would split it into halves
+        (status NOT_CONVERGED: no single torque over dt); ValueError for a package without a
+        control law."""
+        dt = _step_length(dt, "control_torques")
+        if not self.has_entry_point("control_torques"):
+            raise ValueError(f"{self.prefix} has no control law: no control_torques (its C "
+                             "function returns UNAVAILABLE)")
+        tau, x1, iterations = np.empty(self.nu), np.empty(self.nx), ctypes.c_int(0)
+        c_options = self._fixed_step_options(options, "control_torques")
+        status = self._leased("control_torques", x0=_pointer(_vector(x0, self.nx, "x0")),
+                              u=self._inputs(u), p=self._p(parameters), dt=dt,
+                              tau=_pointer(tau), x1=_pointer(x1),
+                              options=ctypes.byref(c_options),
+                              iterations=ctypes.byref(iterations))
+        if status:
+            raise self._step_failed(status, iterations.value)
+        return ControlledStep(tau, x1, iterations.value)
 
     def step_sensitivities(self, x0, u=None, dt: float | None = None, *,
                            options: NewtonOptions | dict | None = None,

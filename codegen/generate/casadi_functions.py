@@ -67,6 +67,9 @@ class SchemeFunctions:
     # -> (F, A): the scheme's Newton matrix A ~ dF/dz (StepSystem.newton_matrix), which Newton
     # takes in place of dF/dz; None: dF/dz.
     newton_matrix: ca.Function | None = None
+    # -> tau[nu]: the torques the actuated joints apply over the step (EnergyFlows'
+    # applied_torques, a control law solved in the step); None without one.
+    applied_torques: ca.Function | None = None
 
     def all(self) -> tuple[ca.Function, ...]:
         """The functions of the generated C. A package with newton_factors forms its
@@ -76,7 +79,7 @@ class SchemeFunctions:
                      self.outputs, self.initial_state, self.sensitivity_rhs,
                      self.sensitivity_map, self.joint_maps, self.holding_torques,
                      self.segment_margins, self.energy_check, self.newton_factors,
-                     self.parameters, self.newton_matrix)
+                     self.parameters, self.newton_matrix, self.applied_torques)
         return tuple(function for function in functions if function is not None)
 
 
@@ -293,6 +296,21 @@ def newton_matrix(t: SchemeTranslation) -> GeneratedFunction | None:
                            ["F", "A"])
 
 
+def applied_torques(t: SchemeTranslation) -> GeneratedFunction | None:
+    """-> tau[nu], the torque each actuated joint applies over the step (EnergyFlows'
+    applied_torques) at the step's arguments; None for a scheme without a control law."""
+    torques = t.scheme.flows.applied_torques
+    if torques is None:
+        return None
+    if torques.shape != (t.nu, 1) or not t.nu:
+        raise ValueError(f"{t.scheme.metadata.method}: applied_torques must be a column of one "
+                         f"torque per actuated joint ({t.nu}), not {torques.shape[0]} x "
+                         f"{torques.shape[1]}")
+    return t.step_function("applied_torques",
+                           [t.translated("applied_torques", torques, t.step, t.step_symbols)],
+                           ["tau"])
+
+
 def predictor(t: SchemeTranslation) -> GeneratedFunction:
     """(x0, p, dt) -> z: the first Newton guess; it may use the state definitions (vi:
     w = M^-1 p by its recursion)."""
@@ -330,6 +348,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     found["holding_torques"] = holding_torques(t)
     found["newton_factors"], pattern = newton_factors(t)
     found["newton_matrix"] = newton_matrix(t)
+    found["applied_torques"] = applied_torques(t)
     jacobian = t.residual if t.jacobian is None else t.jacobian
     found.update(
         residual=t.step_function("residual", [t.residual], ["F"]),

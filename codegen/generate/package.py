@@ -59,6 +59,7 @@ MODEL_FUNCTIONS = (
     ("segment_margins", "segment_margins"), ("energy_terms", "energy_check"),
     ("sensitivity_rhs", "sensitivity_rhs"), ("sensitivity_map", "sensitivity_map"),
     ("joint_maps", "joint_maps"), ("newton_matrix", "newton_matrix"),
+    ("applied_torques", "applied_torques"),
 )
 
 #: A generated model source larger than this is compiled with LARGE_MODEL_FLAGS in place of the
@@ -135,7 +136,10 @@ def package_features(scheme: DiscreteScheme, sensitivities: bool) -> Features:
     return Features(inputs=bool(scheme.inputs.shape[0]), flows=scheme.has_energy_flows,
                     sensitivities=sensitivities, segments=bool(scheme.segment_tolerances),
                     parameters=bool(scheme.parameter_paths),
-                    energy_check=scheme.kinetic_energy is not None)
+                    energy_check=scheme.kinetic_energy is not None,
+                    # a composed step has no single z to evaluate them at (UNAVAILABLE)
+                    control=(scheme.flows.applied_torques is not None
+                             and len(scheme.composition) == 1))
 
 
 def newton_defaults(scheme: DiscreteScheme) -> dict:
@@ -345,6 +349,20 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
             "This package has them." if sensitivities else
             "This package was generated without them (chaingen generate --no-sensitivities): "
             f"{prefix.upper()}_UNAVAILABLE."),
+        "control_text": comment_text(
+            "The embedded controller's step: the step step() takes from x0 (the same checks, "
+            "warm start, Newton and workspace history: from the same workspace, x1 and "
+            "iterations are bitwise step()'s), and tau[NU], the torque each actuated joint "
+            "applies over it (in u's order, N m), which the scheme's control law determines "
+            "inside the step's Newton system: evaluated at the step's converged unknowns z. A "
+            "step that step() would take as halves (the fallback ladder's last rung) has no "
+            f"single torque over dt: {prefix.upper()}_NOT_CONVERGED, and neither tau nor x1 "
+            "is written (nor on any other failure; iterations is, as by step()). Arguments as "
+            f"step() ({prefix.upper()}_BAD_ARGUMENT, also for a NULL tau or an x0 with a NaN "
+            "or Inf). Like step(), one workspace per thread. "
+            + ("This package's scheme has a control law." if features.control else
+               "This package's scheme has no control law (or its step is composed): "
+               f"{prefix.upper()}_UNAVAILABLE.")),
         "max_split": contract.MAX_SPLIT_DEPTH,
         "refresh_rate": c_literal(contract.REFRESH_RATE),
         "simplified_margin": c_literal(contract.SIMPLIFIED_MARGIN),
@@ -378,6 +396,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "energy_flows": features.flows, "sensitivities": sensitivities,
         "segment_tolerance": scheme.segment_relative_tolerance if features.segments else None,
         "energy_check": features.energy_check,
+        "control": features.control,
         "state": list(scheme.state_layout.entries),
         "unknowns": list(scheme.unknowns_layout.entries),
         "sample_columns": [name for name, _ in columns],

@@ -67,6 +67,7 @@ static const chaingen_model MODEL = {
     .sensitivity_map = four_link_actuated_es_model_sensitivity_map,
     .joint_maps = NULL,
     .newton_matrix = NULL,
+    .applied_torques = NULL,
 };
 
 /* The runtime, compiled here with the model a constant it sees (its loops specialised to the
@@ -170,6 +171,16 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
     const chaingen_workspace view = workspace_view(workspace);
     return chaingen_step_sensitivities(&MODEL, x0, u, nu, p, np, dt, x1, ds_ds, ds_du, ds_dp, options, &view,
                                        iterations);
+}
+
+int four_link_actuated_es_control_torques(const double *x0, const double *u, int nu,
+                                          const double *p, int np, double dt, double *tau,
+                                          double *x1, const four_link_actuated_es_options *options,
+                                          four_link_actuated_es_workspace *workspace,
+                                          int *iterations)
+{
+    const chaingen_workspace view = workspace_view(workspace);
+    return chaingen_control_torques(&MODEL, x0, u, nu, p, np, dt, tau, x1, options, &view, iterations);
 }
 
 long four_link_actuated_es_sample_count(long n_steps, long every)

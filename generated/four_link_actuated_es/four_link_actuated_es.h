@@ -133,8 +133,8 @@ extern "C" {
 #define FOUR_LINK_ACTUATED_ES_UNAVAILABLE 11      /* the package was generated without this
                                                    * function: step_sensitivities without the
                                                    * sensitivities, holding_torques and
-                                                   * simulate_controlled for a scene without
-                                                   * actuated joints */
+                                                   * simulate_controlled without actuated joints,
+                                                   * control_torques without a control law */
 
 /* Values of the option reuse_jacobian. */
 #define FOUR_LINK_ACTUATED_ES_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
@@ -320,6 +320,23 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
                                              const four_link_actuated_es_options *options,
                                              four_link_actuated_es_workspace *workspace,
                                              int *iterations);
+
+/* The embedded controller's step: the step step() takes from x0 (the same checks, warm start,
+ * Newton and workspace history: from the same workspace, x1 and iterations are bitwise step()'s),
+ * and tau[NU], the torque each actuated joint applies over it (in u's order, N m), which the
+ * scheme's control law determines inside the step's Newton system: evaluated at the step's
+ * converged unknowns z. A step that step() would take as halves (the fallback ladder's last rung)
+ * has no single torque over dt: FOUR_LINK_ACTUATED_ES_NOT_CONVERGED, and neither tau nor x1 is
+ * written (nor on any other failure; iterations is, as by step()). Arguments as step()
+ * (FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT, also for a NULL tau or an x0 with a NaN or Inf). Like
+ * step(), one workspace per thread. This package's scheme has no control law (or its step is
+ * composed): FOUR_LINK_ACTUATED_ES_UNAVAILABLE. */
+FOUR_LINK_ACTUATED_ES_API
+int four_link_actuated_es_control_torques(const double *x0, const double *u, int nu,
+                                          const double *p, int np, double dt, double *tau,
+                                          double *x1, const four_link_actuated_es_options *options,
+                                          four_link_actuated_es_workspace *workspace,
+                                          int *iterations);
 
 /* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1;
  * 0 when n_steps < 0 or every < 1; -1 when the rows would not fit in memory (rows * NSAMPLE

@@ -1421,6 +1421,74 @@ CHAINGEN_LINKAGE int chaingen_step(const chaingen_model *table, const double *x0
     return status;
 }
 
+/* step()'s step from x0 (the same checks, warm start, Newton and rungs of the ladder within the
+ * whole step: a warm start retried from the predictor, a kept Jacobian replaced by full Newton),
+ * and the torques the actuated joints apply over it, applied_torques(z, x0, u, q, dt) at its
+ * converged z (a control law solved inside the step, issue 34). A step that step() would split
+ * into halves has no single torque over dt: NOT_CONVERGED, tau and x1 untouched. The torques are
+ * evaluated into scratch before finish_step (c->rest: N >= NU entries, elsewhere a posture's zero
+ * rates), so that a failure anywhere leaves both outputs untouched; x1 is then bitwise step()'s
+ * from the same workspace. A composed step (nstage > 0) has no single z: UNAVAILABLE. */
+CHAINGEN_LINKAGE int chaingen_control_torques(const chaingen_model *table, const double *x0,
+                                              const double *u, int nu, const double *p, int np,
+                                              double dt, double *tau, double *x1,
+                                              const chaingen_options *options,
+                                              const chaingen_workspace *workspace,
+                                              int *iterations)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver, *c = &solver;
+    double *torques;
+    int i, spent = 0, status;
+    if (model && (!model->applied_torques || model->nstage > 0)) {
+        return CHAINGEN_UNAVAILABLE;
+    }
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    if (!x0 || !tau || !x1 || !(dt > 0.0) || !isfinite(dt) || !cg_all_finite(x0, model->nx)) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    cg_carve(model, workspace, c);
+    c->s->step_fallbacks = 0;
+    c->s->step_splits = 0;
+    status = cg_derive(model, c, p);
+    if (status != CHAINGEN_OK) {
+        return status;
+    }
+    if (model->nsegment > 0) {
+        status = cg_start_segments(model, c, x0);
+        if (status != CHAINGEN_OK) {
+            return status;
+        }
+    }
+    torques = c->rest;
+    status = cg_solve_step(model, c, x0, u, p, dt, options, &spent);
+    if (iterations) {
+        *iterations = spent;
+    }
+    if (status == CHAINGEN_OK) {
+        cg_step_arguments(model, c, c->z, x0, u, &dt);
+        c->res[0] = torques;
+        status = cg_evaluate(model->applied_torques, c);
+        if (status != CHAINGEN_OK) {
+            return status;
+        }
+        if (!cg_all_finite(torques, model->nu)) {
+            return CHAINGEN_NONFINITE;
+        }
+        status = cg_finish_step(model, c, x0, u, dt, x1, NULL, options);
+    }
+    if (status != CHAINGEN_OK) {
+        /* step() would split the step (advance): no single torque over dt. */
+        return cg_shorter_may_pass(model, status) ? CHAINGEN_NOT_CONVERGED : status;
+    }
+    for (i = 0; i < model->nu; ++i) {
+        tau[i] = torques[i];
+    }
+    return CHAINGEN_OK;
+}
+
 /* A step as advance's first rung takes it (no split: the Jacobians are those of one step), and
  * the step map's Jacobians by the implicit function theorem: one factorisation of dF/dz at the
  * converged z, solved for the NCHAIN_SENS right-hand sides. Rows: the joint-space state s

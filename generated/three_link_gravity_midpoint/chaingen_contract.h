@@ -32,8 +32,8 @@
                                       * bound, a value the scene format refuses (see p above) */
 #define CHAINGEN_UNAVAILABLE 11      /* the package was generated without this function:
                                       * step_sensitivities without the sensitivities,
-                                      * holding_torques and simulate_controlled for a scene
-                                      * without actuated joints */
+                                      * holding_torques and simulate_controlled without actuated
+                                      * joints, control_torques without a control law */
 
 /* Values of the option reuse_jacobian. */
 #define CHAINGEN_JACOBIAN_EVERY_ITERATE 0  /* full Newton */

@@ -108,8 +108,9 @@ extern "C" {
 #define THREE_LINK_GRAVITY_MIDPOINT_UNAVAILABLE 11      /* the package was generated without this
                                                          * function: step_sensitivities without the
                                                          * sensitivities, holding_torques and
-                                                         * simulate_controlled for a scene without
-                                                         * actuated joints */
+                                                         * simulate_controlled without actuated
+                                                         * joints, control_torques without a
+                                                         * control law */
 
 /* Values of the option reuse_jacobian. */
 #define THREE_LINK_GRAVITY_MIDPOINT_JACOBIAN_EVERY_ITERATE 0  /* full Newton */
@@ -297,6 +298,24 @@ int three_link_gravity_midpoint_step_sensitivities(const double *x0, const doubl
                                                    const three_link_gravity_midpoint_options *options,
                                                    three_link_gravity_midpoint_workspace *workspace,
                                                    int *iterations);
+
+/* The embedded controller's step: the step step() takes from x0 (the same checks, warm start,
+ * Newton and workspace history: from the same workspace, x1 and iterations are bitwise step()'s),
+ * and tau[NU], the torque each actuated joint applies over it (in u's order, N m), which the
+ * scheme's control law determines inside the step's Newton system: evaluated at the step's
+ * converged unknowns z. A step that step() would take as halves (the fallback ladder's last rung)
+ * has no single torque over dt: THREE_LINK_GRAVITY_MIDPOINT_NOT_CONVERGED, and neither tau nor x1
+ * is written (nor on any other failure; iterations is, as by step()). Arguments as step()
+ * (THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT, also for a NULL tau or an x0 with a NaN or Inf). Like
+ * step(), one workspace per thread. This package's scheme has no control law (or its step is
+ * composed): THREE_LINK_GRAVITY_MIDPOINT_UNAVAILABLE. */
+THREE_LINK_GRAVITY_MIDPOINT_API
+int three_link_gravity_midpoint_control_torques(const double *x0, const double *u, int nu,
+                                                const double *p, int np, double dt, double *tau,
+                                                double *x1,
+                                                const three_link_gravity_midpoint_options *options,
+                                                three_link_gravity_midpoint_workspace *workspace,
+                                                int *iterations);
 
 /* Rows that simulate writes for n_steps steps sampled every `every` steps: n_steps/every + 1;
  * 0 when n_steps < 0 or every < 1; -1 when the rows would not fit in memory (rows * NSAMPLE

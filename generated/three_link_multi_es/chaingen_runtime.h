@@ -53,7 +53,10 @@ typedef int (*chaingen_function)(const double **arg, double **res, long long int
  *   sensitivity_map   (z, x0, u, q, dt) -> (S_z, S_s0, S_u, S_p)  when sensitivities
  *   joint_maps        (x0, x1, q) -> (x0_s0, s1_x1, x0_p, s1_p)   composed, chain_state
  *   newton_matrix     (z, x0, u, q, dt) -> (F, A)   A ~ dF/dz, Newton's matrix in place of
- *                                                   dF/dz where the scheme has one */
+ *                                                   dF/dz where the scheme has one
+ *   applied_torques   (z, x0, u, q, dt) -> (tau[nu])   the torques the actuated joints apply
+ *                                                   over the step (a control law solved in
+ *                                                   it, issue 34): control_torques */
 typedef struct {
     int n_joints;           /* links and revolute joints N */
     int nx;                 /* entries of a state x */
@@ -94,6 +97,7 @@ typedef struct {
     chaingen_function sensitivity_map;
     chaingen_function joint_maps;
     chaingen_function newton_matrix;
+    chaingen_function applied_torques;
 } chaingen_model;
 
 /* The size a chaingen_dimension query names, -1 for an unknown one. */
@@ -145,6 +149,12 @@ CHAINGEN_LINKAGE int chaingen_step_sensitivities(const chaingen_model *model, co
                                                  const chaingen_options *options,
                                                  const chaingen_workspace *workspace,
                                                  int *iterations);
+CHAINGEN_LINKAGE int chaingen_control_torques(const chaingen_model *model, const double *x0,
+                                              const double *u, int nu, const double *p, int np,
+                                              double dt, double *tau, double *x1,
+                                              const chaingen_options *options,
+                                              const chaingen_workspace *workspace,
+                                              int *iterations);
 CHAINGEN_LINKAGE long chaingen_sample_count(const chaingen_model *model, long n_steps,
                                             long every);
 CHAINGEN_LINKAGE int chaingen_simulate_observed(const chaingen_model *model, const double *x0,

@@ -58,6 +58,7 @@ static const chaingen_model MODEL = {
     .sensitivity_map = three_link_multi_vi_model_sensitivity_map,
     .joint_maps = NULL,
     .newton_matrix = NULL,
+    .applied_torques = NULL,
 };
 
 /* The runtime, compiled here with the model a constant it sees (its loops specialised to the
@@ -160,6 +161,15 @@ int three_link_multi_vi_step_sensitivities(const double *x0, const double *u, in
     const chaingen_workspace view = workspace_view(workspace);
     return chaingen_step_sensitivities(&MODEL, x0, u, nu, p, np, dt, x1, ds_ds, ds_du, ds_dp, options, &view,
                                        iterations);
+}
+
+int three_link_multi_vi_control_torques(const double *x0, const double *u, int nu, const double *p,
+                                        int np, double dt, double *tau, double *x1,
+                                        const three_link_multi_vi_options *options,
+                                        three_link_multi_vi_workspace *workspace, int *iterations)
+{
+    const chaingen_workspace view = workspace_view(workspace);
+    return chaingen_control_torques(&MODEL, x0, u, nu, p, np, dt, tau, x1, options, &view, iterations);
 }
 
 long three_link_multi_vi_sample_count(long n_steps, long every)

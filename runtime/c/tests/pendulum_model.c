@@ -304,6 +304,23 @@ static int f_next_state(const double **arg, double **res, long long int *iw, dou
     return 0;
 }
 
+/* (z, x0, [u], [q], dt) -> tau = u + dt domega + phi0^2, the control variant's applied torque. */
+static int f_applied_torques(const double **arg, double **res, long long int *iw, double *w,
+                             int mem)
+{
+    const double *z = arg[0], *x0 = arg[1];
+    const double dt = step_dt(arg);
+    (void)iw, (void)w, (void)mem;
+    if (enter(PENDULUM_F_APPLIED_TORQUES, dt)) {
+        return 1;
+    }
+    if (res[0]) {
+        res[0][0] = pendulum_knob.nan_torques ? NAN
+                                              : step_u(arg) + dt * z[1] + x0[0] * x0[0];
+    }
+    return 0;
+}
+
 /* (x0, x1, [q]) -> (length / (tolerance G), cos of the segment's turn). */
 static int f_segment_margins(const double **arg, double **res, long long int *iw, double *w,
                              int mem)
@@ -524,6 +541,7 @@ void pendulum_model_init(chaingen_model *model, const pendulum_variant *variant)
     model->energy_terms = variant->energy_check ? f_energy_terms : NULL;
     model->sensitivity_rhs = variant->sensitivities ? f_sensitivity_rhs : NULL;
     model->sensitivity_map = variant->sensitivities ? f_sensitivity_map : NULL;
+    model->applied_torques = variant->control ? f_applied_torques : NULL;
     model->joint_maps = variant->sensitivities && variant->chain_state && model->nstage > 0
                             ? f_joint_maps : NULL;
 }

@@ -72,6 +72,8 @@ typedef struct {
     int sensitivities;   /* sensitivity_rhs and sensitivity_map */
     int chain_state;     /* composed sensitivities chained in x (joint_maps, identity here) */
     int holding;         /* holding_torques present */
+    int control;         /* applied_torques present: tau = u + dt domega + phi0^2 (a stand-in
+                          * for a control law solved in the step: it reads z, x0, u and dt) */
     int composition;     /* PENDULUM_PLAIN, _YOSHIDA4, _SUZUKI4, _KAHAN_LI6 */
     int error_entries;   /* 1 (angles) or 2 (angles and rates); 0: 2 */
 } pendulum_variant;
@@ -91,6 +93,7 @@ enum {
     PENDULUM_F_SENSITIVITY_RHS,
     PENDULUM_F_SENSITIVITY_MAP,
     PENDULUM_F_JOINT_MAPS,
+    PENDULUM_F_APPLIED_TORQUES,
     PENDULUM_NFUNCTIONS
 };
 
@@ -114,6 +117,7 @@ typedef struct {
     double residual_noise;   /* F gains a pseudo-random error of this size at every
                               * evaluation: round-off of terms larger than the Jacobian's */
     unsigned noise_state;    /* its generator's state */
+    int nan_torques;         /* applied_torques returns NaN */
     int phi_limited;         /* next_state fails (returns 1) on a step from phi0 > phi_limit */
     double phi_limit;
     long calls[PENDULUM_NFUNCTIONS];   /* evaluations of each function */

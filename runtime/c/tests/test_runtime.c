@@ -1963,6 +1963,117 @@ static void test_simulate_controlled(void)
     end();
 }
 
+/* ---- The controlled step's torque ----------------------------------------------------------- */
+
+static int control_torques(const double *x0, double u0, double dt, double *tau, double *x1,
+                           const chaingen_options *options, int *iterations)
+{
+    const double u[1] = {u0};
+    return chaingen_control_torques(&model, x0, u, 1, params(), model.np, dt, tau, x1, options,
+                                    &ws, iterations);
+}
+
+/* control_torques takes step()'s step (x1 and iterations bitwise step()'s from the same
+ * workspace history, warm starts included) and returns applied_torques at its converged z; a
+ * step that step() splits is NOT_CONVERGED with tau and x1 untouched; a composed step or a model
+ * without the function is UNAVAILABLE; bad arguments as step(). */
+static void test_control_torques(void)
+{
+    enum { STEPS = 6 };
+    const double p[1] = {PENDULUM_STIFFNESS}, u[1] = {0.3}, x0[2] = {1.0, 0.5};
+    const double bad_x[2] = {NAN, 0.0};
+    double controlled[STEPS + 1][2], stepped[STEPS + 1][2], tau[STEPS], x1[2], y1[2], t1;
+    int k, its[2][STEPS], iterations = -1;
+    pendulum_variant v = full_variant();
+    chaingen_options options;
+    begin("control_torques");
+    v.control = 1;
+    v.sensitivities = 0;
+    use(v);
+    memcpy(controlled[0], x0, sizeof x0);
+    memcpy(stepped[0], x0, sizeof x0);
+    for (k = 0; k < STEPS; ++k) {
+        STATUS(control_torques(controlled[k], 0.3, 0.01, &tau[k], controlled[k + 1], NULL,
+                               &its[0][k]), CHAINGEN_OK);
+    }
+    EXPECT(store->scalars.history == CHAINGEN_WARM_START_HISTORY,
+           "the steps' solutions were not kept for the warm start (history %d)",
+           store->scalars.history);
+    use(v);
+    for (k = 0; k < STEPS; ++k) {
+        STATUS(step(stepped[k], 0.3, 0.01, stepped[k + 1], NULL, NULL, &its[1][k]),
+               CHAINGEN_OK);
+    }
+    for (k = 0; k < STEPS; ++k) {
+        /* z = (dphi, domega) with x1 = (phi0 + dt omega_m, omega0 + domega). */
+        const double expected = 0.3 + 0.01 * (stepped[k + 1][1] - stepped[k][1])
+                                + stepped[k][0] * stepped[k][0];
+        EXPECT(!memcmp(controlled[k + 1], stepped[k + 1], sizeof x1) && its[0][k] == its[1][k],
+               "step %d: x1 (%.17g, %.17g) after %d iterations, step() (%.17g, %.17g) after %d",
+               k, controlled[k + 1][0], controlled[k + 1][1], its[0][k], stepped[k + 1][0],
+               stepped[k + 1][1], its[1][k]);
+        EXPECT(close_to(tau[k], expected, 1e-13), "step %d: tau %.17g, expected %.17g", k,
+               tau[k], expected);
+    }
+    /* Newton crawls on steps longer than 0.015 s: step() splits them, control_torques refuses. */
+    pendulum_knob.jacobian_scale = 1.0 / 1.9;
+    pendulum_knob.above_dt = 0.015;
+    x1[0] = x1[1] = t1 = 7.0;
+    STATUS(control_torques(x0, 0.3, 0.02, &t1, x1, NULL, &iterations), CHAINGEN_NOT_CONVERGED);
+    EXPECT(x1[0] == 7.0 && x1[1] == 7.0 && t1 == 7.0, "outputs written by a refused step");
+    EXPECT(iterations == 20 && store->scalars.step_splits == 0, "%d iterations, %ld splits",
+           iterations, store->scalars.step_splits);
+    STATUS(step(x0, 0.3, 0.02, y1, NULL, NULL, NULL), CHAINGEN_OK);
+    EXPECT(store->scalars.step_splits == 1, "step() split it %ld times",
+           store->scalars.step_splits);
+    pendulum_knob.jacobian_scale = 0.0;
+    pendulum_knob.above_dt = 0.0;
+    /* A failed evaluation of the torques, and NaN torques: outputs untouched. */
+    pendulum_knob.fail_mask = 1u << PENDULUM_F_APPLIED_TORQUES;
+    STATUS(control_torques(x0, 0.3, 0.01, &t1, x1, NULL, NULL), CHAINGEN_EVALUATION_FAILED);
+    pendulum_knob.fail_mask = 0;
+    pendulum_knob.nan_torques = 1;
+    STATUS(control_torques(x0, 0.3, 0.01, &t1, x1, NULL, NULL), CHAINGEN_NONFINITE);
+    EXPECT(x1[0] == 7.0 && x1[1] == 7.0 && t1 == 7.0, "outputs written by a failed call");
+    pendulum_knob.nan_torques = 0;
+    /* Bad arguments, as step(). */
+    chaingen_default_options(&model, &options);
+    STATUS(chaingen_control_torques(&model, NULL, u, 1, p, 1, 0.01, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, bad_x, u, 1, p, 1, 0.01, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, NULL, x1, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, &t1, NULL, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, -0.01, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, NAN, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, x0, NULL, 1, p, 1, 0.01, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, x0, u, 2, p, 1, 0.01, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 0, 0.01, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, &t1, x1, NULL, NULL, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    options.reuse_jacobian = -1;
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, &t1, x1, &options, &ws, NULL),
+           CHAINGEN_BAD_ARGUMENT);
+    EXPECT(x1[0] == 7.0 && x1[1] == 7.0 && t1 == 7.0, "outputs written by a refused call");
+    /* Without the function, and for a composed step: UNAVAILABLE. */
+    use(full_variant());
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_UNAVAILABLE);
+    v.composition = PENDULUM_YOSHIDA4;
+    use(v);
+    STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, &t1, x1, NULL, &ws, NULL),
+           CHAINGEN_UNAVAILABLE);
+    EXPECT(x1[0] == 7.0 && x1[1] == 7.0 && t1 == 7.0, "outputs written by an unavailable call");
+    end();
+}
+
 static void test_every_status(void)
 {
     int status;
@@ -2013,6 +2124,7 @@ static const test_group groups[] = {
     {"simulate", test_simulate},
     {"simulate_observed", test_simulate_observed},
     {"simulate_controlled", test_simulate_controlled},
+    {"control_torques", test_control_torques},
 };
 
 int main(int argc, char **argv)

@@ -54,6 +54,7 @@ int main(void)
     memset(&variant, 0, sizeof variant);
     variant.actuated = variant.parameters = variant.damped = variant.flows = 1;
     variant.segments = variant.energy_check = variant.sensitivities = variant.holding = 1;
+    variant.control = 1;
     pendulum_model_init(&model, &variant);
     ws.scalars = &storage.scalars;
     ws.arg = storage.arg;
@@ -79,6 +80,8 @@ int main(void)
                               &iterations) != CHAINGEN_OK;
     failures += chaingen_step_sensitivities(&model, x0, u, 1, p, 1, 0.01, x1, ds, du, dp,
                                             &options, &ws, &iterations) != CHAINGEN_OK;
+    failures += chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, &tau, x1, &options, &ws,
+                                         &iterations) != CHAINGEN_OK;
     failures += chaingen_sample_count(&model, 10, 1) != 11;
     failures += chaingen_simulate_observed(&model, x0, 0.0, 0.01, 10, 1, NULL, 1, p, 1, &options,
                                            &ws, samples, x1, &stats, observer, NULL, 1, &control)
