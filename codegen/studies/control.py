@@ -153,11 +153,32 @@ def _number(value: float | None) -> str:
 
 
 def table(rows: list[Row]) -> str:
+    """One line per row."""
     lines = ["| law | dt (s) | gains x | final error (rad) | max H_d(k) - H_d(0) (J) | "
              "worst step balance (J) | note |", "|---|---|---|---|---|---|---|"]
     for row in rows:
         lines.append(f"| {row.law} | {row.dt:g} | {row.scale:g} | {_number(row.error)} | "
                      f"{_number(row.rise)} | {_number(row.balance)} | {row.note} |")
+    return "\n".join(lines)
+
+
+def _cell(row: Row) -> str:
+    if row.error is None:
+        where = row.note.replace("step failed at ", "") if "failed" in row.note else "lost"
+        return f"unstable ({where}); {_number(row.rise)}"
+    return f"{_number(row.error)}; {_number(row.rise)}"
+
+
+def pivot(rows: list[Row]) -> str:
+    """One line per (dt, gains), one column per law: 'final error (rad); max H_d rise (J)'."""
+    laws = list(dict.fromkeys(row.law for row in rows))
+    cells = {(row.law, row.dt, row.scale): row for row in rows}
+    settings = list(dict.fromkeys((row.scale, row.dt) for row in rows))
+    lines = ["| gains x | dt (s) | " + " | ".join(laws) + " |",
+             "|---|---|" + "---|" * len(laws)]
+    for scale, dt in settings:
+        lines.append(f"| {scale:g} | {dt:g} | " + " | ".join(
+            _cell(cells[(law, dt, scale)]) for law in laws) + " |")
     return "\n".join(lines)
 
 
@@ -167,6 +188,8 @@ def main(argv=None) -> int:
     parser.add_argument("scene", nargs="?", default="four_link_pbc")
     parser.add_argument("--t-end", type=float, default=20.0)
     parser.add_argument("--quick", action="store_true", help="two dt, two scales, 2 s")
+    parser.add_argument("--rows", action="store_true",
+                        help="one line per run (with the worst step balance), not per setting")
     args = parser.parse_args(argv)
     scene = load_scene(args.scene)
     if scene.control is None:
@@ -177,7 +200,11 @@ def main(argv=None) -> int:
         rows = run_table(scene, t_end=args.t_end)
     print(f"scene {scene.name}, t_end {2.0 if args.quick else args.t_end:g} s, gains x s "
           "(stiffness and damping)")
-    print(table(rows))
+    print(table(rows) if args.rows else pivot(rows))
+    worst = max((row.balance for row in rows if row.law.startswith("discrete, es")
+                 and row.balance is not None), default=float("nan"))
+    print(f"\nworst step balance |H_d(k+1) - H_d(k) - work + dissipated| of the discrete law "
+          f"in es: {worst:.1e} J")
     return 0
 
 
