@@ -19,7 +19,7 @@ Output per case: the statuses of initial_state outputs holding_torques residual
 residual_jacobian step step_sensitivities, then sample_count's result, then the statuses of
 simulate (u given), simulate (u NULL) and simulate_controlled, then two checks, 1 or 0: the
 NULL-u run's samples are those of zero torques, and simulate_controlled's torques rows are one
-per sampled step, row j the input of step j*every.
+per sampled step, row j the input of step j*every; then the status of control_torques.
 """
 from __future__ import annotations
 
@@ -45,7 +45,8 @@ KNOWN = set(STATUS_CODES.values())
 #: Columns of the driver's output line.
 COLUMNS = ("initial_state", "outputs", "holding_torques", "residual", "residual_jacobian",
            "step", "step_sensitivities", "sample_count", "simulate", "simulate_null_u",
-           "simulate_controlled", "null_u_is_zero_u", "torques_by_sample")
+           "simulate_controlled", "null_u_is_zero_u", "torques_by_sample", "control_torques")
+UNAVAILABLE = STATUS_CODES["UNAVAILABLE"]
 
 DRIVER = r"""
 #include <limits.h>
@@ -106,7 +107,7 @@ int main(void)
 {
     double defaults[NP], p[NP], phi[N], zeros[N], u[NU], x[NX], x1[NX], z[NZ], residual[NZ];
     static double jacobian[NZ * NZ], ds_ds[NS * NS], ds_du[NS * NU], ds_dp[NS * NP];
-    double out_phi[N], out_omega[N], tau[N], flows[2], energy, error;
+    double out_phi[N], out_omega[N], tau[N], applied[NU + 1], flows[2], energy, error;
     int i;
     memset(zeros, 0, sizeof zeros);
     memset(z, 0, sizeof z);
@@ -143,6 +144,8 @@ int main(void)
         status[5] = PFX_step(x, u, NU, p, NP, dt, x1, flows, NULL, &workspace, &iterations);
         status[6] = PFX_step_sensitivities(x, u, NU, p, NP, dt, x1, ds_ds, ds_du, ds_dp, NULL,
                                           &workspace, &iterations);
+        status[10] = PFX_control_torques(x, u, NU, p, NP, dt, applied, x1, NULL, &workspace,
+                                         &iterations);
         count = PFX_sample_count(n_steps, every);
         controlled_rows = n_steps > 0 && every > 0 ? (n_steps - 1) / every + 1 : 0;
         memset(&control, 0, sizeof control);
@@ -200,9 +203,9 @@ int main(void)
             free(zero_samples);
             free(torques);
         }
-        printf("%d %d %d %d %d %d %d %ld %d %d %d %d %d\n", status[0], status[1], status[2],
+        printf("%d %d %d %d %d %d %d %ld %d %d %d %d %d %d\n", status[0], status[1], status[2],
                status[3], status[4], status[5], status[6], count, status[7], status[8],
-               status[9], same, recorded);
+               status[9], same, recorded, status[10]);
         fflush(stdout);
     }
 }
@@ -334,6 +337,15 @@ def expected(package: Package, case: Case) -> dict:
     if run == OK:
         run = INTERRUPTED if case.stop else KNOWN - {BAD_ARGUMENT, BAD_PARAMETER} | underflows
     controlled = BAD_ARGUMENT if case.hold < 1 else run
+    # control_torques: UNAVAILABLE without a control law; a state with a NaN or Inf is a bad
+    # argument (step takes it and fails); a step it would split is NOT_CONVERGED.
+    law = UNAVAILABLE
+    if package.manifest.get("control"):
+        law = guarded((dt_ok and x_ok, BAD_ARGUMENT), (p_ok, BAD_PARAMETER))
+        if law == OK and collapsed:
+            law = SEGMENT_COLLAPSED
+        if law == OK:
+            law = KNOWN - {BAD_ARGUMENT, BAD_PARAMETER, UNAVAILABLE}
     posture = guarded((phi_ok, BAD_ARGUMENT), (p_ok, BAD_PARAMETER),
                       (not case.collapsed, SEGMENT_COLLAPSED))
     return {
@@ -345,7 +357,7 @@ def expected(package: Package, case: Case) -> dict:
         "residual_jacobian": guarded((dt_ok, BAD_ARGUMENT), (p_ok, BAD_PARAMETER)),
         "step": stepped, "step_sensitivities": stepped, "sample_count": count,
         "simulate": run, "simulate_null_u": run, "simulate_controlled": controlled,
-        "null_u_is_zero_u": 1, "torques_by_sample": 1,
+        "null_u_is_zero_u": 1, "torques_by_sample": 1, "control_torques": law,
     }
 
 
@@ -363,12 +375,14 @@ def mismatches(package: Package, cases: list[Case], results: list[dict]) -> list
 
 
 def generate(directory: Path, scene: str, method: str, order: int, parameters) -> Path:
-    """Generate a package of a reference scene with run-time parameters into `directory`, in a
-    child process (SymPy and CasADi stay out of the test process)."""
+    """Generate a package of a reference scene (or a scene file, a path ending in .toml) with
+    run-time parameters into `directory`, in a child process (SymPy and CasADi stay out of the
+    test process)."""
     program = ("import sys\n"
-               "from chaingen import load_reference_scene\n"
+               "from chaingen import load_reference_scene, load_scene\n"
                "from chaingen.generate.package import generate_package, write_package\n"
-               "scene = load_reference_scene(sys.argv[1])\n"
+               "scene = (load_scene(sys.argv[1]) if sys.argv[1].endswith('.toml')\n"
+               "         else load_reference_scene(sys.argv[1]))\n"
                "package = generate_package(scene, sys.argv[2], 3, parameters=sys.argv[5:],\n"
                "                           order=int(sys.argv[3]))\n"
                "write_package(package, sys.argv[4])\n")

@@ -21,7 +21,7 @@ from c_driver import LONG_MAX, Case, build_driver, generate, mismatches, run_dri
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from helpers import require_tools
+from helpers import require_tools, scene_path
 
 pytestmark = pytest.mark.tools
 
@@ -40,11 +40,24 @@ huge = st.one_of(st.integers(LONG_MIN, LONG_MAX),
                  st.sampled_from([LONG_MAX, LONG_MIN, LONG_MAX - 1, 0, -1, 1, 2, 3]))
 
 
+#: A package with a control law (control_torques, issue 34): es, the gains run-time parameters.
+CONTROL_PARAMETERS = ("links[0].mass", "springs[0].stiffness", "gravity", "links[2].damping",
+                      "control.stiffness[0]", "control.damping[1]", "control.target[0]")
+
+
 @pytest.fixture(scope="module")
 def package(tmp_path_factory):
     require_tools("gcc")
     directory = tmp_path_factory.mktemp("fuzz") / "package"
     generate(directory, "four_link_actuated", "midpoint", 4, PARAMETERS)
+    return build_driver(directory, SANITIZE)
+
+
+@pytest.fixture(scope="module")
+def controlled_package(tmp_path_factory):
+    require_tools("gcc")
+    directory = tmp_path_factory.mktemp("fuzz") / "controlled"
+    generate(directory, str(scene_path("four_link_pbc")), "es", 2, CONTROL_PARAMETERS)
     return build_driver(directory, SANITIZE)
 
 
@@ -84,9 +97,14 @@ def test_every_entry_point_under_the_sanitizers(package):
              (1.0, -1.0, 0.5, 0.0), defaults[:-1] + (math.hypot(1.0, 0.3),), collapsed=True),
     ]
 
-    @settings(max_examples=FUZZ_EXAMPLES, deadline=None,
+    fuzz(package, corners)
+
+
+def fuzz(package, corners: list[Case], examples: int = FUZZ_EXAMPLES) -> None:
+    """The corner cases and `examples` batches hypothesis draws, through the driver."""
+    @settings(max_examples=examples, deadline=None,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-    @given(st.lists(cases(defaults), min_size=1, max_size=BATCH))
+    @given(st.lists(cases(tuple(package.defaults)), min_size=1, max_size=BATCH))
     @example(corners)
     def check(batch):
         results, process = run_driver(package, batch)
@@ -95,3 +113,19 @@ def test_every_entry_point_under_the_sanitizers(package):
         assert mismatches(package, batch, results) == []
 
     check()
+
+
+def test_control_torques_of_a_controlled_package_under_the_sanitizers(controlled_package):
+    """The same fuzz on a package with a control law (four_link_pbc, es, its gains run-time
+    parameters): control_torques refuses bad numbers as step does, and is sanitizer clean."""
+    package = controlled_package
+    assert package.manifest["control"]
+    defaults = tuple(package.defaults)
+    corners = [Case(0.01, 0.0, 20, 3, 2, False, 0.0, (0.3, 0.2, 0.1, 0.0), (1.0, -1.0, 0.5, 0.0),
+                    defaults),
+               Case(0.5, 0.0, 3, 1, 1, False, 0.0, (3.0, -2.0, 1.0, 0.5), (50.0,) * 4,
+                    defaults),
+               Case(0.01, 0.0, 3, 1, 1, False, math.nan, (0.3,) * 4, (0.0,) * 4, defaults)]
+    results, _ = run_driver(package, corners[:1])
+    assert results[0]["control_torques"] == 0 and results[0]["step"] == 0
+    fuzz(package, corners, FUZZ_EXAMPLES // 2)
