@@ -121,3 +121,30 @@ def test_gains_as_run_time_parameters_equal_a_scene_with_those_gains(solvers):
                                             dt=0.01, n_steps=300, parameters=gains)
     assert np.allclose(got.phi, expected.phi, rtol=0, atol=1e-11)
     assert np.allclose(got.energy, expected.energy, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["es", "midpoint"])
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_the_controllers_torque_applied_to_the_plant_reproduces_the_closed_loop(name, method):
+    """What a robot's controller does with the package: control_torques(x_k) gives the torque
+    of the controlled step from the measured state; applied as the input of the same scene
+    without its control law (the plant model) it gives the same next state, to the Newton
+    tolerance, along 40 steps of the loop; and the loop's states are those of simulate."""
+    scene = SCENES[name]
+    dt, steps = 0.02, 40
+    controlled = chaingen.build_solver(scene, method, 3, sensitivities=False)
+    plant = chaingen.build_solver(dataclasses.replace(scene, control=None), method, 3,
+                                  sensitivities=False)
+    run = controlled.simulate(scene.initial_angles, scene.initial_velocities, dt=dt,
+                              n_steps=steps)
+    x = controlled.initial_state(scene.initial_angles, scene.initial_velocities)
+    worst = 0.0
+    for k in range(steps):
+        step = controlled.control_torques(x, None, dt)
+        assert np.all(np.isfinite(step.tau))
+        plant_next = plant.step(x, step.tau, dt, options={"warm_start": False}).x1
+        worst = max(worst, np.abs(plant_next - step.x1).max() / np.abs(step.x1).max())
+        phi = controlled.outputs(step.x1)[0]
+        assert np.abs(phi - run.phi[k + 1]).max() <= 1e-12
+        x = step.x1
+    assert worst < 1e-9, worst
