@@ -1,9 +1,10 @@
 """The embedded controller's entry point, control_torques (issue 34): the step `step` takes, and
 the torque each actuated joint applies over it (EnergyFlows.applied_torques at the converged z).
 
-The lead's control law is not here yet: these tests put stand-ins into a scheme of
-scenes/four_link_actuated.toml (es, K = 3) with DiscreteScheme.replaced(applied_torques=...), and
-check the generated function and the runtime's entry point against them. The runtime's own suite
+Stand-in laws put into a scheme of scenes/four_link_actuated.toml (es, K = 3) with
+DiscreteScheme.replaced(applied_torques=...) check the generated function and the runtime's
+entry point against known expressions; the last test takes the schemes' own passivity law
+(scenes/four_link_pbc*.toml, docs/controllers.md). The runtime's own suite
 (runtime/c/tests, group control_torques) checks the refused split, the untouched outputs on
 failure, the bad arguments and UNAVAILABLE for a composed step, also under valgrind and the
 sanitizers (tests/test_c_runtime.py).
@@ -249,3 +250,30 @@ def test_the_passivity_law_is_evaluated_at_the_converged_step(name, method):
     for expected_x in controlled:
         x = solver.step(x, u, DT).x1
         assert np.array_equal(x, expected_x)
+
+
+def test_a_controller_may_call_it_inside_a_running_simulate(identity_solver):
+    """A Python controller that calls control_torques on the Solver whose simulate runs it: the
+    run's samples are those of the same run undisturbed, and each call inside gives what it
+    gives alone (a spare workspace, no Newton history)."""
+    solver = identity_solver
+    scene = load(SCENE)
+    probe = start(solver) + 0.05
+    solver.reset()
+    lone = solver.control_torques(probe, inputs(1), DT)
+    seen = []
+
+    def quiet(t, phi, omega):
+        return inputs(int(round(t / DT)))
+
+    def probing(t, phi, omega):
+        seen.append(solver.control_torques(probe, inputs(1), DT))
+        return quiet(t, phi, omega)
+
+    runs = [solver.simulate(scene.initial_angles, scene.initial_velocities, dt=DT, n_steps=30,
+                            controller=controller) for controller in (quiet, probing)]
+    np.testing.assert_array_equal(runs[1].samples, runs[0].samples)
+    assert len(seen) == 30
+    for call in seen:
+        assert np.array_equal(call.tau, lone.tau) and np.array_equal(call.x1, lone.x1)
+        assert call.iterations == lone.iterations
