@@ -13,6 +13,12 @@ is at most SAMPLING_MARGIN.
 
 An unactuated scene gets an example that simulates the free motion and prints the energy and
 constraint errors.
+
+A package whose step holds a control law (a scene with a [control] table, the package's feature
+`control`) gets an example without a PD controller: the law is the controller, and the example
+calls control_torques once a step at the scene's own dt (the discrete law keeps the closed
+loop's storage from rising at any dt, so the rate the scene was designed at is the one to show)
+for the scene's t_end, and measures the posture error against the [control] target.
 """
 from __future__ import annotations
 
@@ -73,9 +79,21 @@ def example_settings(scene: Scene | SpatialScene) -> ExampleSettings:
         duration=EXAMPLE_DURATION, print_every=max(1, round(0.5 / dt)), bandwidth=bandwidth)
 
 
-def example_context(scene: Scene | SpatialScene) -> dict:
-    """The example program's numbers as C text, for the templates."""
-    settings = example_settings(scene)
+def controlled_example_settings(scene: Scene) -> ExampleSettings:
+    """The controlled example's target (the [control] target), step and duration (the
+    scene's); no gains of its own."""
+    dt = scene.simulation.dt
+    return ExampleSettings(target=tuple(scene.control.target), kp=(), kd=(), dt=dt,
+                           duration=scene.simulation.t_end,
+                           print_every=max(1, round(0.5 / dt)), bandwidth=0.0)
+
+
+def example_context(scene: Scene | SpatialScene, *, controlled: bool = False) -> dict:
+    """The example program's numbers as C text, for the templates. controlled: the package's
+    step holds the scene's control law (its feature `control`)."""
+    settings = controlled_example_settings(scene) if controlled else example_settings(scene)
+    actuated = actuated_joints(scene)
+    passive = [joint for joint in range(1, scene.n + 1) if joint not in actuated]
 
     def doubles(values) -> str:
         return ", ".join(c_literal(float(value)) for value in values)
@@ -85,7 +103,17 @@ def example_context(scene: Scene | SpatialScene) -> dict:
         "initial_velocities": doubles(scene.initial_velocities),
         "dt": c_literal(settings.dt), "duration": c_literal(settings.duration),
         "print_every": settings.print_every, "target": doubles(settings.target),
-        "actuated_indices": ", ".join(str(j - 1) for j in actuated_joints(scene)),
+        "actuated_indices": ", ".join(str(j - 1) for j in actuated),
         "kp": doubles(settings.kp), "kd": doubles(settings.kd),
         "bandwidth_hz": f"{settings.bandwidth / (2 * math.pi):.3g}",
+        "actuated_list": ", ".join(map(str, actuated)),
+        "passive_note": (f"; joint{'s' if len(passive) > 1 else ''} "
+                         f"{', '.join(map(str, passive))} passive, settling where the closed "
+                         "loop's potential balances" if passive else ""),
+        "example_run": ("the scene's control law to its target" if controlled
+                        else "PD control to a target posture" if actuated else "the free motion"),
+        "example_file": ("the scene's control law through control_torques, once a step"
+                         if controlled else
+                         "a joint-space PD controller with holding-torque feed-forward"
+                         if actuated else "a free-motion run with energy and constraint errors"),
     }

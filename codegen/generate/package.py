@@ -43,6 +43,9 @@ TEMPLATES = {
     "example.c.j2": "example.c",
     "README.md.j2": "README.md",
 }
+#: The example of a package whose step holds a control law (feature `control`), in place of
+#: example.c.j2's PD controller, which would fight the law (codegen/generate/example.py).
+CONTROLLED_EXAMPLE = "example_control.c.j2"
 #: The runtime library (runtime/c/), copied into every package: its source, compiled into the
 #: package's own (<prefix>.c includes it), and its headers.
 RUNTIME_FILES = ("chaingen_runtime.c", "chaingen_runtime.h", "chaingen_contract.h",
@@ -326,7 +329,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "flows": int(features.flows),
         "p_arguments": f"parameters, {prefix.upper()}_NP" if n_p else "NULL, 0",
         "actuated_joints": actuated_joints(scene),
-        **example_context(scene),
+        **example_context(scene, controlled=features.control),
         "parameters": parameters_listed,
         "work": work,
         "defaults": {name: c_literal(value) for name, value in defaults.items()},
@@ -374,8 +377,9 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "public_headers": [f"{prefix}.h", *PUBLIC_RUNTIME_HEADERS],
     }
     environment = template_environment()
-    files = {output.format(prefix=prefix): environment.get_template(template).render(context)
-             for template, output in TEMPLATES.items()}
+    files = {output.format(prefix=prefix): environment.get_template(
+        CONTROLLED_EXAMPLE if features.control and template == "example.c.j2" else template
+    ).render(context) for template, output in TEMPLATES.items()}
     files[f"{prefix}_model.c"] = f"{c_banner}\n{model_source}"
     files[f"{prefix}_model.h"] = f"{c_banner}\n{model_header}"
     for name in RUNTIME_FILES:
