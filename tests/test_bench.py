@@ -442,6 +442,24 @@ def test_control_study_measures_every_loop_and_headline_j(tmp_path):
     assert all(h.passed is None for h in control_headlines(None))
 
 
+@pytest.mark.compile
+def test_control_call_study_times_control_torques_beside_step_and_simulate(tmp_path):
+    """The embedded controller's call on four_link_pbc, timed in one C program beside step and
+    the open-loop simulate: the three loops take the same steps (iterations and final states
+    bit for bit), so the table compares the calls' cost alone."""
+    from chaingen.studies.bench.control import control_call_study, control_call_table
+
+    config = bench_config(quick=True, out=tmp_path / "benchmarks.md")
+    timings = control_call_study(config, lambda message: None)
+    assert timings.scene == "four-link-pbc" and timings.dt == 0.01
+    assert min(timings.control_torques, timings.step, timings.simulate) > 0
+    assert timings.same_end
+    assert timings.iterations[0] == timings.iterations[1] == timings.iterations[2] > 1
+    table = control_call_table(timings)
+    assert "| control_torques (tau and x1) |" in table and "| step (x1) |" in table
+    assert "bit for bit equal: yes" in table
+
+
 # -- the stiff chain's work-precision --------------------------------------------------------
 
 def test_stiff_scene_is_the_scaling_chain_with_stiff_springs():

@@ -24,8 +24,9 @@ child processes, so that a size that takes too long can be stopped):
 4. Studies: run-time parameters against constants compiled in, and a sweep of many runs on
    this machine's cores and on Dask against a loop of single runs (the studies module).
 5. Control loops: a controller in a Python loop over `Solver.stepper` against MuJoCo's
-   Python loop, and one in C closing simulate's loop against the open loop (the control
-   module).
+   Python loop, and one in C closing simulate's loop against the open loop; and the embedded
+   controller's call, `control_torques` on four_link_pbc, against `step` and the open-loop
+   `simulate` per call (the control module).
 6. The stiff chain's work-precision: a 10-link chain with springs of 2e4 N/m over 0.2 s, ours
    (es with both gradients, adaptive es, vi, midpoint, orders 2 and 4) against the compiled
    peers and MuJoCo, CPU against the trajectory error and against the energy error (the
@@ -59,7 +60,7 @@ from .config import (
     BenchConfig,
     bench_config,
 )
-from .control import control_study, control_table
+from .control import control_call_study, control_call_table, control_study, control_table
 from .headlines import headlines
 from .report import (
     headline_table,
@@ -253,6 +254,8 @@ def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> Benc
     emit(f"\nstudies\n\n{study_tables(studies)}")
     control = control_study(config, note)
     emit(f"\ncontrol loops\n\n{control_table(control, config)}")
+    control_calls = control_call_study(config, note)
+    emit(f"\n{control_call_table(control_calls)}")
     found = headlines(reference, scaling, config, control)
     emit(f"\nheadline\n\n{headline_table(found)}")
     figures = {}
@@ -267,7 +270,7 @@ def _run_bench(config: BenchConfig, note, emit, started: float, drawing) -> Benc
         figures[STIFF_FIGURE] = _stiff_figure(stiff, config, drawing)
     wall = time.perf_counter() - started
     text = markdown(config, found, reference, scaling, figures, machine, wall, knobs, studies,
-                    control, stiff)
+                    control, stiff, control_calls)
     # The spatial arm's section is written by --spatial-only alone: a full run keeps it.
     kept = spatial_section_of(config.out.read_text(encoding="utf-8")
                               if config.out.is_file() else "")

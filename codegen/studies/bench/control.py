@@ -13,6 +13,11 @@ alternating order (the machine's speed drifts):
   the C loop) against open-loop `simulate` with the torques it recorded: the ratio of the C
   loop's times;
 - `simulate(controller=...)` with the Python controller, for scale.
+
+And the embedded controller's cost per call (issue 34): on four_link_pbc (its [control] law
+inside es's step, K = 3, the scene's dt), a C program (templates/bench_control.c.j2) times
+chained calls of `control_torques` against chained calls of `step` and the open-loop
+`simulate`, per call, round by round in rotating order in one process.
 """
 from __future__ import annotations
 
@@ -27,7 +32,7 @@ import numpy as np
 
 from ...runtime.build import STRICT_FLAGS, compiler
 from ...scene import load_reference_scene
-from .config import HEADLINE_DT, HEADLINE_SCENE, BenchConfig
+from .config import HARNESS_FLAGS, HEADLINE_DT, HEADLINE_SCENE, BenchConfig
 
 #: The issue's targets: a step from a Python loop (stepper.step) at n = 3, and the C
 #: controller's closed loop against the open loop.
@@ -197,4 +202,100 @@ def control_table(rows: list[ControlRow], config: BenchConfig) -> str:
     for row in rows:
         lines.append(f"| {row.loop} | {row.seconds * 1e6:.2f} us | {row.peer} | "
                      f"{row.peer_seconds * 1e6:.2f} us | {row.ratio:.2f} |")
+    return "\n".join(lines)
+
+
+#: The controlled scene of the embedded controller's timing, and its calls a round.
+CONTROLLED_SCENE = "four_link_pbc"
+CONTROLLED_STEPS = 2000
+
+
+@dataclass(frozen=True)
+class ControlCallTimings:
+    """CPU per call of control_torques and step, and per step of the open-loop simulate
+    (medians over rounds, seconds), their Newton iterations per call (last round), and whether
+    the three loops ended in the same state bit for bit."""
+
+    scene: str
+    dt: float
+    rounds: int
+    control_torques: float
+    step: float
+    simulate: float
+    iterations: tuple[float, float, float]
+    same_end: bool
+
+
+def control_call_study(config: BenchConfig, note) -> ControlCallTimings:
+    """The embedded controller's call against step and simulate (module docstring)."""
+    import json
+    import subprocess
+
+    from ...generate.package import generate_package, template_environment, write_package
+    from ...scene import load_scene
+    from ...simulation import build_solver
+    from .harness import HarnessError, call_arguments
+
+    scene = load_scene(CONTROLLED_SCENE)
+    dt = scene.simulation.dt
+    note("control_torques: build")
+    solver = build_solver(scene, "es", 3, sensitivities=False)
+    x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
+    package = generate_package(scene, "es", 3, sensitivities=False)
+    manifest = package.manifest
+    P = package.prefix.upper()
+    values = ", ".join(repr(float(entry["value"])) for entry in manifest["parameters"])
+    source = template_environment().get_template("bench_control.c.j2").render(
+        prefix=package.prefix, PREFIX=P,
+        p_arguments=call_arguments(package.prefix, manifest)["p_arguments"],
+        p_declaration=(f"static const double p[{P}_NP] = {{ {values} }};\n" if values else ""))
+    with tempfile.TemporaryDirectory(prefix="chaingen-control-calls-") as directory:
+        folder = write_package(package, Path(directory) / "package")
+        (folder / "bench_control.c").write_text(source)
+        program = folder / "bench_control"
+        # each source with the package's own flags (its solver at -O3), as the harness does
+        source_flags = manifest.get("source_flags", {})
+        for name in ("bench_control.c", *manifest["sources"]):
+            built = subprocess.run([compiler(), *STRICT_FLAGS,
+                                    *source_flags.get(name, HARNESS_FLAGS), "-c", name, "-o",
+                                    f"{name}.o"], cwd=folder, capture_output=True, text=True)
+            if built.returncode != 0:
+                raise HarnessError(f"building bench_control failed: {built.stderr}")
+        built = subprocess.run([compiler(), "-o", str(program), "bench_control.c.o",
+                                *(f"{name}.o" for name in manifest["sources"]), "-lm"],
+                               cwd=folder, capture_output=True, text=True)
+        if built.returncode != 0:
+            raise HarnessError(f"linking bench_control failed: {built.stderr}")
+        note(f"control_torques: {config.repeats} rounds")
+        result = subprocess.run([str(program), str(CONTROLLED_STEPS), str(config.repeats),
+                                 repr(float(dt))], input=" ".join(map(repr, x0.tolist())),
+                                capture_output=True, text=True)
+    try:
+        report = json.loads(result.stdout)
+    except json.JSONDecodeError:
+        raise HarnessError(f"bench_control failed: {result.stderr}") from None
+    if report["status"] != 0:
+        raise HarnessError(f"bench_control: status {report['status']} in loop "
+                           f"{report['loop']}")
+    medians = [float(np.median(values)) for values in report["seconds"]]
+    return ControlCallTimings(
+        scene=scene.name, dt=dt, rounds=config.repeats, control_torques=medians[0],
+        step=medians[1], simulate=medians[2],
+        iterations=tuple(count / CONTROLLED_STEPS for count in report["iterations"]),
+        same_end=all(report["same_end"]))
+
+
+def control_call_table(timings: ControlCallTimings) -> str:
+    lines = [f"The embedded controller's call ({timings.scene}: its [control] law inside es's "
+             f"step, K = 3, dt = {timings.dt:g} s; {CONTROLLED_STEPS} chained calls a round "
+             f"from the scene's initial state, fresh workspace, {timings.rounds} rounds in "
+             "rotating order in one C program, medians; CPU per call, per step for simulate; "
+             "final states bit for bit equal: " + ("yes" if timings.same_end else "no") + "):",
+             "", "| call | per call | / step | Newton iterations per call |", "|---|---|---|---|"]
+    for label, seconds, iterations in (
+            ("control_torques (tau and x1)", timings.control_torques, timings.iterations[0]),
+            ("step (x1)", timings.step, timings.iterations[1]),
+            ("simulate, open loop (per step)", timings.simulate, timings.iterations[2])):
+        lines.append(f"| {label} | {seconds * 1e6:.2f} us | {seconds / timings.step:.2f} | "
+                     f"{iterations:.3f} |")
     return "\n".join(lines)

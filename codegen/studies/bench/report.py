@@ -23,7 +23,7 @@ from .config import (
     VARIANTS,
     BenchConfig,
 )
-from .control import control_table
+from .control import control_call_table, control_table
 from .headlines import Headline
 from .knobs import knob_table
 from .runs import COMPILED_FAMILY, RunRow
@@ -206,7 +206,7 @@ HOW_MEASURED = """\
 
 def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
              figures: dict[str, Path], machine, wall_seconds: float, knobs=(),
-             studies=None, control=None, stiff=None) -> str:
+             studies=None, control=None, stiff=None, control_calls=None) -> str:
     lines = [REPORT_TITLE, "",
              f"Written by `{config.command}` in {wall_seconds / 60:.1f} min of wall time on "
              f"{time.strftime('%Y-%m-%d')}. Every number and figure comes from that run; nothing "
@@ -270,6 +270,8 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
                   " ".join(STUDIES_TEXT.split("\n")), "", study_tables(studies), ""]
     if control:
         lines += ["## Control loops", "", control_table(control, config), ""]
+    if control_calls is not None:
+        lines += [control_call_table(control_calls), ""]
     return "\n".join(lines).rstrip() + "\n"
 
 
