@@ -145,3 +145,63 @@ def test_a_scene_without_control_keeps_its_cache_key():
     assert input_hash(plain, "es", 3) != input_hash(FULL, "es", 3)
     other = dataclasses.replace(FULL, control=Control((0.0,) * 4, (1.0,) * 4, (0.0,) * 4))
     assert input_hash(other, "es", 3) != input_hash(FULL, "es", 3)
+
+
+# -- spatial scenes -----------------------------------------------------------------------
+
+def _spatial_scene():
+    from chaingen.spatial import load_spatial_scene
+    base = load_spatial_scene("spatial_three_link")
+    return dataclasses.replace(base, actuated=(1, 3),
+                               control=Control((0.3, -0.2, 0.5), (20.0, 5.0), (5.0, 1.0)))
+
+
+SPATIAL = _spatial_scene()
+
+
+def _spatial_gradient(scene):
+    from chaingen.symbolic.schemes.base import numpy_function
+    from chaingen.symbolic.spatial_shaping import discrete_shaping_gradient as spatial_gradient
+    count = len(scene.actuated)
+    start = sp.symbols(f"a0:{count}", real=True)
+    steps = sp.symbols(f"d0:{count}", real=True)
+    defs = Definitions("t_")
+    gradient = spatial_gradient(scene, start, steps, defs)
+    return numpy_function(list(start) + list(steps), tuple(defs.items), gradient)
+
+
+SPATIAL_GRADIENT = _spatial_gradient(SPATIAL)
+
+
+@settings(max_examples=60, deadline=None)
+@given(start=st.lists(st.floats(-3.0, 3.0), min_size=2, max_size=2),
+       direction=st.lists(st.floats(-1.0, 1.0), min_size=2, max_size=2),
+       size=st.floats(-12.0, 0.0))
+def test_the_spatial_discrete_gradient_is_exact_for_any_step(start, direction, size):
+    """The telescoping product rule over the rotation factors: G . dphi = V_s(phi_1) -
+    V_s(phi_0) to round-off, V_s from chaingen.spatial.dynamics' numpy potential."""
+    actuated = np.array(SPATIAL.actuated) - 1
+    phi0 = np.array(SPATIAL.control.target, dtype=float)
+    phi0[actuated] = start
+    step = np.zeros(3)
+    step[actuated] = np.array(direction) * 10.0 ** size
+    g = np.array(SPATIAL_GRADIENT(*phi0[actuated], *step[actuated]), dtype=float)
+    change = (numpy_shaping_potential(SPATIAL, phi0 + step)
+              - numpy_shaping_potential(SPATIAL, phi0))
+    scale = abs(numpy_shaping_potential(SPATIAL, phi0)) + 1.0
+    assert abs(g @ step[actuated] - change) <= 1e-13 * scale
+
+
+def test_a_spatial_control_table_reads_writes_back_and_takes_key_paths():
+    from chaingen.spatial import parameters as spatial_parameters
+    from chaingen.spatial.reader import parse_spatial_scene
+    from chaingen.spatial.writer import scene_text
+    again = parse_spatial_scene(scene_text(SPATIAL), "again.toml", "again")
+    assert again.control == SPATIAL.control
+    assert "control.damping[1]" in spatial_parameters.compiled_paths(SPATIAL)
+    changed = spatial_parameters.with_values(SPATIAL, {"control.stiffness[1]": 7.5})
+    assert changed.control.stiffness == (20.0, 7.5)
+    with pytest.raises(SceneError, match=r"control\.stiffness\[1\]: must be > 0"):
+        spatial_parameters.with_values(SPATIAL, {"control.stiffness[1]": -1.0})
+    with pytest.raises(SceneError, match="has 2 entries"):
+        spatial_parameters.number_path(SPATIAL, "control.damping[2]")

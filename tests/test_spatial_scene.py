@@ -277,7 +277,7 @@ REFUSALS = [
     ('top unknown key', 'name = "test-arm"',
      'name = "test-arm"\ngravty = 1.0',
      "gravty: unknown key (did you mean 'gravity'? allowed here: name, gravity, links,"
-     ' springs, actuation, initial, simulation), got 1.0'),
+     ' springs, actuation, control, initial, simulation), got 1.0'),
     ('name invalid', 'name = "test-arm"',
      'name = "3arm"',
      "name: must start with a letter and contain only letters, digits, '_' and '-' (it"
@@ -356,7 +356,7 @@ REFUSALS = [
      'velocities = [0.0, 0.1, -0.2]\n\n[base]\nfastening = 0.1\n',
      'base: a key of planar scenes, not of spatial ones: a spring is fastened to the base'
      ' by a route point on link 0 (allowed here: name, gravity, links, springs,'
-     ' actuation, initial, simulation), got {fastening = 0.1}'),
+     ' actuation, control, initial, simulation), got {fastening = 0.1}'),
     ('rpy length', 'rpy = [0.1, 0.2, 0.3]',
      'rpy = [0.1, 0.2]',
      'links[0].joint.rpy: must have 3 entries (roll, pitch, yaw), not 2, got [0.1, 0.2]'),

@@ -24,12 +24,14 @@ SPRING_NUMBERS = {"stiffness": "N/m", "rest_length": "m"}
 RUN_NUMBERS = {"initial.angles": "rad", "initial.velocities": "rad/s", "simulation.dt": "s",
                "simulation.t_end": "s"}
 
+#: A [control] table's key path, for the planar and the spatial patterns.
+CONTROL_PATH = r"|control\.(?P<gain>target|stiffness|damping)\[(?P<gain_entry>[0-9]+)\]"
+
 _PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>[0-9]+)\]\.(?P<key>\w+)"
                    r"(?:\[(?P<entry>[0-9]+)\])?|(?P<top>gravity|base\.fastening)"
                    r"|(?P<run>initial\.angles|initial\.velocities)\[(?P<joint>[0-9]+)\]"
                    r"|(?P<setting>simulation\.dt|simulation\.t_end)"
-                   r"|control\.(?P<gain>target|stiffness|damping)\[(?P<gain_entry>[0-9]+)\]",
-                   re.ASCII)
+                   + CONTROL_PATH, re.ASCII)
 #: The numbers of a [control] table, one per joint (target) or per actuated joint (the gains).
 CONTROL_NUMBERS = {"target": "rad", "stiffness": "N m/rad", "damping": "N m s/rad"}
 
@@ -100,13 +102,7 @@ def number_path(scene: Scene, path: str, *, where: str = "") -> NumberPath:
     if match["top"]:
         return NumberPath(path, "m/s^2" if path == "gravity" else "m", True)
     if match["gain"]:
-        if scene.control is None:
-            raise SceneError(f"{prefix}{path}: the scene has no [control] table")
-        count = len(getattr(scene.control, match["gain"]))
-        if int(match["gain_entry"]) >= count:
-            raise SceneError(f"{prefix}{path}: control.{match['gain']} has {count} entries "
-                             f"(indices 0..{count - 1})")
-        return NumberPath(path, CONTROL_NUMBERS[match["gain"]], True)
+        return control_number_path(scene, path, match, prefix)
     run = run_number_path(scene.n, path, match, prefix)
     if run:
         return run
@@ -157,7 +153,7 @@ def _get(scene: Scene, path: str):
     if parts[0] == "simulation":
         return getattr(scene.simulation, parts[1])
     if parts[0] == "control":
-        return getattr(scene.control, parts[1])[parts[2]]
+        return control_value(scene, parts[1], parts[2])
     row = (scene.links if parts[0] == "links" else scene.springs)[parts[1]]
     value = getattr(row, parts[2])
     return value[parts[3]] if len(parts) > 3 else value
@@ -179,10 +175,7 @@ def _replaced(scene: Scene, path: str, value) -> Scene:
         return dataclasses.replace(
             scene, simulation=dataclasses.replace(scene.simulation, **{parts[1]: value}))
     if parts[0] == "control":
-        entries = list(getattr(scene.control, parts[1]))
-        entries[parts[2]] = value
-        return dataclasses.replace(scene, control=dataclasses.replace(
-            scene.control, **{parts[1]: tuple(entries)}))
+        return control_replaced(scene, parts[1], parts[2], value)
     field = "links" if parts[0] == "links" else "springs"
     rows = list(getattr(scene, field))
     row = rows[parts[1]]
@@ -228,7 +221,35 @@ def compiled_paths(scene: Scene) -> tuple[str, ...]:
         if spring.offsets is not None:
             paths += [f"springs[{index}].offsets[{entry}]"
                       for entry in range(len(spring.offsets))]
-    if scene.control is not None:
-        paths += [f"control.{key}[{entry}]" for key in CONTROL_NUMBERS
-                  for entry in range(len(getattr(scene.control, key)))]
-    return tuple(paths)
+    return tuple(paths) + control_paths(scene)
+
+
+def control_number_path(scene, path: str, match: re.Match, prefix: str) -> NumberPath:
+    """The [control] number `match` names (planar or spatial scene), or SceneError."""
+    if scene.control is None:
+        raise SceneError(f"{prefix}{path}: the scene has no [control] table")
+    count = len(getattr(scene.control, match["gain"]))
+    if int(match["gain_entry"]) >= count:
+        raise SceneError(f"{prefix}{path}: control.{match['gain']} has {count} entries "
+                         f"(indices 0..{count - 1})")
+    return NumberPath(path, CONTROL_NUMBERS[match["gain"]], True)
+
+
+def control_paths(scene) -> tuple[str, ...]:
+    """The key paths of a scene's [control] numbers (none without the table)."""
+    if scene.control is None:
+        return ()
+    return tuple(f"control.{key}[{entry}]" for key in CONTROL_NUMBERS
+                 for entry in range(len(getattr(scene.control, key))))
+
+
+def control_value(scene, key: str, entry: int):
+    return getattr(scene.control, key)[entry]
+
+
+def control_replaced(scene, key: str, entry: int, value):
+    """`scene` with control.<key>[entry] replaced (no validation)."""
+    entries = list(getattr(scene.control, key))
+    entries[entry] = value
+    return dataclasses.replace(scene, control=dataclasses.replace(
+        scene.control, **{key: tuple(entries)}))

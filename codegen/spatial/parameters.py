@@ -19,7 +19,16 @@ import dataclasses
 import re
 
 from ..errors import SceneError
-from ..scene.parameters import NumberPath, path_match, run_number_path
+from ..scene.parameters import (
+    CONTROL_PATH,
+    NumberPath,
+    control_number_path,
+    control_paths,
+    control_replaced,
+    control_value,
+    path_match,
+    run_number_path,
+)
 from .reader import parse_spatial_scene
 from .values import SpatialScene
 from .writer import scene_text
@@ -33,7 +42,7 @@ GEOMETRY = {"links": ("com", "inertia", "joint"), "springs": ("route",)}
 _PATH = re.compile(r"(?P<table>links|springs)\[(?P<index>[0-9]+)\]\.(?P<key>\w+)(?P<rest>.*)"
                    r"|gravity\[(?P<axis>[0-9]+)\]|(?P<vector>gravity)"
                    r"|(?P<run>initial\.angles|initial\.velocities)\[(?P<joint>[0-9]+)\]"
-                   r"|(?P<setting>simulation\.dt|simulation\.t_end)", re.ASCII)
+                   r"|(?P<setting>simulation\.dt|simulation\.t_end)" + CONTROL_PATH, re.ASCII)
 _STRUCTURE = re.compile(r"actuation(?:\.joints(?:\[[0-9]+\])?)?|links|springs|name", re.ASCII)
 _NUMBERS = ("gravity[0..2], links[i].mass, links[i].damping, springs[i].stiffness, "
             "springs[i].rest_length")
@@ -57,6 +66,8 @@ def number_path(scene: SpatialScene, path: str, *, where: str = "") -> NumberPat
     run = run_number_path(scene.n, path, match, prefix)
     if run:
         return run
+    if match["gain"]:
+        return control_number_path(scene, path, match, prefix)
     table, index, key = match["table"], int(match["index"]), match["key"]
     rows = scene.links if table == "links" else scene.springs
     if index >= len(rows):
@@ -80,7 +91,7 @@ def compiled_paths(scene: SpatialScene) -> tuple[str, ...]:
         paths += [f"links[{index}].{key}" for key in LINK_NUMBERS]
     for index, _ in enumerate(scene.springs):
         paths += [f"springs[{index}].{key}" for key in SPRING_NUMBERS]
-    return tuple(paths)
+    return tuple(paths) + control_paths(scene)
 
 
 def value(scene: SpatialScene, path: str):
@@ -94,6 +105,8 @@ def value(scene: SpatialScene, path: str):
         values = (scene.initial_angles if match["run"] == "initial.angles"
                   else scene.initial_velocities)
         return values[int(match["joint"])]
+    if match["gain"]:
+        return control_value(scene, match["gain"], int(match["gain_entry"]))
     rows = scene.links if match["table"] == "links" else scene.springs
     return getattr(rows[int(match["index"])], match["key"])
 
@@ -113,6 +126,8 @@ def _replaced(scene: SpatialScene, path: str, number) -> SpatialScene:
         values = list(getattr(scene, name))
         values[int(match["joint"])] = number
         return dataclasses.replace(scene, **{name: tuple(values)})
+    if match["gain"]:
+        return control_replaced(scene, match["gain"], int(match["gain_entry"]), number)
     field = match["table"]
     rows = list(getattr(scene, field))
     index = int(match["index"])

@@ -45,7 +45,8 @@ DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 #: by this times the tensor's largest entry: the round-off of a tensor written in decimals.
 INERTIA_RELATIVE_TOLERANCE = 1e-12
 
-_TOP_KEYS = ("name", "gravity", "links", "springs", "actuation", "initial", "simulation")
+_TOP_KEYS = ("name", "gravity", "links", "springs", "actuation", "control", "initial",
+             "simulation")
 _LINK_KEYS = ("mass", "com", "inertia", "joint", "damping")
 _LINK_REQUIRED = ("mass", "com", "inertia", "joint")
 _JOINT_KEYS = ("xyz", "rpy", "axis")
@@ -117,6 +118,7 @@ class SpatialSceneReader(SceneReader):
         angles: tuple[float, ...] | None = None
         velocities: tuple[float, ...] | None = None
         actuated: tuple[int, ...] = ()
+        control_table: dict[str, Any] | None = None
         simulation = self.SIMULATION_DEFAULTS
 
         for key, value in document.items():
@@ -131,6 +133,8 @@ class SpatialSceneReader(SceneReader):
                 springs = self.springs(value)
             elif key == "actuation":
                 actuated = self.actuation(value)
+            elif key == "control":
+                control_table = self.table("control", value, "[control]")
             elif key == "initial":
                 angles, velocities = self.initial(value)
             elif key == "simulation":
@@ -151,6 +155,8 @@ class SpatialSceneReader(SceneReader):
             initial_angles=angles if angles is not None else (0.0,) * n,
             initial_velocities=velocities if velocities is not None else (0.0,) * n,
             actuated=actuated,
+            control=(None if control_table is None
+                     else self.control(control_table, n, actuated)),
             simulation=simulation,
         )
         self.refuse_zero_length_segments(scene)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..scene.values import Simulation
+from ..scene.values import Control, Simulation
 
 Vector = tuple[float, float, float]
 
@@ -95,6 +95,7 @@ class SpatialScene:
     initial_angles: tuple[float, ...]         # rad, one per joint
     initial_velocities: tuple[float, ...]     # rad/s, one per joint
     actuated: tuple[int, ...] = ()            # 1-based joints with a torque input, ascending
+    control: Control | None = None            # a [control] table (chaingen.scene.values.Control)
     simulation: Simulation = SPATIAL_SIMULATION_DEFAULTS   # run settings ([simulation])
 
     @property

@@ -37,6 +37,13 @@ def scene_text(scene: SpatialScene, comment_lines: Iterable[str] = (),
     if scene.actuated:
         lines += ["", "[actuation]",
                   f"joints = [{', '.join(str(int(j)) for j in scene.actuated)}]"]
+    if scene.control is not None:
+        control = scene.control
+        lines += ["", "[control]", f"target = {_vector(control.target)}",
+                  f"stiffness = {_vector(control.stiffness)}",
+                  f"damping = {_vector(control.damping)}",
+                  f"compensate = {'true' if control.compensate else 'false'}",
+                  f'law = "{control.law}"']
     lines += ["", "[simulation]   # run settings; the command line's options override them"]
     lines += _simulation_lines(scene.simulation)
     return "\n".join(lines) + "\n"

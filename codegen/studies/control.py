@@ -24,8 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import NewtonError
-from ..scene import Scene, kinematics, load_scene
+from ..scene import Scene, kinematics
 from ..simulation import build_solver
+from ..spatial import dynamics
+from ..spatial.reader import load_either_scene
+from ..spatial.values import SpatialScene
+from ..symbolic.schemes.base import actuated_joints
 
 #: The runs of the table: (label, method, law).
 LAWS = (("discrete, es", "es", "discrete"), ("sampled, es", "es", "sampled"),
@@ -37,12 +41,20 @@ SCALES = (1.0, 10.0, 100.0)
 UNSTABLE_ERROR = 1.0
 
 
-def shaping_potential(scene: Scene, phi) -> float:
+def potential(scene: Scene | SpatialScene, phi) -> float:
+    """V (gravity and springs) in numpy: chaingen.scene.kinematics, or chaingen.spatial.dynamics
+    for a spatial scene."""
+    if isinstance(scene, SpatialScene):
+        return float(dynamics.potential_energy(scene, np.asarray(phi, dtype=float)))
+    return kinematics.potential_energy(scene, phi)
+
+
+def shaping_potential(scene: Scene | SpatialScene, phi) -> float:
     """V_s(phi) in numpy (chaingen.symbolic.shaping's, independently): the quadratic about the
     target on the actuated joints minus, with compensate, V at the actuated angles with the
     others at their target."""
     control = scene.control
-    actuated = np.array(scene.actuated_joints) - 1
+    actuated = np.array(actuated_joints(scene)) - 1
     phi = np.asarray(phi, dtype=float)
     target = np.array(control.target, dtype=float)
     offsets = phi[actuated] - target[actuated]
@@ -50,13 +62,13 @@ def shaping_potential(scene: Scene, phi) -> float:
     if control.compensate:
         held = target.copy()
         held[actuated] = phi[actuated]
-        value -= kinematics.potential_energy(scene, held)
+        value -= potential(scene, held)
     return value
 
 
-def closed_loop_potential(scene: Scene, phi) -> float:
+def closed_loop_potential(scene: Scene | SpatialScene, phi) -> float:
     """V + V_s: the closed loop's potential."""
-    return kinematics.potential_energy(scene, phi) + shaping_potential(scene, phi)
+    return potential(scene, phi) + shaping_potential(scene, phi)
 
 
 def _gradient(function, phi, h: float = 1e-4) -> np.ndarray:
@@ -70,23 +82,26 @@ def _gradient(function, phi, h: float = 1e-4) -> np.ndarray:
     return out
 
 
-def predicted_equilibrium(scene: Scene, guess, iterations: int = 50):
+def predicted_equilibrium(scene: Scene | SpatialScene, guess, iterations: int = 50):
     """(phi_e, hessian): the stationary point of V + V_s that Newton's method reaches from
     `guess` (differences of the numpy potential), and the Hessian there; the equilibrium is
     stable if the Hessian is positive definite (docs/controllers.md)."""
-    def potential(phi):
+    def closed(phi):
         return closed_loop_potential(scene, phi)
 
     phi = np.array(guess, dtype=float)
     for _ in range(iterations):
-        gradient = _gradient(potential, phi)
-        hessian = np.array([_gradient(lambda x, i=i: _gradient(potential, x)[i], phi, 1e-3)
+        gradient = _gradient(closed, phi)
+        hessian = np.array([_gradient(lambda x, i=i: _gradient(closed, x)[i], phi, 1e-3)
                             for i in range(len(phi))])
         hessian = (hessian + hessian.T) / 2
         step = np.linalg.solve(hessian, -gradient)
         phi = phi + step
         if np.abs(step).max() < 1e-12:
             break
+    # V + V_s is 2 pi-periodic in a passive joint's angle: give it in (-pi, pi], as a run's.
+    passive = [j for j in range(len(phi)) if j + 1 not in actuated_joints(scene)]
+    phi[passive] = np.arctan2(np.sin(phi[passive]), np.cos(phi[passive]))
     return phi, hessian
 
 
@@ -101,12 +116,13 @@ class Row:
     note: str = ""
 
 
-def scaled(scene: Scene, law: str) -> Scene:
+def scaled(scene: Scene | SpatialScene, law: str) -> Scene | SpatialScene:
     """`scene` with its control law set to `law`."""
     return dataclasses.replace(scene, control=dataclasses.replace(scene.control, law=law))
 
 
-def run_table(scene: Scene, dts=DTS, scales=SCALES, t_end: float = 20.0) -> list[Row]:
+def run_table(scene: Scene | SpatialScene, dts=DTS, scales=SCALES,
+              t_end: float = 20.0) -> list[Row]:
     """Every (law, dt, scale) run of the table, one build per law (the gains as run-time
     parameters)."""
     control = scene.control
@@ -191,7 +207,7 @@ def main(argv=None) -> int:
     parser.add_argument("--rows", action="store_true",
                         help="one line per run (with the worst step balance), not per setting")
     args = parser.parse_args(argv)
-    scene = load_scene(args.scene)
+    scene = load_either_scene(args.scene)
     if scene.control is None:
         parser.error(f"{args.scene}: the scene has no [control] table")
     if args.quick:

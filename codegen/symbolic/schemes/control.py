@@ -28,6 +28,7 @@ from ..com_model import com_frame_map, number
 from ..com_recursion import apply, projected_rates
 from ..recursion import Definitions, cross
 from ..shaping import discrete_shaping_gradient, shaping_gradient, shaping_potential, sinc
+from .base import actuated_joints
 
 
 @dataclass
@@ -42,7 +43,7 @@ class StepControl:
 
     @property
     def actuated_torques(self) -> list:
-        return [self.torques[joint - 1] for joint in self.scene.actuated_joints]
+        return [self.torques[joint - 1] for joint in actuated_joints(self.scene)]
 
 
 def _dot(a, b) -> sp.Expr:
@@ -123,6 +124,103 @@ def midpoint_control(scene: Scene, dt, angles0, rates0, rates_mid, defs: Definit
             law.injected += dt * number(d) * rates0[joint - 1] * rates_mid[joint - 1]
     law.torques = torques
     return torques
+
+
+def _spatial_law(scene, dt, start, increments, ratios, rates_mid, rates0, defs, law) -> list:
+    """A spatial scene's law per joint: discrete (G r - D rate_mid) or sampled."""
+    from .. import spatial_shaping
+    control = scene.control
+    actuated = scene.actuated
+    torques = [sp.Integer(0)] * scene.n
+    if control.law == "discrete":
+        gradient = spatial_shaping.discrete_shaping_gradient(scene, start, increments, defs)
+        for index, (joint, g, d) in enumerate(zip(actuated, gradient, control.damping)):
+            rate = rates_mid[joint - 1]
+            ratio = ratios[index] if ratios is not None else sp.Integer(1)
+            torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) * ratio \
+                - number(d) * rate
+            law.injected += dt * number(d) * rate ** 2
+    else:
+        gradient = spatial_shaping.discrete_shaping_gradient(
+            scene, start, [sp.Integer(0)] * len(actuated), defs)
+        for joint, g, d in zip(actuated, gradient, control.damping):
+            torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) \
+                - number(d) * rates0[joint - 1]
+            law.injected += dt * number(d) * rates0[joint - 1] * rates_mid[joint - 1]
+    law.torques = torques
+    return torques
+
+
+def spatial_midpoint_control(scene, dt, angles0, rates0, rates_mid, defs: Definitions,
+                             law: StepControl) -> list:
+    """The spatial midpoint's law per joint: its torques work through dt w(m) = phi_1 - phi_0
+    itself (r = 1)."""
+    actuated = scene.actuated
+    return _spatial_law(scene, dt, [angles0[j - 1] for j in actuated],
+                        [dt * rates_mid[j - 1] for j in actuated], None, rates_mid, rates0,
+                        defs, law)
+
+
+def _sine_vector(m) -> tuple:
+    """s(X) = 1/2 vec(X - X^T): for a rotation by theta about a, sin(theta) a."""
+    return ((m[2][1] - m[1][2]) / 2, (m[0][2] - m[2][0]) / 2, (m[1][0] - m[0][1]) / 2)
+
+
+def _times(a, b) -> tuple:
+    return tuple(tuple(sp.Add(*(a[r][m] * b[m][k] for m in range(3))) for k in range(3))
+                 for r in range(3))
+
+
+def spatial_es_control(scene, dt, q0, q1, angles, rates_mid, axes_mid, rates0,
+                       defs: Definitions, law: StepControl) -> list:
+    """Spatial es's law per joint. Its torques work through dt phidot_i(m) = n_i(m) . (s(P_i) -
+    s(P_{i-1})), P_k = sum_a d_ka(1) d_ka(0)^T the turn of link k over the step (dt omega_k(m)
+    = 1/2 sum_a d_a(0) x d_a(1) = s(P_k)). On the constraints P_i = P_{i-1} Rot(n_i(0), dphi_i),
+    and Rot - 1 = dphi (sinc(dphi) [n] + dphi/2 sinc(dphi/2)^2 [n]^2), so that increment is
+    dphi_i h_i with h_i = n_i(m) . s(P_{i-1} (sinc(dphi) [n] + ...)): r_i = 1 / h_i, no 0 / 0.
+    angles: the joint angles at q0 (spatial_es.joint_angles)."""
+    import numpy as np
+
+    from ...spatial.dynamics import rpy_matrix
+    from .spatial_null_space import Link
+
+    n = scene.n
+    identity = tuple(tuple(sp.Integer(int(r == k)) for k in range(3)) for r in range(3))
+    turns = [identity]
+    for k in range(1, n + 1):
+        start, end = Link(q0, k).d, Link(q1, k).d
+        turns.append(tuple(tuple(defs.define(f"ctl_P{k}_{r}{c}", sp.Add(*(
+            end[a][r] * start[a][c] for a in range(3)))) for c in range(3)) for r in range(3)))
+    angles0 = [defs.define(f"ctl_phi0_{i}", a) for i, a in enumerate(angles, start=1)]
+    steps, ratios = [], []
+    for i, link in enumerate(scene.links, start=1):
+        axis = Link(q0, i - 1).turn(rpy_matrix(link.joint.rpy) @ np.asarray(link.joint.axis))
+        axis = [defs.define(f"ctl_n0_{i}{x}", c) for x, c in zip("xyz", axis)]
+        parent, own = turns[i - 1], turns[i]
+        relative = _times(tuple(tuple(parent[c][r] for c in range(3)) for r in range(3)), own)
+        sine = _sine_vector(relative)
+        cosine = (relative[0][0] + relative[1][1] + relative[2][2] - 1) / 2
+        step = defs.define(f"ctl_dphi{i}", sp.atan2(sp.Add(*(a * b for a, b in zip(axis, sine))),
+                                                     cosine))
+        steps.append(step)
+        cross = ((0, -axis[2], axis[1]), (axis[2], 0, -axis[0]), (-axis[1], axis[0], 0))
+        square = _times(cross, cross)
+        first = defs.define(f"ctl_sinc{i}", sinc(step))
+        half = defs.define(f"ctl_sinch{i}", sinc(step / 2))
+        change = tuple(tuple(first * cross[r][c] + step / 2 * half ** 2 * square[r][c]
+                             for c in range(3)) for r in range(3))
+        h = sp.Add(*(a * b for a, b in zip(axes_mid[i - 1], _sine_vector(_times(parent, change)))))
+        ratios.append(defs.define(f"ctl_ratio{i}", 1 / h))
+    actuated = scene.actuated
+    return _spatial_law(scene, dt, [angles0[j - 1] for j in actuated],
+                        [steps[j - 1] for j in actuated], [ratios[j - 1] for j in actuated],
+                        rates_mid, rates0, defs, law)
+
+
+def spatial_state_shaping(scene, angles) -> sp.Expr:
+    """V_s of a spatial scene at the state's joint angles."""
+    from ..spatial_shaping import shaping_potential as spatial_potential
+    return spatial_potential(scene, [angles[joint - 1] for joint in scene.actuated])
 
 
 def state_shaping(scene: Scene, angles) -> sp.Expr:

@@ -41,6 +41,8 @@ from .base import (
     input_symbols,
     joint_torques,
 )
+from .control import StepControl, spatial_es_control, spatial_state_shaping
+from .es import CONTROLLED_FLOWS
 from .spatial_midpoint import holding_torques
 from .spatial_null_space import (
     Link,
@@ -243,8 +245,16 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
     axes, rates = joint_rates(scene, qm, vm, step, "m")
     inputs = input_symbols(scene)
     applied = joint_torques(scene, inputs)
-    torques = [step.define(f"tau{i}", u - number(link.damping) * rate)
-               for i, (u, link, rate) in enumerate(zip(applied, scene.links, rates), start=1)]
+    law = StepControl(scene, dt)
+    controlled = [sp.Integer(0)] * n
+    if scene.control:
+        start_axes, start_rates = joint_rates(scene, q0, v0, step, "c0")
+        measured = projected_rates(scene, q0, v0, start_axes, step)
+        controlled = spatial_es_control(scene, dt, q0, q1, joint_angles(scene, q0), rates, axes,
+                                        measured, step, law)
+    torques = [step.define(f"tau{i}", u - number(link.damping) * rate + c)
+               for i, (u, link, rate, c) in enumerate(zip(applied, scene.links, rates,
+                                                          controlled), start=1)]
     momentum = [a + dt * (c - d) for a, c, d in zip(
         mass_times(scene, dv), potential_gradient(scene, q0, q1, step),
         torque_forces(scene, qm, axes, torques))]
@@ -255,10 +265,15 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
     state_axes, state_rates = joint_rates(scene, q0, v0, at_state, "")
     # A composed step (order 4) reports the rates of v projected onto the tangent space
     # (model.md 14), as the planar es does.
-    outputs_rates = (projected_rates(scene, q0, v0, state_axes, at_state) if order > 2
-                     else state_rates)
+    outputs_rates = (projected_rates(scene, q0, v0, state_axes, at_state)
+                     if order > 2 or scene.control else state_rates)
     potential_energy, segments = potential(scene, q0, at_state)
     energy = sp.Add(*(v * f for v, f in zip(v0, mass_times(scene, v0)))) / 2 + potential_energy
+    applied_torques = None
+    if scene.control:
+        energy += spatial_state_shaping(scene, joint_angles(scene, q0))
+        applied_torques = ImmutableMatrix([u + law.torques[j - 1]
+                                           for u, j in zip(inputs, scene.actuated)])
 
     phi = ImmutableMatrix(sp.symbols(f"phi_init1:{n + 1}", real=True))
     phidot = ImmutableMatrix(sp.symbols(f"phidot_init1:{n + 1}", real=True))
@@ -298,10 +313,13 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         inputs=inputs,
         input_work=dt * sp.Add(*(u * rate for u, rate in zip(applied, rates))),
         dissipated=dt * sp.Add(*(number(link.damping) * rate ** 2
-                                 for link, rate in zip(scene.links, rates) if link.damping)),
+                                 for link, rate in zip(scene.links, rates) if link.damping))
+        + law.injected,
+        applied_torques=applied_torques,
         segment_vectors=ImmutableMatrix([c for d in segments for c in d]),
         definitions=tuple(step.items), state_definitions=tuple(at_state.items),
-        flow_description=FLOWS if has_energy_flows(scene) else None,
+        flow_description=(CONTROLLED_FLOWS if scene.control else
+                          FLOWS if has_energy_flows(scene) else None),
         # Newton-chord with Newton's matrix A (newton_matrix), evaluated at each step's first
         # guess (and again when it contracts poorly, model.md 13), to a tighter update
         # tolerance than the contract's: dF/dw ~ 2 M / dt is large, so the turns' error shows

@@ -28,7 +28,8 @@ from .base import (
     joint_space_state,
     joint_torques,
 )
-from .midpoint import FLOWS, SUMMARY
+from .control import StepControl, spatial_midpoint_control, spatial_state_shaping
+from .midpoint import CONTROLLED_FLOWS, FLOWS, SUMMARY
 
 
 def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) -> DiscreteScheme:
@@ -48,7 +49,12 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
     dynamics = spatial_recursion.inverse_dynamics(scene, frames, wm, list(dw), dt, step)
     springs, _, _ = spatial_recursion.spring_gradient(scene, frames, step)
     inputs = input_symbols(scene)
-    torques = joint_torques(scene, inputs)
+    plain = joint_torques(scene, inputs)
+    law = StepControl(scene, dt)
+    torques = plain
+    if scene.control:
+        controlled = spatial_midpoint_control(scene, dt, q0, w0, wm, step, law)
+        torques = [t + c for t, c in zip(plain, controlled)]
     residual = [moment + dt * (spring - torque + number(link.damping) * w)
                 for moment, spring, torque, link, w
                 in zip(dynamics, springs, torques, scene.links, wm)]
@@ -61,6 +67,10 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
     _, spring_energy, segments = spatial_recursion.spring_gradient(scene, frames0, at_state)
     kinetic = spatial_recursion.kinetic_energy(scene, frames0, omegas, velocities)
     energy = kinetic + spatial_recursion.gravity_potential(scene, frames0) + spring_energy
+    applied_torques = None
+    if scene.control:
+        energy += spatial_state_shaping(scene, q0)
+        applied_torques = ImmutableMatrix([torques[joint - 1] for joint in scene.actuated])
     state_fields = joint_space_state(scene, q0, w0, energy)
     if scene.actuated:
         state_fields.update(holding_torques(scene, state_fields["initial_angles"]))
@@ -77,11 +87,15 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
                               "(Coriolis + grad V - tau) at the mid-point, spatial chain (N m s)"),
         inputs=inputs, definitions=tuple(step.items), state_definitions=tuple(at_state.items),
         segment_vectors=ImmutableMatrix([c for d in segments for c in d]),
-        input_work=dt * sp.Add(*(tau * w for tau, w in zip(torques, wm))),
+        input_work=dt * sp.Add(*(tau * w for tau, w in zip(plain, wm))),
         dissipated=dt * sp.Add(*(number(link.damping) * w ** 2
-                                 for link, w in zip(scene.links, wm) if link.damping)),
-        flow_description=FLOWS if has_energy_flows(scene) else None,
+                                 for link, w in zip(scene.links, wm) if link.damping))
+        + law.injected,
+        applied_torques=applied_torques,
+        flow_description=(CONTROLLED_FLOWS if scene.control else
+                          FLOWS if has_energy_flows(scene) else None),
         jacobian_reuse=JACOBIAN_PER_STEP, kinetic_energy=kinetic,
+        newton_overrides=(("energy_tol", 0.0),) if scene.control else (),
     )
 
 
