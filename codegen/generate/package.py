@@ -329,7 +329,10 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "flows": int(features.flows),
         "p_arguments": f"parameters, {prefix.upper()}_NP" if n_p else "NULL, 0",
         "actuated_joints": actuated_joints(scene),
-        **example_context(scene, controlled=features.control),
+        # A law without a [control] table (a stand-in a test puts into a scheme) has no target
+        # of its own: the example's posture is then the PD example's.
+        **example_context(scene, controlled=features.control
+                          and getattr(scene, "control", None) is not None),
         "parameters": parameters_listed,
         "work": work,
         "defaults": {name: c_literal(value) for name, value in defaults.items()},
