@@ -57,7 +57,7 @@ def shaping_potential(scene: Scene | SpatialScene, phi) -> float:
     actuated = np.array(actuated_joints(scene)) - 1
     phi = np.asarray(phi, dtype=float)
     target = np.array(control.target, dtype=float)
-    offsets = phi[actuated] - target[actuated]
+    offsets = np.angle(np.exp(1j * (phi[actuated] - target[actuated])))   # wrapped, as V_d's
     value = 0.5 * float(np.sum(np.array(control.stiffness) * offsets ** 2))
     if control.compensate:
         held = target.copy()

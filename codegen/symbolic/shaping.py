@@ -40,6 +40,14 @@ from .recursion import Definitions
 _SINC_SERIES_BELOW = 1e-3
 
 
+def offset(phi, target) -> sp.Expr:
+    """phi - phi* wrapped to (-pi, pi]: V_d's quadratic lives on the circle, its cut at the
+    target's antipode (where it is continuous, its gradient not), so that a joint crossing
+    +-pi, which es's and the measured angles wrap, sees no jump in V_s."""
+    difference = phi - number(target)
+    return sp.atan2(sp.sin(difference), sp.cos(difference))
+
+
 def sinc(h) -> sp.Expr:
     """sin(h) / h without a branch and without 0 / 0: with H = max(|h|, c),
     sin(H) / H + p(h) - p(H), p the Taylor polynomial 1 - h^2/6 + h^4/120. Above c it is
@@ -107,7 +115,7 @@ def _shaping_angles(scene: Scene, actuated_angles) -> dict[int, sp.Expr]:
 def shaping_potential(scene: Scene, actuated_angles, defs: Definitions | None = None) -> sp.Expr:
     """V_s at the actuated joints' angles `actuated_angles` (scene order of actuation)."""
     control = scene.control
-    quadratic = sp.Add(*(number(k) / 2 * (phi - number(control.target[joint - 1])) ** 2
+    quadratic = sp.Add(*(number(k) / 2 * offset(phi, control.target[joint - 1]) ** 2
                          for joint, k, phi in zip(scene.actuated_joints, control.stiffness,
                                                   actuated_angles)))
     if not control.compensate:
@@ -138,9 +146,8 @@ def discrete_shaping_gradient(scene: Scene, start, increments, defs: Definitions
     `start + increments` (module docstring). One entry per actuated joint."""
     control = scene.control
     actuated = scene.actuated_joints
-    mean = [phi + d / 2 for phi, d in zip(start, increments)]
-    gradient = [number(k) * (m - number(control.target[joint - 1]))
-                for joint, k, m in zip(actuated, control.stiffness, mean)]
+    gradient = [number(k) * (offset(phi, control.target[joint - 1]) + d / 2)
+                for joint, k, phi, d in zip(actuated, control.stiffness, start, increments)]
     if not control.compensate:
         return gradient
     terms = potential_terms(scene)

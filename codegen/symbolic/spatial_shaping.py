@@ -22,7 +22,7 @@ import sympy as sp
 
 from ..spatial.values import SpatialScene
 from .com_model import number
-from .shaping import sinc
+from .shaping import offset, sinc
 from .spatial_recursion import joint_rotation_factors
 
 
@@ -158,7 +158,7 @@ def _angles(scene: SpatialScene, actuated_angles) -> list:
 def shaping_potential(scene: SpatialScene, actuated_angles) -> sp.Expr:
     """V_s = 1/2 sum k_a (phi_a - phi*_a)^2 - c V(phi_A, phi*_U)."""
     control = scene.control
-    value = sp.Add(*(number(k) / 2 * (phi - number(control.target[joint - 1])) ** 2
+    value = sp.Add(*(number(k) / 2 * offset(phi, control.target[joint - 1]) ** 2
                      for joint, k, phi in zip(_actuated(scene), control.stiffness,
                                               actuated_angles)))
     if control.compensate:
@@ -171,7 +171,7 @@ def discrete_shaping_gradient(scene: SpatialScene, start, increments, defs) -> l
     docstring); with zero increments, dV_s/dphi_a at `start`."""
     control = scene.control
     actuated = _actuated(scene)
-    gradient = [number(k) * (phi + d / 2 - number(control.target[joint - 1]))
+    gradient = [number(k) * (offset(phi, control.target[joint - 1]) + d / 2)
                 for joint, k, phi, d in zip(actuated, control.stiffness, start, increments)]
     if not control.compensate:
         return gradient
