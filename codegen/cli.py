@@ -239,8 +239,11 @@ def command_export(args) -> int:
         write_text(args.mjcf, text)
     actuated = scene.actuated if spatial else scene.actuated_joints
     motors = f", motors on joints {list(actuated)}" if actuated else ""
+    # MJCF has no counterpart of a [control] law: the file is the plant, and says so here.
+    plant = ("; the plant only: the scene's [control] law is not in the MJCF (drive its motors "
+             "with it yourself)" if getattr(scene, "control", None) is not None else "")
     print(f"wrote {args.mjcf}: {scene.n} links, {len(scene.springs)} spring tendons{motors}, "
-          f"dt {dt:g} s, {args.integrator}")
+          f"dt {dt:g} s, {args.integrator}{plant}")
     return 0
 
 

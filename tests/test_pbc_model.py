@@ -227,3 +227,16 @@ def test_a_spatial_control_table_reads_writes_back_and_takes_key_paths():
         spatial_parameters.with_values(SPATIAL, {"control.stiffness[1]": -1.0})
     with pytest.raises(SceneError, match="has 2 entries"):
         spatial_parameters.number_path(SPATIAL, "control.damping[2]")
+
+
+def test_exporting_a_controlled_scene_says_the_mjcf_is_the_plant(tmp_path):
+    """MJCF has no counterpart of the [control] law: the export writes the plant and says so,
+    so that a MuJoCo run of it is not taken for the closed loop."""
+    import subprocess
+    import sys
+    out = tmp_path / "arm.xml"
+    result = subprocess.run([sys.executable, "-m", "chaingen", "export", "four_link_pbc",
+                             "--mjcf", str(out)], capture_output=True, text=True, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "the plant only: the scene's [control] law is not in the MJCF" in result.stdout
+    assert out.exists()
