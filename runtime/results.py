@@ -58,6 +58,9 @@ class SimulationResult:
     #: every step's); None for a scene without actuation.
     torques: np.ndarray | None = field(default=None, repr=False)
     actuated_joints: tuple[int, ...] = ()
+    # What the energy column is: "H" = T + V, or "H_d" = T + V + V_s, the closed loop's
+    # storage of a package whose step holds a [control] law (feature `control`).
+    storage: str = "H"
 
     def column(self, name: str) -> np.ndarray:
         return self.samples[:, self.columns.index(name)]

@@ -487,7 +487,8 @@ class Solver:
             adaptive=bool(c_options.rtol > 0 or c_options.atol > 0),
             rtol=float(c_options.rtol), atol=float(c_options.atol),
             torques=None if recorded is None else recorded[:-(-int(stats.steps) // every)],
-            actuated_joints=self.actuated_joints)
+            actuated_joints=self.actuated_joints,
+            storage="H_d" if self.manifest.get("control") else "H")
         if errors:
             raise errors[0]
         if status:

@@ -28,6 +28,9 @@ def run_metadata(result: SimulationResult) -> dict:
                 "order": result.order, "dt": result.dt, "every": result.every,
                 "n_steps": result.n_steps, "rtol": result.rtol, "atol": result.atol,
                 "columns": list(result.columns)}
+    if result.storage != "H":      # the energy column of a controlled package
+        metadata["energy"] = ("H_d = T + V + V_s: the closed loop's storage (a [control] law, "
+                              "docs/controllers.md)")
     if result.parameters:          # a solver's run-time parameters: the values the run took
         metadata["parameters"] = {path: float(value) for path, value in result.parameters.items()}
     if result.adaptive:

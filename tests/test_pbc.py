@@ -166,3 +166,18 @@ def test_a_target_near_pi_is_reached_through_the_wrap():
     assert np.abs(offset).max() < 1e-4
     balance = np.diff(result.energy - result.input_work + result.dissipated)
     assert np.abs(balance).max() <= 1e-12 * np.abs(result.energy).max()
+
+
+def test_a_controlled_runs_files_say_what_its_energy_is(tmp_path):
+    """The energy column of a controlled scene is H_d: the metadata file and the summary say so
+    (docs/scene-format.md, section 12), so that it is not read as H = T + V."""
+    import json
+    import subprocess
+    import sys
+    out = tmp_path / "run.csv"
+    result = subprocess.run([sys.executable, "-m", "chaingen", "simulate", "four_link_pbc",
+                             "--t-end", "0.2", "--out", str(out)], capture_output=True,
+                            text=True, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "(H_d - H_d_0 - work + dissipated)" in result.stdout
+    assert json.loads((tmp_path / "run.csv.json").read_text())["energy"].startswith("H_d = ")

@@ -35,7 +35,7 @@ def run_summary(result, settings, out: Path | None) -> str:
             f"  input work, dissipated {result.input_work[-1]:.6g} J, "
             f"{result.dissipated[-1]:.6g} J",
             f"  max |balance error|    {np.abs(result.balance_error).max():.3e} J "
-            f"(H - H_0 - work + dissipated){over}",
+            f"({result.storage} - {result.storage}_0 - work + dissipated){over}",
         ]
     lines += [
         f"  max |constraint error| {result.constraint_error.max():.3e}{over}",
