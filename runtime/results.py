@@ -25,6 +25,11 @@ def sample_slice(columns, name: str) -> slice:
     return slice(start, start + len(names))
 
 
+def storage_of(manifest: dict) -> str:
+    """What a package's energy column is: H_d with a [control] law in its step, else H."""
+    return "H_d" if manifest.get("control") else "H"
+
+
 @dataclass(frozen=True)
 class SimulationResult:
     """Samples of one simulation: rows of the trajectory file's columns, and its counters."""

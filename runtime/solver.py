@@ -44,7 +44,7 @@ from .interface import (
 )
 from .parameters import parameter_bounds as _parameter_bounds
 from .parameters import parameter_vector
-from .results import ControlledStep, Sensitivities, SimulationResult, StepResult
+from .results import ControlledStep, Sensitivities, SimulationResult, StepResult, storage_of
 from .runs import StopSignal, run_watched
 from .stepper import Stepper
 from .workspaces import Workspaces
@@ -487,8 +487,7 @@ class Solver:
             adaptive=bool(c_options.rtol > 0 or c_options.atol > 0),
             rtol=float(c_options.rtol), atol=float(c_options.atol),
             torques=None if recorded is None else recorded[:-(-int(stats.steps) // every)],
-            actuated_joints=self.actuated_joints,
-            storage="H_d" if self.manifest.get("control") else "H")
+            actuated_joints=self.actuated_joints, storage=storage_of(self.manifest))
         if errors:
             raise errors[0]
         if status:
