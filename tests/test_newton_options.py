@@ -75,6 +75,29 @@ def test_warm_start_only_continues_its_own_trajectory():
     assert other_dt == solver.step(states[5], dt=0.005, options=COLD).iterations
 
 
+def test_a_new_chain_on_a_used_workspace_steps_as_on_a_fresh_one():
+    """A chain of steps from a state the workspace did not produce is a new trajectory on all
+    its steps, not only its first: the warm start's choice measured on the old history (here the
+    predictor, where simulate's run ended near rest) goes with it. Before, the chain's second
+    step took that stale choice, and on four_link_pbc (dt = 0.02 s) the chain left simulate's
+    run at round-off after 9 steps (1132 Newton iterations against 1133)."""
+    scene = load("four_link_pbc")
+    solver = solver_for("four_link_pbc", "es")
+    run = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.02, n_steps=200)
+    x = solver.initial_state(scene.initial_angles, scene.initial_velocities)
+    iterations = 0
+    for k in range(200):   # on the thread's workspace, right after simulate's run
+        result = solver.step(x, dt=0.02)
+        x, iterations = result.x1, iterations + result.iterations
+        assert np.array_equal(solver.outputs(x)[0], run.phi[k + 1]), k + 1
+    assert iterations == run.newton_iterations
+    solver.reset()
+    fresh, _ = chained_steps(solver, solver.initial_state(scene.initial_angles,
+                                                          scene.initial_velocities),
+                             0.02, None, 200)
+    assert np.array_equal(fresh[-1], x)
+
+
 def test_reset_forgets_the_history():
     solver = solver_for("three_link_mono", "es")
     x0 = initial(solver)

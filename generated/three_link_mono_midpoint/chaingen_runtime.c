@@ -1249,7 +1249,10 @@ static int cg_finish_step(const chaingen_model *table, const cg_solver *c, const
             ++s->history;
         }
     } else {
+        /* A new chain (another trajectory, or another dt): the old history is gone, and with it
+         * the choice measured on it; the next step chooses as after workspace_init. */
         s->history = 1;
+        s->warm_choice = 0;
     }
     memcpy(c->previous_z, c->z, sizeof(double) * (size_t)nz);
     memcpy(c->previous_x1, x1, sizeof(double) * (size_t)nx);
