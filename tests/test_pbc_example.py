@@ -38,8 +38,8 @@ STRICT = list(contract.STRICT_FLAGS)
 SANITIZE = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer",
             "-fno-sanitize-recover=all", "-g"]
 #: A step's rise of H_d the discrete law allows: round-off in evaluating H_d, whose terms
-#: (gravity, springs, the compensation) are tens of J that cancel (measured: 2.1e-14 J on
-#: four_link_pbc, 2.5e-14 J on four_link_pbc_partial). The sampled law at the same dt raises
+#: (gravity, springs, the compensation) are tens of J that cancel (measured: 2.5e-14 J on
+#: four_link_pbc, 2.8e-14 J on four_link_pbc_partial). The sampled law at the same dt raises
 #: H_d by 2.7e-4 J (docs/controllers.md).
 ROUND_OFF = 1e-12
 
