@@ -82,14 +82,22 @@ def joint_space_model(scene: Scene, directions, rates) -> JointSpaceModel:
         mass_matrix=mass_matrix, gravity_potential=gravity, springs=springs)
 
 
-def joint_space_potential(scene: Scene, directions) -> sp.Expr:
-    """V (gravity and springs) from the absolute link directions, without the kinetic terms."""
+def direction_geometry(scene: Scene, directions) -> tuple[list, list, list]:
+    """(joints X_1..X_{n+1}, normals n_0..n_n, COM heights) from the absolute link directions
+    (expressions or symbols): what the potential is made of."""
     joints, normals, heights = [ImmutableMatrix([0, 0])], [ImmutableMatrix([0, 1])], []
     for link, e in zip(scene.links, directions):
+        e = ImmutableMatrix(e)
         n = S * e
         heights.append((joints[-1] + number(link.com) * e + number(link.com_normal) * n)[1])
         joints.append(joints[-1] + number(link.length) * e)
         normals.append(n)
+    return joints, normals, heights
+
+
+def joint_space_potential(scene: Scene, directions) -> sp.Expr:
+    """V (gravity and springs) from the absolute link directions, without the kinetic terms."""
+    joints, normals, heights = direction_geometry(scene, directions)
     gravity = sp.Integer(0)
     if scene.gravity:
         gravity = sp.Add(*(number(link.mass * scene.gravity) * y

@@ -33,7 +33,8 @@ import sympy as sp
 from sympy import ImmutableMatrix
 
 from ..scene import Scene
-from .com_model import S, number, spring_terms
+from .com_model import number, spring_terms
+from .joint_model import direction_geometry
 from .recursion import Definitions
 
 #: sinc(h) = sin(h) / h below this |h| by its Taylor polynomial (error h^6 / 5040 < 2e-22).
@@ -75,13 +76,7 @@ def potential_terms(scene: Scene) -> PotentialTerms:
     """V of `scene` in direction symbols (the construction of joint_model.joint_space_potential)."""
     directions = tuple((sp.Symbol(f"shape_ex{j}", real=True), sp.Symbol(f"shape_ey{j}", real=True))
                        for j in range(1, scene.n + 1))
-    joints, normals, heights = [ImmutableMatrix([0, 0])], [ImmutableMatrix([0, 1])], []
-    for link, (ex, ey) in zip(scene.links, directions):
-        e = ImmutableMatrix([ex, ey])
-        n = S * e
-        heights.append((joints[-1] + number(link.com) * e + number(link.com_normal) * n)[1])
-        joints.append(joints[-1] + number(link.length) * e)
-        normals.append(n)
+    joints, normals, heights = direction_geometry(scene, directions)
     gravity = sp.Integer(0)
     if scene.gravity:
         gravity = sp.Add(*(number(link.mass * scene.gravity) * y

@@ -46,6 +46,28 @@ class StepControl:
         return [self.torques[joint - 1] for joint in actuated_joints(self.scene)]
 
 
+def apply_law(scene, dt, discrete, sampled, ratios, rates_mid, rates0, defs: Definitions,
+              law: StepControl) -> list:
+    """The law's torque per joint (zero where not actuated), into `law`: discrete,
+    -G_a r_a - D_a phidot_a(m) with G = discrete() and r = `ratios` (None: 1); sampled,
+    -dV_s/dphi_a(phi_0) - D_a phidot_a(0) with the gradient sampled(). Also the injected
+    damping's energy over the step."""
+    control = scene.control
+    actuated = actuated_joints(scene)
+    torques = [sp.Integer(0)] * scene.n
+    held = control.law != "discrete"
+    gradient = sampled() if held else discrete()
+    for index, (joint, g, d) in enumerate(zip(actuated, gradient, control.damping)):
+        shape = defs.define(f"ctl_shape{joint}", g)
+        if not held and ratios is not None:
+            shape = shape * ratios[index]
+        rate = rates0[joint - 1] if held else rates_mid[joint - 1]
+        torques[joint - 1] = -shape - number(d) * rate
+        law.injected += dt * number(d) * rate * rates_mid[joint - 1]
+    law.torques = torques
+    return torques
+
+
 def _dot(a, b) -> sp.Expr:
     return a[0] * b[0] + a[1] * b[1]
 
@@ -63,92 +85,57 @@ def es_control(scene: Scene, dt, defs: Definitions, law: StepControl):
                        for k, (R, a) in enumerate(zip(maps, arms0), start=1)]
         angles0 = [defs.define(f"ctl_phi0_{k}", sp.atan2(cross(a, b), _dot(a, b)))
                    for k, (a, b) in enumerate(zip(e0[:-1], e0[1:]), start=1)]
-        torques = [sp.Integer(0)] * n
-        if control.law == "discrete":
-            e1 = [base] + [defs.vector(f"ctl_e1_{k}", apply(R, (a[0] + d[0], a[1] + d[1])))
-                           for k, (R, a, d) in enumerate(zip(maps, arms0, arm_steps), start=1)]
-            turns = [sp.Integer(0)] + [
-                defs.define(f"ctl_dtheta{k}", sp.atan2(cross(a, b), _dot(a, b)))
-                for k, (a, b) in enumerate(zip(e0[1:], e1[1:]), start=1)]
-            steps = [defs.define(f"ctl_dphi{k}", turns[k] - turns[k - 1])
-                     for k in range(1, n + 1)]
-            start = [angles0[joint - 1] for joint in actuated]
-            increments = [steps[joint - 1] for joint in actuated]
-            gradient = discrete_shaping_gradient(scene, start, increments, defs)
-            for joint, g, d in zip(actuated, gradient, control.damping):
-                ratio = defs.define(f"ctl_ratio{joint}", 1 / (
-                    sinc(steps[joint - 1] / 2) * sp.cos((turns[joint] + turns[joint - 1]) / 2)))
-                rate = rates[joint - 1]
-                torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) * ratio \
-                    - number(d) * rate
-                law.injected += dt * number(d) * rate ** 2
-        else:
+        e1 = [base] + [defs.vector(f"ctl_e1_{k}", apply(R, (a[0] + d[0], a[1] + d[1])))
+                       for k, (R, a, d) in enumerate(zip(maps, arms0, arm_steps), start=1)]
+        turns = [sp.Integer(0)] + [
+            defs.define(f"ctl_dtheta{k}", sp.atan2(cross(a, b), _dot(a, b)))
+            for k, (a, b) in enumerate(zip(e0[1:], e1[1:]), start=1)]
+        steps = [defs.define(f"ctl_dphi{k}", turns[k] - turns[k - 1]) for k in range(1, n + 1)]
+        start = [angles0[joint - 1] for joint in actuated]
+        ratios = [defs.define(f"ctl_ratio{joint}", 1 / (
+            sinc(steps[joint - 1] / 2) * sp.cos((turns[joint] + turns[joint - 1]) / 2)))
+            for joint in actuated]
+
+        def measured():
+            # The joint rates a controller measures: of the velocity's projection onto the
+            # constraints (es's state carries a normal component that alternates in sign
+            # and that no joint sees; com_recursion.projected_rates).
             absolute = [defs.define(f"ctl_thetadot0_{k}", cross(a, r)
                                     / number(link.com ** 2 + link.com_normal ** 2))
                         for k, (a, r, link) in enumerate(zip(arms0, arm_rates0, scene.links),
                                                          start=1)]
-            # The joint rates a controller measures: of the velocity's projection onto the
-            # constraints (es's state carries a normal component that alternates in sign
-            # and that no joint sees; com_recursion.projected_rates).
-            rates0 = projected_rates(scene, joints0, arms0, e0[1:], com_rates0, absolute, defs)
-            gradient = shaping_gradient(scene, [angles0[joint - 1] for joint in actuated])
-            for joint, g, d in zip(actuated, gradient, control.damping):
-                torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) \
-                    - number(d) * rates0[joint - 1]
-                law.injected += dt * number(d) * rates0[joint - 1] * rates[joint - 1]
-        law.torques = torques
-        return torques
+            return projected_rates(scene, joints0, arms0, e0[1:], com_rates0, absolute, defs)
+
+        held = control.law != "discrete"
+        return apply_law(
+            scene, dt,
+            lambda: discrete_shaping_gradient(scene, start, [steps[j - 1] for j in actuated],
+                                              defs),
+            lambda: shaping_gradient(scene, start), ratios, rates,
+            measured() if held else None, defs, law)
 
     return hook
 
 
 def midpoint_control(scene: Scene, dt, angles0, rates0, rates_mid, defs: Definitions,
                      law: StepControl) -> list:
-    """midpoint's control torques per joint for scene.control (angles not wrapped)."""
-    control = scene.control
+    """midpoint's control torques per joint for scene.control (angles not wrapped): its
+    torques work through dt w(m) = phi_1 - phi_0 itself (r = 1)."""
     actuated = scene.actuated_joints
-    torques = [sp.Integer(0)] * scene.n
-    if control.law == "discrete":
-        start = [angles0[joint - 1] for joint in actuated]
-        increments = [dt * rates_mid[joint - 1] for joint in actuated]
-        gradient = discrete_shaping_gradient(scene, start, increments, defs)
-        for joint, g, d in zip(actuated, gradient, control.damping):
-            rate = rates_mid[joint - 1]
-            torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) - number(d) * rate
-            law.injected += dt * number(d) * rate ** 2
-    else:
-        gradient = shaping_gradient(scene, [angles0[joint - 1] for joint in actuated])
-        for joint, g, d in zip(actuated, gradient, control.damping):
-            torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) \
-                - number(d) * rates0[joint - 1]
-            law.injected += dt * number(d) * rates0[joint - 1] * rates_mid[joint - 1]
-    law.torques = torques
-    return torques
+    start = [angles0[joint - 1] for joint in actuated]
+    increments = [dt * rates_mid[joint - 1] for joint in actuated]
+    return apply_law(scene, dt,
+                     lambda: discrete_shaping_gradient(scene, start, increments, defs),
+                     lambda: shaping_gradient(scene, start), None, rates_mid, rates0, defs, law)
 
 
 def _spatial_law(scene, dt, start, increments, ratios, rates_mid, rates0, defs, law) -> list:
-    """A spatial scene's law per joint: discrete (G r - D rate_mid) or sampled."""
-    from .. import spatial_shaping
-    control = scene.control
-    actuated = scene.actuated
-    torques = [sp.Integer(0)] * scene.n
-    if control.law == "discrete":
-        gradient = spatial_shaping.discrete_shaping_gradient(scene, start, increments, defs)
-        for index, (joint, g, d) in enumerate(zip(actuated, gradient, control.damping)):
-            rate = rates_mid[joint - 1]
-            ratio = ratios[index] if ratios is not None else sp.Integer(1)
-            torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) * ratio \
-                - number(d) * rate
-            law.injected += dt * number(d) * rate ** 2
-    else:
-        gradient = spatial_shaping.discrete_shaping_gradient(
-            scene, start, [sp.Integer(0)] * len(actuated), defs)
-        for joint, g, d in zip(actuated, gradient, control.damping):
-            torques[joint - 1] = -defs.define(f"ctl_shape{joint}", g) \
-                - number(d) * rates0[joint - 1]
-            law.injected += dt * number(d) * rates0[joint - 1] * rates_mid[joint - 1]
-    law.torques = torques
-    return torques
+    """A spatial scene's law per joint (apply_law with chaingen.symbolic.spatial_shaping's
+    gradients; the sampled one is the discrete one at a zero step)."""
+    from ..spatial_shaping import discrete_shaping_gradient as spatial_gradient
+    return apply_law(scene, dt, lambda: spatial_gradient(scene, start, increments, defs),
+                     lambda: spatial_gradient(scene, start, [sp.Integer(0)] * len(start), defs),
+                     ratios, rates_mid, rates0, defs, law)
 
 
 def spatial_midpoint_control(scene, dt, angles0, rates0, rates_mid, defs: Definitions,
