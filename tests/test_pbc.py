@@ -181,3 +181,18 @@ def test_a_controlled_runs_files_say_what_its_energy_is(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "(H_d - H_d_0 - work + dissipated)" in result.stdout
     assert json.loads((tmp_path / "run.csv.json").read_text())["energy"].startswith("H_d = ")
+
+
+def test_the_compensation_follows_the_run_time_model_parameters():
+    """With gravity and a spring's stiffness as run-time parameters, the law cancels the
+    potential of the values the run takes (the shaping is derived from the same symbols): the
+    loop regulates to the target with any of them, at round-off balance."""
+    scene = SCENES["four_link_pbc"]
+    solver = chaingen.build_solver(scene, "es", 3, sensitivities=False,
+                                   parameters=["gravity", "springs[1].stiffness"])
+    for values in ([9.81, 10.0], [3.0, 50.0], [20.0, 1.0]):
+        result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                                 n_steps=4000, parameters=values)
+        assert np.abs(result.phi[-1] - scene.control.target).max() < 1e-6
+        balance = np.diff(result.energy - result.input_work + result.dissipated)
+        assert np.abs(balance).max() <= 1e-12 * np.abs(result.energy).max()
