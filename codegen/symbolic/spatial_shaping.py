@@ -23,35 +23,13 @@ import sympy as sp
 from ..spatial.values import SpatialScene
 from .com_model import number
 from .shaping import offset, sinc
-from .spatial_recursion import joint_rotation_factors
+from .spatial_recursion import ZERO, add, apply, constant, dot, joint_rotation_factors, scale
 
 
-def _add(a, b):
-    return tuple(x + y for x, y in zip(a, b))
-
-
-def _scale(k, a):
-    return tuple(k * x for x in a)
-
-
-def _dot(a, b):
-    return sp.Add(*(x * y for x, y in zip(a, b)))
-
-
-def _apply(matrix, v):
-    return tuple(_dot(row, v) for row in matrix)
-
-
-def _product(a, b):
-    return tuple(tuple(_dot(a[r], [b[m][k] for m in range(3)]) for k in range(3))
+def matrix_product(a, b):
+    """a b of 3 x 3 matrices as rows."""
+    return tuple(tuple(dot(a[r], [b[m][k] for m in range(3)]) for k in range(3))
                  for r in range(3))
-
-
-def _mix(a, b, wa, wb):
-    return tuple(tuple(wa * a[r][k] + wb * b[r][k] for k in range(3)) for r in range(3))
-
-
-_ZERO3 = (sp.Integer(0),) * 3
 
 
 class Chain:
@@ -61,28 +39,29 @@ class Chain:
     def __init__(self, scene: SpatialScene, pairs, joint: int | None = None, tangent=None):
         self.scene = scene
         rotation = derivative = None    # R_0 = 1, dR_0 = 0
-        origin, velocity = _ZERO3, _ZERO3
+        origin, velocity = ZERO, ZERO
         self.rotations, self.origins, self.tangents, self.moving = [], [], [], []
         for i, (link, (c, s)) in enumerate(zip(scene.links, pairs), start=1):
-            xyz = tuple(number(x) for x in link.joint.xyz)
+            xyz = constant(link.joint.xyz)
             if rotation is None:
                 origin = xyz
             else:
-                origin = _add(origin, _apply(rotation, xyz))
+                origin = add(origin, apply(rotation, xyz))
                 if derivative is not None:
-                    velocity = _add(velocity, _apply(derivative, xyz))
+                    velocity = add(velocity, apply(derivative, xyz))
             A, B, C = joint_rotation_factors(link.joint)
             relative = tuple(tuple(A[r][k] + s * B[r][k] + c * C[r][k] for k in range(3))
                              for r in range(3))
-            turned = relative if rotation is None else _product(rotation, relative)
+            turned = relative if rotation is None else matrix_product(rotation, relative)
             if derivative is not None:
-                derivative = _product(derivative, relative)
+                derivative = matrix_product(derivative, relative)
             if i == joint:
                 dc, ds = tangent
                 change = tuple(tuple(ds * B[r][k] + dc * C[r][k] for k in range(3))
                                for r in range(3))
-                own = change if rotation is None else _product(rotation, change)
-                derivative = own if derivative is None else _mix(derivative, own, 1, 1)
+                own = change if rotation is None else matrix_product(rotation, change)
+                derivative = own if derivative is None else tuple(
+                    add(row, other) for row, other in zip(derivative, own))
             rotation = turned
             self.rotations.append(rotation)
             self.origins.append(origin)
@@ -90,35 +69,32 @@ class Chain:
 
     def point(self, link: int, point) -> tuple:
         """A point fixed on `link` (0: the base), in the world."""
-        point = tuple(number(x) for x in point)
+        point = constant(point)
         if link == 0:
             return point
-        return _add(self.origins[link - 1], _apply(self.rotations[link - 1], point))
+        return add(self.origins[link - 1], apply(self.rotations[link - 1], point))
 
     def point_tangent(self, link: int, point) -> tuple:
         """The derivative of `point` along the chain's tangent (zero inboard of its joint)."""
         if link == 0:
-            return _ZERO3
+            return ZERO
         derivative, velocity = self.tangents[link - 1]
         out = velocity
         if derivative is not None:
-            out = _add(out, _apply(derivative, tuple(number(x) for x in point)))
+            out = add(out, apply(derivative, constant(point)))
         return out
 
 
-def _com(link) -> tuple:
-    return tuple(link.com)
-
 
 def gravity_energy(scene: SpatialScene, chain: Chain) -> sp.Expr:
-    gravity = tuple(number(g) for g in scene.gravity)
-    return -sp.Add(*(number(link.mass) * _dot(gravity, chain.point(i, _com(link)))
+    gravity = constant(scene.gravity)
+    return -sp.Add(*(number(link.mass) * dot(gravity, chain.point(i, link.com))
                      for i, link in enumerate(scene.links, start=1)))
 
 
 def gravity_tangent(scene: SpatialScene, chain: Chain) -> sp.Expr:
-    gravity = tuple(number(g) for g in scene.gravity)
-    return -sp.Add(*(number(link.mass) * _dot(gravity, chain.point_tangent(i, _com(link)))
+    gravity = constant(scene.gravity)
+    return -sp.Add(*(number(link.mass) * dot(gravity, chain.point_tangent(i, link.com))
                      for i, link in enumerate(scene.links, start=1)))
 
 
@@ -128,7 +104,7 @@ def segments(scene: SpatialScene, chain: Chain, tangents: bool = False) -> list:
     for spring in scene.springs:
         at = chain.point_tangent if tangents else chain.point
         points = [at(p.link, p.point) for p in spring.route]
-        out.append([_add(b, _scale(-1, a)) for a, b in zip(points, points[1:])])
+        out.append([add(b, scale(-1, a)) for a, b in zip(points, points[1:])])
     return out
 
 
@@ -137,20 +113,17 @@ def potential(scene: SpatialScene, angles) -> sp.Expr:
     chain = Chain(scene, [(sp.cos(a), sp.sin(a)) for a in angles])
     energy = gravity_energy(scene, chain)
     for spring, vectors in zip(scene.springs, segments(scene, chain)):
-        length = sp.Add(*(sp.sqrt(_dot(v, v)) for v in vectors))
+        length = sp.Add(*(sp.sqrt(dot(v, v)) for v in vectors))
         energy += number(spring.stiffness) / 2 * (length - number(spring.rest_length)) ** 2
     return energy
 
-
-def _actuated(scene: SpatialScene) -> tuple[int, ...]:
-    return scene.actuated
 
 
 def _angles(scene: SpatialScene, actuated_angles) -> list:
     """Every joint's angle of the compensation term: the actuated ones given, the rest at
     their target."""
     angles = [number(t) for t in scene.control.target]
-    for joint, value in zip(_actuated(scene), actuated_angles):
+    for joint, value in zip(scene.actuated, actuated_angles):
         angles[joint - 1] = value
     return angles
 
@@ -159,7 +132,7 @@ def shaping_potential(scene: SpatialScene, actuated_angles) -> sp.Expr:
     """V_s = 1/2 sum k_a (phi_a - phi*_a)^2 - c V(phi_A, phi*_U)."""
     control = scene.control
     value = sp.Add(*(number(k) / 2 * offset(phi, control.target[joint - 1]) ** 2
-                     for joint, k, phi in zip(_actuated(scene), control.stiffness,
+                     for joint, k, phi in zip(scene.actuated, control.stiffness,
                                               actuated_angles)))
     if control.compensate:
         value -= potential(scene, _angles(scene, actuated_angles))
@@ -170,7 +143,7 @@ def discrete_shaping_gradient(scene: SpatialScene, start, increments, defs) -> l
     """G with G . increments = V_s(start + increments) - V_s(start) identically (module
     docstring); with zero increments, dV_s/dphi_a at `start`."""
     control = scene.control
-    actuated = _actuated(scene)
+    actuated = scene.actuated
     gradient = [number(k) * (offset(phi, control.target[joint - 1]) + d / 2)
                 for joint, k, phi, d in zip(actuated, control.stiffness, start, increments)]
     if not control.compensate:
@@ -191,8 +164,8 @@ def discrete_shaping_gradient(scene: SpatialScene, start, increments, defs) -> l
         for j, (v0, v1) in enumerate(zip(v0s, v1s)):
             v0 = [defs.define(f"sshape_v{s}_{j}_0{x}", c) for x, c in zip("xyz", v0)]
             v1 = [defs.define(f"sshape_v{s}_{j}_1{x}", c) for x, c in zip("xyz", v1)]
-            l0 = defs.define(f"sshape_l{s}_{j}_0", sp.sqrt(_dot(v0, v0)))
-            l1 = defs.define(f"sshape_l{s}_{j}_1", sp.sqrt(_dot(v1, v1)))
+            l0 = defs.define(f"sshape_l{s}_{j}_0", sp.sqrt(dot(v0, v0)))
+            l1 = defs.define(f"sshape_l{s}_{j}_1", sp.sqrt(dot(v1, v1)))
             l0s.append(l0)
             l1s.append(l1)
             spring_units.append([defs.define(f"sshape_u{s}_{j}{x}", (a + b) / (l0 + l1))
@@ -213,7 +186,7 @@ def discrete_shaping_gradient(scene: SpatialScene, start, increments, defs) -> l
             part = gravity_tangent(scene, chain)
             for tension, spring_units, moving in zip(tensions, units,
                                                      segments(scene, chain, tangents=True)):
-                part += tension * sp.Add(*(_dot(u, m) for u, m in zip(spring_units, moving)))
+                part += tension * sp.Add(*(dot(u, m) for u, m in zip(spring_units, moving)))
             total += part / 2
         gradient[index] -= defs.define(f"sshape_G{joint}", total)
     return gradient

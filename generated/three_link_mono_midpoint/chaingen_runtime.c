@@ -1388,18 +1388,19 @@ static int cg_take_step(const chaingen_model *table, const cg_solver *c, const d
     return cg_advance(model, c, x0, u, p, dt, x1, flows, options, iterations, depth);
 }
 
-CHAINGEN_LINKAGE int chaingen_step(const chaingen_model *table, const double *x0, const double *u,
-                                   int nu, const double *p, int np, double dt, double *x1,
-                                   double *flows, const chaingen_options *options,
-                                   const chaingen_workspace *workspace, int *iterations)
+/* What step() and control_torques() do before a step: check the arguments (BAD_ARGUMENT),
+ * carve the workspace, reset the step's counters, derive the parameters' quantities and check
+ * the start state's segments (a run checks its start once: each later step starts where the one
+ * before ended, checked as its x1). A NaN or Inf in x0 is left to the step (Newton fails on it). */
+static int cg_begin_step(const chaingen_model *model, const chaingen_workspace *workspace,
+                         cg_solver *c, const double *x0, const double *u, int nu,
+                         const double *p, int np, double dt)
 {
-    const chaingen_model *const model = CG_MODEL(table);
-    cg_solver solver, *c = &solver;
-    int spent = 0, status;
+    int status;
     if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
-    if (!x1 || !(dt > 0.0) || !isfinite(dt)) {
+    if (!(dt > 0.0) || !isfinite(dt)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     cg_carve(model, workspace, c);
@@ -1409,13 +1410,26 @@ CHAINGEN_LINKAGE int chaingen_step(const chaingen_model *table, const double *x0
     if (status != CHAINGEN_OK) {
         return status;
     }
-    /* The start state's segments (a run checks its start once: each later step starts where the
-     * one before ended, checked as its x1). */
     if (model->nsegment > 0 && x0 && cg_all_finite(x0, model->nx)) {
-        status = cg_start_segments(model, c, x0);
-        if (status != CHAINGEN_OK) {
-            return status;
-        }
+        return cg_start_segments(model, c, x0);
+    }
+    return CHAINGEN_OK;
+}
+
+CHAINGEN_LINKAGE int chaingen_step(const chaingen_model *table, const double *x0, const double *u,
+                                   int nu, const double *p, int np, double dt, double *x1,
+                                   double *flows, const chaingen_options *options,
+                                   const chaingen_workspace *workspace, int *iterations)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    cg_solver solver, *c = &solver;
+    int spent = 0, status;
+    if (!x1) {
+        return CHAINGEN_BAD_ARGUMENT;
+    }
+    status = cg_begin_step(model, workspace, c, x0, u, nu, p, np, dt);
+    if (status != CHAINGEN_OK) {
+        return status;
     }
     status = cg_take_step(model, c, x0, u, p, dt, x1, flows, options, &spent, 0);
     if (iterations) {
@@ -1446,24 +1460,12 @@ CHAINGEN_LINKAGE int chaingen_control_torques(const chaingen_model *table, const
     if (model && (!model->applied_torques || model->nstage > 0)) {
         return CHAINGEN_UNAVAILABLE;
     }
-    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
+    if (!x0 || !tau || !x1 || (model && !cg_all_finite(x0, model->nx))) {
         return CHAINGEN_BAD_ARGUMENT;
     }
-    if (!x0 || !tau || !x1 || !(dt > 0.0) || !isfinite(dt) || !cg_all_finite(x0, model->nx)) {
-        return CHAINGEN_BAD_ARGUMENT;
-    }
-    cg_carve(model, workspace, c);
-    c->s->step_fallbacks = 0;
-    c->s->step_splits = 0;
-    status = cg_derive(model, c, p);
+    status = cg_begin_step(model, workspace, c, x0, u, nu, p, np, dt);
     if (status != CHAINGEN_OK) {
         return status;
-    }
-    if (model->nsegment > 0) {
-        status = cg_start_segments(model, c, x0);
-        if (status != CHAINGEN_OK) {
-            return status;
-        }
     }
     torques = c->rest;
     status = cg_solve_step(model, c, x0, u, p, dt, options, &spent);

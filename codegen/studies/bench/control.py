@@ -228,13 +228,12 @@ class ControlCallTimings:
 
 def control_call_study(config: BenchConfig, note) -> ControlCallTimings:
     """The embedded controller's call against step and simulate (module docstring)."""
-    import json
     import subprocess
 
     from ...generate.package import generate_package, template_environment, write_package
     from ...scene import load_scene
     from ...simulation import build_solver
-    from .harness import HarnessError, call_arguments
+    from .harness import build_timing_program, call_arguments, timing_report
 
     scene = load_scene(CONTROLLED_SCENE)
     dt = scene.simulation.dt
@@ -252,31 +251,12 @@ def control_call_study(config: BenchConfig, note) -> ControlCallTimings:
     with tempfile.TemporaryDirectory(prefix="chaingen-control-calls-") as directory:
         folder = write_package(package, Path(directory) / "package")
         (folder / "bench_control.c").write_text(source)
-        program = folder / "bench_control"
-        # each source with the package's own flags (its solver at -O3), as the harness does
-        source_flags = manifest.get("source_flags", {})
-        for name in ("bench_control.c", *manifest["sources"]):
-            built = subprocess.run([compiler(), *STRICT_FLAGS,
-                                    *source_flags.get(name, HARNESS_FLAGS), "-c", name, "-o",
-                                    f"{name}.o"], cwd=folder, capture_output=True, text=True)
-            if built.returncode != 0:
-                raise HarnessError(f"building bench_control failed: {built.stderr}")
-        built = subprocess.run([compiler(), "-o", str(program), "bench_control.c.o",
-                                *(f"{name}.o" for name in manifest["sources"]), "-lm"],
-                               cwd=folder, capture_output=True, text=True)
-        if built.returncode != 0:
-            raise HarnessError(f"linking bench_control failed: {built.stderr}")
+        program = build_timing_program(folder, "bench_control.c", manifest, HARNESS_FLAGS)
         note(f"control_torques: {config.repeats} rounds")
         result = subprocess.run([str(program), str(CONTROLLED_STEPS), str(config.repeats),
                                  repr(float(dt))], input=" ".join(map(repr, x0.tolist())),
                                 capture_output=True, text=True)
-    try:
-        report = json.loads(result.stdout)
-    except json.JSONDecodeError:
-        raise HarnessError(f"bench_control failed: {result.stderr}") from None
-    if report["status"] != 0:
-        raise HarnessError(f"bench_control: status {report['status']} in loop "
-                           f"{report['loop']}")
+    report = timing_report(result, "bench_control")
     medians = [float(np.median(values)) for values in report["seconds"]]
     return ControlCallTimings(
         scene=scene.name, dt=dt, rounds=config.repeats, control_torques=medians[0],

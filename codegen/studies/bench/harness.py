@@ -28,7 +28,33 @@ class HarnessError(RuntimeError):
     """The harness did not build, or a step failed while timing."""
 
 
-def _report(result: subprocess.CompletedProcess, what: str) -> dict:
+def build_timing_program(folder: Path, program: str, manifest: dict,
+                         flags: tuple[str, ...] = ("-O2",)) -> Path:
+    """Compile the timing program `program` (a .c file in `folder`, beside the package's files)
+    with the package's sources, each in its own compiler process at once, the package's own
+    flags for its sources (manifest source_flags: the solver's -O3, a large model's -O1) as
+    chaingen's build does and `flags` elsewhere, and link it; its path, or HarnessError naming
+    the failed command."""
+    source_flags = manifest.get("source_flags", {})
+    sources = [program, *manifest["sources"]]
+    executable = folder / Path(program).stem
+    commands = [[compiler(), *STRICT_FLAGS, *source_flags.get(name, flags), "-c", name, "-o",
+                 f"{name}.o"] for name in sources]
+    processes = [subprocess.Popen(command, cwd=folder, stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True) for command in commands]
+    results = [(command, process, process.communicate()[1])
+               for command, process in zip(commands, processes)]
+    if all(process.returncode == 0 for _, process, _ in results):
+        command = [compiler(), "-o", str(executable), *(f"{name}.o" for name in sources), "-lm"]
+        link = subprocess.run(command, cwd=folder, capture_output=True, text=True)
+        results.append((command, link, link.stderr))
+    for command, process, stderr in results:
+        if process.returncode != 0:
+            raise HarnessError(f"building {program} failed: {' '.join(command)}\n{stderr}")
+    return executable
+
+
+def timing_report(result: subprocess.CompletedProcess, what: str) -> dict:
     """The JSON report a timing program printed, or HarnessError naming `what` and why."""
     try:
         report = json.loads(result.stdout)
@@ -83,29 +109,10 @@ class Harness:
             parameters=[c_literal(entry["value"]) for entry in manifest["parameters"]],
             option_fields=[(field.name, field.c_type) for field in contract.NEWTON_OPTIONS])
         (self.workdir / "bench_harness.c").write_text(source)
-        self.program = self.workdir / "bench_harness"
-        # Each source in its own compiler process, at once, the package's own flags for its
-        # large model (manifest source_flags) as chaingen's build does.
-        source_flags = manifest.get("source_flags", {})
-        sources = ["bench_harness.c", *manifest["sources"]]
-        commands = [[compiler(), *STRICT_FLAGS, *source_flags.get(name, flags), "-c", name, "-o",
-                     f"{name}.o"] for name in sources]
-        commands.append([compiler(), "-o", str(self.program), *(f"{name}.o" for name in sources),
-                         "-lm"])
         start = time.perf_counter()
-        processes = [subprocess.Popen(command, cwd=self.workdir, stdout=subprocess.PIPE,
-                                      stderr=subprocess.PIPE, text=True)
-                     for command in commands[:-1]]
-        results = [(command, process, process.communicate()[1])
-                   for command, process in zip(commands, processes)]
-        if all(process.returncode == 0 for _, process, _ in results):
-            link = subprocess.run(commands[-1], cwd=self.workdir, capture_output=True, text=True)
-            results.append((commands[-1], link, link.stderr))
+        self.program = build_timing_program(self.workdir, "bench_harness.c", manifest, flags)
         #: wall time of compiling and linking package and harness (the model dominates)
         self.build_seconds = time.perf_counter() - start
-        for command, process, stderr in results:
-            if process.returncode != 0:
-                raise HarnessError(f"building the harness failed: {' '.join(command)}\n{stderr}")
 
     def time(self, x0, dt: float, *, n_steps: int = 2000, repeats: int = 7,
              options: dict[str, float] | None = None) -> LoopTimings:
@@ -115,7 +122,7 @@ class Harness:
         arguments += [f"{key}={value!r}" for key, value in (options or {}).items()]
         result = subprocess.run(arguments, input=" ".join(map(repr, x0.tolist())),
                                 capture_output=True, text=True)
-        report = _report(result, f"{self.package.prefix}: harness")
+        report = timing_report(result, f"{self.package.prefix}: harness")
         return LoopTimings(step_ns=report["step_ns"],
                            residual_jacobian_ns=report["residual_jacobian_ns"],
                            residual_ns=report["residual_ns"], lu_ns=report["lu_ns"],
@@ -199,6 +206,6 @@ def time_pair(first: GeneratedPackage, second: GeneratedPackage, x0, dt: float, 
         result = subprocess.run([str(program), str(n_steps), str(rounds), repr(float(dt))],
                                 input=" ".join(map(repr, np.asarray(x0, float).tolist())),
                                 capture_output=True, text=True)
-    report = _report(result, "paired harness")
+    report = timing_report(result, "paired harness")
     return PairedTimings(tuple(report["a"]), tuple(report["b"]),
                          report["iterations_a"] / n_steps, report["iterations_b"] / n_steps)

@@ -21,14 +21,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
 import sympy as sp
 
 from ...scene import Scene
+from ...spatial.dynamics import rpy_matrix
+from ...spatial.values import SpatialScene
 from ..com_model import com_frame_map, number
 from ..com_recursion import apply, projected_rates
 from ..recursion import Definitions, cross
 from ..shaping import discrete_shaping_gradient, shaping_gradient, shaping_potential, sinc
+from ..spatial_shaping import discrete_shaping_gradient as spatial_gradient
+from ..spatial_shaping import matrix_product
+from ..spatial_shaping import shaping_potential as spatial_potential
 from .base import actuated_joints
+from .spatial_null_space import Link
 
 
 @dataclass
@@ -132,7 +139,6 @@ def midpoint_control(scene: Scene, dt, angles0, rates0, rates_mid, defs: Definit
 def _spatial_law(scene, dt, start, increments, ratios, rates_mid, rates0, defs, law) -> list:
     """A spatial scene's law per joint (apply_law with chaingen.symbolic.spatial_shaping's
     gradients; the sampled one is the discrete one at a zero step)."""
-    from ..spatial_shaping import discrete_shaping_gradient as spatial_gradient
     return apply_law(scene, dt, lambda: spatial_gradient(scene, start, increments, defs),
                      lambda: spatial_gradient(scene, start, [sp.Integer(0)] * len(start), defs),
                      ratios, rates_mid, rates0, defs, law)
@@ -153,11 +159,6 @@ def _sine_vector(m) -> tuple:
     return ((m[2][1] - m[1][2]) / 2, (m[0][2] - m[2][0]) / 2, (m[1][0] - m[0][1]) / 2)
 
 
-def _times(a, b) -> tuple:
-    return tuple(tuple(sp.Add(*(a[r][m] * b[m][k] for m in range(3))) for k in range(3))
-                 for r in range(3))
-
-
 def spatial_es_control(scene, dt, q0, q1, angles, rates_mid, axes_mid, rates0,
                        defs: Definitions, law: StepControl) -> list:
     """Spatial es's law per joint. Its torques work through dt phidot_i(m) = n_i(m) . (s(P_i) -
@@ -166,11 +167,6 @@ def spatial_es_control(scene, dt, q0, q1, angles, rates_mid, axes_mid, rates0,
     and Rot - 1 = dphi (sinc(dphi) [n] + dphi/2 sinc(dphi/2)^2 [n]^2), so that increment is
     dphi_i h_i with h_i = n_i(m) . s(P_{i-1} (sinc(dphi) [n] + ...)): r_i = 1 / h_i, no 0 / 0.
     angles: the joint angles at q0 (spatial_es.joint_angles)."""
-    import numpy as np
-
-    from ...spatial.dynamics import rpy_matrix
-    from .spatial_null_space import Link
-
     n = scene.n
     identity = tuple(tuple(sp.Integer(int(r == k)) for k in range(3)) for r in range(3))
     turns = [identity]
@@ -184,19 +180,21 @@ def spatial_es_control(scene, dt, q0, q1, angles, rates_mid, axes_mid, rates0,
         axis = Link(q0, i - 1).turn(rpy_matrix(link.joint.rpy) @ np.asarray(link.joint.axis))
         axis = [defs.define(f"ctl_n0_{i}{x}", c) for x, c in zip("xyz", axis)]
         parent, own = turns[i - 1], turns[i]
-        relative = _times(tuple(tuple(parent[c][r] for c in range(3)) for r in range(3)), own)
+        transposed = tuple(tuple(parent[c][r] for c in range(3)) for r in range(3))
+        relative = matrix_product(transposed, own)
         sine = _sine_vector(relative)
         cosine = (relative[0][0] + relative[1][1] + relative[2][2] - 1) / 2
         step = defs.define(f"ctl_dphi{i}", sp.atan2(sp.Add(*(a * b for a, b in zip(axis, sine))),
                                                      cosine))
         steps.append(step)
         cross = ((0, -axis[2], axis[1]), (axis[2], 0, -axis[0]), (-axis[1], axis[0], 0))
-        square = _times(cross, cross)
+        square = matrix_product(cross, cross)
         first = defs.define(f"ctl_sinc{i}", sinc(step))
         half = defs.define(f"ctl_sinch{i}", sinc(step / 2))
         change = tuple(tuple(first * cross[r][c] + step / 2 * half ** 2 * square[r][c]
                              for c in range(3)) for r in range(3))
-        h = sp.Add(*(a * b for a, b in zip(axes_mid[i - 1], _sine_vector(_times(parent, change)))))
+        h = sp.Add(*(a * b for a, b in zip(axes_mid[i - 1],
+                                            _sine_vector(matrix_product(parent, change)))))
         ratios.append(defs.define(f"ctl_ratio{i}", 1 / h))
     actuated = scene.actuated
     return _spatial_law(scene, dt, [angles0[j - 1] for j in actuated],
@@ -204,12 +202,8 @@ def spatial_es_control(scene, dt, q0, q1, angles, rates_mid, axes_mid, rates0,
                         rates_mid, rates0, defs, law)
 
 
-def spatial_state_shaping(scene, angles) -> sp.Expr:
-    """V_s of a spatial scene at the state's joint angles."""
-    from ..spatial_shaping import shaping_potential as spatial_potential
-    return spatial_potential(scene, [angles[joint - 1] for joint in scene.actuated])
-
-
-def state_shaping(scene: Scene, angles) -> sp.Expr:
-    """V_s at the state's relative angles `angles` (every joint): H_d = H + this."""
-    return shaping_potential(scene, [angles[joint - 1] for joint in scene.actuated_joints])
+def state_shaping(scene, angles) -> sp.Expr:
+    """V_s at the state's joint angles `angles` (every joint), planar or spatial: H_d = H +
+    this."""
+    potential = spatial_potential if isinstance(scene, SpatialScene) else shaping_potential
+    return potential(scene, [angles[joint - 1] for joint in actuated_joints(scene)])

@@ -41,7 +41,7 @@ from .base import (
     input_symbols,
     joint_torques,
 )
-from .control import StepControl, spatial_es_control, spatial_state_shaping
+from .control import StepControl, spatial_es_control, state_shaping
 from .es import CONTROLLED_FLOWS
 from .spatial_midpoint import holding_torques
 from .spatial_null_space import (
@@ -271,7 +271,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
     energy = sp.Add(*(v * f for v, f in zip(v0, mass_times(scene, v0)))) / 2 + potential_energy
     applied_torques = None
     if scene.control:
-        energy += spatial_state_shaping(scene, joint_angles(scene, q0))
+        energy += state_shaping(scene, joint_angles(scene, q0))
         applied_torques = ImmutableMatrix([u + law.torques[j - 1]
                                            for u, j in zip(inputs, scene.actuated)])
 

@@ -28,7 +28,7 @@ from .base import (
     joint_space_state,
     joint_torques,
 )
-from .control import StepControl, spatial_midpoint_control, spatial_state_shaping
+from .control import StepControl, spatial_midpoint_control, state_shaping
 from .midpoint import CONTROLLED_FLOWS, FLOWS, SUMMARY
 
 
@@ -69,7 +69,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
     energy = kinetic + spatial_recursion.gravity_potential(scene, frames0) + spring_energy
     applied_torques = None
     if scene.control:
-        energy += spatial_state_shaping(scene, q0)
+        energy += state_shaping(scene, q0)
         applied_torques = ImmutableMatrix([torques[joint - 1] for joint in scene.actuated])
     state_fields = joint_space_state(scene, q0, w0, energy)
     if scene.actuated:
