@@ -116,7 +116,7 @@ class Row:
     note: str = ""
 
 
-def scaled(scene: Scene | SpatialScene, law: str) -> Scene | SpatialScene:
+def with_law(scene: Scene | SpatialScene, law: str) -> Scene | SpatialScene:
     """`scene` with its control law set to `law`."""
     return dataclasses.replace(scene, control=dataclasses.replace(scene.control, law=law))
 
@@ -132,7 +132,7 @@ def run_table(scene: Scene | SpatialScene, dts=DTS, scales=SCALES,
     target = np.array(control.target)
     rows = []
     for label, method, law in LAWS:
-        solver = build_solver(scaled(scene, law), method, 3, parameters=paths,
+        solver = build_solver(with_law(scene, law), method, 3, parameters=paths,
                               sensitivities=False)
         for scale in scales:
             gains = [k * scale for k in control.stiffness] + [d * scale for d in control.damping]
