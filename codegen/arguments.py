@@ -76,8 +76,10 @@ def add_scheme_options(parser: argparse.ArgumentParser,
                              f"{SPATIAL_DEFAULT_METHOD} for a spatial scene that names none)")
     # K's range is the rules' (run_settings): one message for 0 and for 21.
     parser.add_argument("--quadrature", type=integer, metavar="K",
-                        help="Gauss-Legendre points for the spring terms of 'es' "
-                             "(default: the scene's)")
+                        help="Gauss-Legendre points for the spring terms of 'es'; at "
+                             f"order {GALERKIN_ORDER}, K + 1 Gauss-Lobatto nodes of its "
+                             "Galerkin step (a spatial scene's es takes K at that order "
+                             "only) (default: the scene's)")
     parser.add_argument("--gradient", choices=GRADIENTS,
                         help="es's discrete gradient of the springs: exact (the energy balance "
                              "holds identically), quadrature (the K-point average alone, the "

@@ -103,6 +103,24 @@ def require_module(module: str, extra: str):
         pytest.skip(message)
 
 
+def passed_check(scene, method: str, order: int = 2):
+    """chaingen check's comparisons on `scene` with `method` at `order` (3 samples, dt =
+    0.01 s): the residual Jacobian and the step sensitivities against central differences,
+    every generated function against the scheme's SymPy expressions. Asserts that every one
+    of them ran and passed; returns the built solver."""
+    from chaingen.simulation import build_solver
+    from chaingen.studies.check import check_solver
+    from chaingen.symbolic.schemes import build_scheme
+
+    scheme = build_scheme(scene, method, order=order)
+    solver = build_solver(scene, method, sensitivities=True, order=order)
+    report = check_solver(scheme, solver, samples=3, dt=0.01)
+    assert {row.quantity for row in report.rows} >= {
+        "residual Jacobian", "d s1 / d s0", "d s1 / d u", "residual", "next state", "energy"}
+    assert report.passed, report.table()
+    return solver
+
+
 def run_example_checked(package: Path, work: Path, seconds: str) -> list[str]:
     """The example program of a written package (its directory), compiled with the strict
     flags for memcheck and for ASan/UBSan, run for `seconds` under each: asserts that both

@@ -41,10 +41,11 @@ def test_the_composition_from_order_4_meets_the_order_6_conditions():
 
 class NumpyStep:
     """The Galerkin step of `scene` by a numpy Newton on its SymPy residual (differenced
-    Jacobian): slow, independent of code generation."""
+    Jacobian): slow, independent of code generation. build: the planar step's builder, or
+    the spatial one's (spatial_galerkin.build)."""
 
-    def __init__(self, scene, quadrature: int, exact_energy: bool = True):
-        scheme = galerkin.build(scene, quadrature, exact_energy=exact_energy)
+    def __init__(self, scene, quadrature: int, exact_energy: bool = True, build=galerkin.build):
+        scheme = build(scene, quadrature, exact_energy=exact_energy)
         self.scheme = scheme
         self.residual = scheme.step_function(scheme.residual)
         self.next_state = scheme.step_function(scheme.next_state)

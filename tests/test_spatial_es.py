@@ -27,7 +27,7 @@ from test_spatial_midpoint import reference_run, wrapped
 from chaingen.errors import UnsupportedSceneError
 from chaingen.spatial import dynamics
 from chaingen.symbolic import spatial_com_model as directors
-from chaingen.symbolic.schemes import build_scheme
+from chaingen.symbolic.schemes import SPATIAL_BUILDERS, build_scheme
 
 from helpers import require_tools
 
@@ -412,14 +412,18 @@ def test_newton_matrix_is_the_mass_matrix_at_rest_and_near_dF_dw(seed, n):
     assert rate <= 0.05, rate
 
 
-def test_order_6_refused_order_4_composed():
-    """Order 4 composes the step (docs/model.md 14); order 6 would stall at 4, as the planar
-    es's composition does: refused, saying so."""
+def test_order_4_composed_order_6_the_galerkin_step():
+    """Order 4 composes the step (docs/model.md 14); order 6, where a composition of it
+    stalls at 4 as the planar es's does, is the k = 1 Galerkin step in joint angles composed
+    from order 4 (tests/test_spatial_galerkin.py); the builder names the orders it takes."""
     scene = random_scene(1, 2)
-    with pytest.raises(UnsupportedSceneError, match="order 6: es for a spatial scene .* "
-                                                    "order 4 at most"):
-        build_scheme(scene, "es", order=6)
-    assert len(build_scheme(scene, "es", order=4).metadata.composition) == 5
+    composed = build_scheme(scene, "es", order=4)
+    assert len(composed.metadata.composition) == 5 and composed.maps.state.shape == (48, 1)
+    galerkin = build_scheme(scene, "es", order=6)
+    assert galerkin.step.unknowns.shape == (8, 1) and galerkin.maps.state.shape == (4, 1)
+    with pytest.raises(UnsupportedSceneError, match="order 3: es for a spatial scene .* "
+                                                    "takes orders 2, 4, 6"):
+        SPATIAL_BUILDERS["es"](scene, 3, 3)
 
 
 @pytest.mark.compile

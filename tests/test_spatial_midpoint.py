@@ -29,7 +29,7 @@ from chaingen.spatial.values import (
 )
 from chaingen.symbolic.schemes import SPATIAL_BUILDERS, build_scheme, spatial_midpoint
 
-from helpers import load, require_module, require_tools
+from helpers import load, passed_check, require_module, require_tools
 
 
 def residual_function(scheme):
@@ -246,16 +246,8 @@ def test_sensitivities_and_generated_functions_pass_the_check():
     """chaingen check's comparisons on an actuated spatial scene: the residual Jacobian and
     the step sensitivities against central differences, every generated function against
     the scheme's SymPy expressions; and the C holding torques against the numeric ones."""
-    from chaingen.simulation import build_solver
-    from chaingen.studies.check import check_solver
-
     scene = dataclasses.replace(random_scene(41, 4, springs=True, physical=False), actuated=(1, 3))
-    scheme = build_scheme(scene, "midpoint")
-    solver = build_solver(scene, "midpoint", sensitivities=True)
-    report = check_solver(scheme, solver, samples=3, dt=0.01)
-    assert {row.quantity for row in report.rows} >= {
-        "residual Jacobian", "d s1 / d s0", "d s1 / d u", "residual", "next state", "energy"}
-    assert report.passed, report.table()
+    solver = passed_check(scene, "midpoint")
     q = np.random.default_rng(41).uniform(-np.pi, np.pi, 4)
     np.testing.assert_allclose(
         solver.holding_torques(q),

@@ -79,19 +79,23 @@ def test_a_bad_value_is_one_line_exit_2_and_nothing_written(tmp_path, table, exp
     assert sorted(path.name for path in tmp_path.iterdir()) == ["arm.toml"]
 
 
-def test_a_method_the_spatial_scheme_refuses_is_one_line_exit_2(tmp_path):
-    """es's spatial orders are the scheme's (here order 4, refused while es takes order 2
-    only): the refusal names the order, and nothing is written."""
-    from chaingen.symbolic.schemes import orders_taken
+def test_es_at_order_6_in_the_table_takes_its_galerkin_step_and_refuses_k_1(tmp_path):
+    """Spatial es takes every order (order 6: its k = 1 Galerkin step, docs/model.md 16), so
+    the table's es at order 6 is taken, with the table's K; K = 1, which its Gauss-Lobatto rule
+    cannot take, is the reader's one line, exit 2, and nothing is written."""
+    from chaingen.scene import SolverSpec
+    from chaingen.symbolic.schemes import build_scheme, orders_taken
 
-    refused = [order for order in (2, 4, 6)
-               if order not in orders_taken(parse_spatial_scene(SPATIAL.read_text()), "es")]
-    if not refused:
-        pytest.skip("spatial es takes every order now")
-    scene = with_table(tmp_path, f'[simulation]\nmethod = "es"\norder = {refused[0]}\n')
+    scene = parse_spatial_scene(SPATIAL.read_text(), "arm.toml")
+    assert orders_taken(scene, "es") == (2, 4, 6)
+    taken = parse_spatial_scene(SPATIAL.read_text() + '\n[simulation]\nmethod = "es"\n'
+                                'order = 6\nquadrature = 4\n', "arm.toml")
+    assert build_scheme(SolverSpec.create(taken)).quadrature == 4
+    scene = with_table(tmp_path, '[simulation]\nmethod = "es"\norder = 6\nquadrature = 1\n')
     result = chaingen_in_process("generate", scene, "-o", "out", cwd=tmp_path)
     assert result.returncode == 2 and len(result.stderr.splitlines()) == 1, result
-    assert f"order {refused[0]}" in result.stderr and not (tmp_path / "out").exists()
+    assert "simulation.quadrature: es at order 6 takes its k = 1 Galerkin step" in result.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def test_the_writer_writes_the_table_and_it_reads_back_exactly():

@@ -58,7 +58,7 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
     scene, quadrature, order = spec.scene, spec.quadrature, spec.order
     if isinstance(scene, SpatialScene):
         return build_spatial_scheme(spec)
-    stages = FROM_ORDER_4 if spec.galerkin_step else composition(order)
+    stages = composition_stages(spec)
     builder = galerkin.build if spec.galerkin_step else BUILDERS[spec.method]
     numbers = spec.parameter_numbers
     # Dummies: a parameter can never be mistaken for a symbol of the model (vi calls its
@@ -83,8 +83,9 @@ def build_scheme(scene: Scene | SolverSpec, method: str | None = None,
 def build_spatial_scheme(spec: SolverSpec) -> DiscreteScheme:
     """The scheme of a spatial scene's SolverSpec, its run-time parameters (gravity, masses,
     damping, the springs' stiffness and rest length: chaingen.spatial.parameters) as symbols
-    in the scene's place, its step composed to the spec's order; UnsupportedSceneError for a
-    method that has no spatial scheme yet."""
+    in the scene's place, its step composed to the spec's order (es at order 6: its k = 1
+    Galerkin step with the spec's K, chaingen.symbolic.schemes.spatial_galerkin, composed from
+    order 4); UnsupportedSceneError for a method that has no spatial scheme yet."""
     scene = spec.scene
     if spec.method not in SPATIAL_BUILDERS:
         raise UnsupportedSceneError(
@@ -103,7 +104,14 @@ def build_spatial_scheme(spec: SolverSpec) -> DiscreteScheme:
         parameter_units=tuple(number.unit for number in numbers),
         parameter_values=tuple(float(spatial_parameters.value(scene, number.path))
                                for number in numbers),
-        order=spec.order, composition=composition(spec.order))
+        order=spec.order, composition=composition_stages(spec))
+
+
+def composition_stages(spec: SolverSpec) -> tuple[float, ...]:
+    """The step fractions the spec's step is composed of: es's k = 1 Galerkin step (its
+    order 4) by Suzuki's 5 stages to order 6 (FROM_ORDER_4), every other step from order 2
+    (chaingen.symbolic.composition)."""
+    return FROM_ORDER_4 if spec.galerkin_step else composition(spec.order)
 
 
 def spatial_segment_tolerances(scene: SpatialScene) -> tuple[float, ...]:

@@ -28,6 +28,9 @@ of M(phi_g) w_g = p_g by the articulated-body recursion (O(n), model.md 17), so 
 is the Galerkin equations alone, the per-node equations eliminated exactly. Every node's
 quantities are recursions over the links, no whole-chain M(phi). The state is (phi, w): p_0 =
 M(phi_0) w_0 follows from it.
+
+The step's assembly (galerkin_scheme) asks a chain for its quantities at a node: PlanarChain
+here, from chaingen.symbolic.recursion; spatial_galerkin.SpatialChain for a spatial scene.
 """
 from __future__ import annotations
 
@@ -97,11 +100,66 @@ def energy_correction(defs: recursion.Definitions, defect, dphi_1, dt,
     return ratio
 
 
+class PlanarChain:
+    """The quantities of a planar chain at a node, by the recursions of
+    chaingen.symbolic.recursion (model.md 17): what galerkin_scheme asks of a chain (the
+    spatial chain's: chaingen.symbolic.schemes.spatial_galerkin.SpatialChain)."""
+
+    summary = SUMMARY
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+
+    def frames(self, defs: recursion.Definitions, tag: str, angles):
+        return recursion.link_frames(self.scene,
+                                     recursion.angle_directions(defs, angles, tag=tag))
+
+    def rates(self, defs: recursion.Definitions, tag: str, frames, momenta) -> list:
+        """w with M(phi) w = p, by the articulated-body recursion, O(n)."""
+        return recursion.rates_from_momenta(self.scene, frames, momenta, defs, tag)
+
+    def lagrangian(self, defs: recursion.Definitions, tag: str, frames, rates):
+        """(M(phi) w, dL/dphi = dT/dphi - dV/dphi, V(phi)) at a node."""
+        scene = self.scene
+        momentum, kinetic_gradient = recursion.momenta(
+            scene, frames, recursion.absolute_rates(defs, rates, f"{tag}Omega"), defs, tag)
+        springs, spring_energy = recursion.spring_gradient(scene, frames, defs, tag)
+        gravity = recursion.gravity_gradient(scene, frames, defs, tag)
+        gradient = [dT - spring - weight
+                    for dT, spring, weight in zip(kinetic_gradient, springs, gravity)]
+        potential = spring_energy + recursion.gravity_potential(scene, frames, defs, tag)
+        return momentum, gradient, potential
+
+    def state_fields(self, phi0, w0) -> dict:
+        """The state's fields (joint_space_state): its energy H = T + V and its segment
+        vectors, by the same recursions at (phi_0, w_0)."""
+        scene = self.scene
+        at_state = recursion.Definitions("state_")
+        frames0 = recursion.link_frames(scene, recursion.angle_directions(at_state, phi0))
+        rates0 = recursion.absolute_rates(at_state, w0)
+        velocities, _ = recursion.velocities(scene, frames0, rates0, at_state)
+        _, spring_energy = recursion.spring_gradient(scene, frames0, at_state)
+        energy = (recursion.kinetic_energy(scene, rates0, velocities)
+                  + recursion.gravity_potential(scene, frames0, at_state) + spring_energy)
+        return dict(**joint_space_state(scene, phi0, w0, energy),
+                    segment_vectors=recursion.segment_vector_entries(scene, frames0),
+                    state_definitions=tuple(at_state.items))
+
+
 def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
           exact_energy: bool = True) -> DiscreteScheme:
-    """The k = 1 step of `scene` with the (quadrature + 1)-point Gauss-Lobatto rule, its energy
-    defect corrected (energy_correction) unless exact_energy is False (the rule's step alone,
-    for comparison)."""
+    """The k = 1 step of the planar `scene` with the (quadrature + 1)-point Gauss-Lobatto
+    rule, its energy defect corrected (energy_correction) unless exact_energy is False (the
+    rule's step alone, for comparison)."""
+    return galerkin_scheme(scene, PlanarChain(scene), quadrature, order, exact_energy)
+
+
+def galerkin_scheme(scene, chain, quadrature: int, order: int = GALERKIN_ORDER,
+                    exact_energy: bool = True) -> DiscreteScheme:
+    """The k = 1 step of `scene` with the (quadrature + 1)-point Gauss-Lobatto rule, every
+    node's quantities from `chain` (PlanarChain, or spatial_galerkin.SpatialChain: frames,
+    rates from momenta, the Lagrangian's terms and the state's fields), its energy defect
+    corrected (energy_correction) unless exact_energy is False."""
     require(method="es", quadrature=quadrature, order=GALERKIN_ORDER)
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
@@ -117,26 +175,18 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
     torques = ImmutableMatrix(joint_torques(scene, inputs))
     damping = [number(link.damping) for link in scene.links]
 
-    # Every node's quantities by the recursions over the links (chaingen.symbolic.recursion,
-    # model.md 17): O(n) definitions a node, no M(phi) of the whole chain. The rates at the
-    # nodes after the start solve M(phi_g) w_g = p_g by the articulated-body recursion, O(n):
-    # they are functions of the unknowns, not unknowns.
+    # Every node's quantities by the recursions over the links (model.md 17): O(n)
+    # definitions a node (and the spatial M(phi_g)'s Cholesky factor), no whole-chain
+    # expressions. The rates at the nodes after the start solve M(phi_g) w_g = p_g: they are
+    # functions of the unknowns, not unknowns.
     step = recursion.Definitions("step_")
-
-    def frames_at(tag, angles):
-        return recursion.link_frames(scene, recursion.angle_directions(step, angles, tag=tag))
 
     def forces_at(tag, frames, rates):
         """(M(phi) w, dL/dphi + tau - D w, V(phi)) at a node, by definitions."""
-        momentum, kinetic_gradient = recursion.momenta(
-            scene, frames, recursion.absolute_rates(step, rates, f"{tag}Omega"), step, tag)
-        springs, spring_energy = recursion.spring_gradient(scene, frames, step, tag)
-        gravity = recursion.gravity_gradient(scene, frames, step, tag)
-        forces = [step.define(f"{tag}force{k}", dT - spring - weight + tau - d * rate)
-                  for k, (dT, spring, weight, tau, d, rate)
-                  in enumerate(zip(kinetic_gradient, springs, gravity, torques, damping, rates),
-                               start=1)]
-        potential = spring_energy + recursion.gravity_potential(scene, frames, step, tag)
+        momentum, lagrangian_gradient, potential = chain.lagrangian(step, tag, frames, rates)
+        forces = [step.define(f"{tag}force{k}", dL + tau - d * rate)
+                  for k, (dL, tau, d, rate)
+                  in enumerate(zip(lagrangian_gradient, torques, damping, rates), start=1)]
         return ImmutableMatrix(momentum), ImmutableMatrix(forces), potential
 
     def quadratic(start_change_mid, change_end, s):
@@ -157,15 +207,15 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
         dp, p_slope = quadratic(dp_m, dp_1, s_value)
         tag = f"n{g}_"
         if g == 0:
-            frames = frames_at(tag, list(phi0))
+            frames = chain.frames(step, tag, list(phi0))
             w_g = list(w0)
         else:
             angles = [step.define(f"phi_node{g}_{i}", value)
                       for i, value in enumerate(phi0 + dphi, start=1)]
             p_g = [step.define(f"p_node{g}_{i}", value)
                    for i, value in enumerate(p0 + dp, start=1)]
-            frames = frames_at(tag, angles)
-            w_g = recursion.rates_from_momenta(scene, frames, p_g, step, tag)
+            frames = chain.frames(step, tag, angles)
+            w_g = chain.rates(step, tag, frames, p_g)
         momentum, force, potential = forces_at(tag, frames, w_g)
         if g == 0:
             p0 = momentum
@@ -196,24 +246,15 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
     residual = ImmutableMatrix.vstack(*phi_rows, *p_rows)
     unknowns = ImmutableMatrix.vstack(dphi_m, dphi_1, dp_m, dp_1)
 
-    # The state's energy H = T + V and its segment vectors, by the same recursions.
-    at_state = recursion.Definitions("state_")
-    frames0 = recursion.link_frames(scene, recursion.angle_directions(at_state, phi0))
-    rates0 = recursion.absolute_rates(at_state, w0)
-    velocities, _ = recursion.velocities(scene, frames0, rates0, at_state)
-    _, spring_energy = recursion.spring_gradient(scene, frames0, at_state)
-    energy = (recursion.kinetic_energy(scene, rates0, velocities)
-              + recursion.gravity_potential(scene, frames0, at_state) + spring_energy)
-
     names = [f"{kind}_{i}" for kind in ("dphim", "dphi1", "dpm", "dp1") for i in range(1, n + 1)]
     return DiscreteScheme.of(
-        method="es", quadrature=quadrature, scene=scene, summary=SUMMARY, dt=dt,
+        method="es", quadrature=quadrature, scene=scene, summary=chain.summary, dt=dt,
         unknowns=unknowns,
         residual=residual,
         next_state=ImmutableMatrix.vstack(phi0 + dphi_1, w_1),
         predictor=ImmutableMatrix.vstack(dt * w0 / 2, dt * w0,
                                          ImmutableMatrix.zeros(2 * n, 1)),
-        **joint_space_state(scene, phi0, w0, energy),
+        **chain.state_fields(phi0, w0),
         unknowns_layout=Layout(
             tuple(names),
             "increments from the step's start of the joint angles at its mid-point and end "
@@ -221,8 +262,7 @@ def build(scene: Scene, quadrature: int, order: int = GALERKIN_ORDER,
         residual_description=(
             "the Galerkin equations of phi tested with 1 and 2s - 1 (2n entries, rad), then "
             "those of p (2n entries, N m s); the rates at the nodes solve M(phi_g) w_g = p_g"),
-        inputs=inputs, segment_vectors=recursion.segment_vector_entries(scene, frames0),
-        definitions=tuple(step.items), state_definitions=tuple(at_state.items),
+        inputs=inputs, definitions=tuple(step.items),
         input_work=sp.Add(*(tau * d for tau, d in zip(torques, dphi_1))),
         dissipated=dissipated,
         flow_description=FLOWS if has_energy_flows(scene) else None,

@@ -27,12 +27,15 @@ from sympy import ImmutableMatrix
 
 from ...errors import UnsupportedSceneError
 from ...runtime.contract import JACOBIAN_CHORD_ACROSS_STEPS
+from ...scene.solver_rules import GALERKIN_ORDER
+from ...scene.solver_rules import ORDERS as RULES_ORDERS
 from ...spatial.dynamics import rpy_matrix
 from ...spatial.values import SpatialScene
 from .. import spatial_recursion as vectors
 from ..com_model import number
 from ..recursion import Definitions
 from ..spatial_com_model import DIRECTOR_PAIRS, orthogonal_pair
+from . import spatial_galerkin
 from .base import (
     DiscreteScheme,
     FlowDescription,
@@ -215,20 +218,26 @@ def joint_space_start(scene: SpatialScene, phi, phidot, defs: Definitions) -> li
 
 
 #: The orders of the step this builder takes (chaingen.symbolic.schemes.orders_taken asks it):
-#: order 2 and its composition to order 4 (order 6 would stall at 4, docs/model.md 14).
-ORDERS = (2, 4)
+#: every order of the rules, order 2 and its composition to order 4, and at order 6 another
+#: step composed, the k = 1 Galerkin step in joint angles (spatial_galerkin; a composition of
+#: this one stalls at order 4, docs/model.md 14).
+ORDERS = RULES_ORDERS
 
 
 def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) -> DiscreteScheme:
     """The spatial es scheme of `scene`, by the discrete null space method with nodal
     reparametrisation (Betsch and Leyendecker 2006; docs/model.md 4.8): n unknowns, one turn per
     joint. quadrature plays no role (the springs' discrete gradient is exact without it).
-    Order 2, and 4 by composition (chaingen.symbolic.composition); order 6 stalls at 4 as the
-    planar es's composition does (model.md 14): UnsupportedSceneError."""
+    Order 2, and 4 by composition (chaingen.symbolic.composition). From order 6 (its
+    composition stalls at 4, model.md 14) the k = 1 Galerkin step in joint angles with the
+    (quadrature + 1)-point Gauss-Lobatto rule (chaingen.symbolic.schemes.spatial_galerkin,
+    model.md 16), which build_scheme composes by Suzuki's 5 stages."""
+    if order >= GALERKIN_ORDER:
+        return spatial_galerkin.build(scene, quadrature, order)
     if order not in ORDERS:
         raise UnsupportedSceneError(
-            f"order {order}: es for a spatial scene (scene {scene.name!r}) composes its step to "
-            "order 4 at most (a composition of its steps stalls at order 4, docs/model.md 14)")
+            f"order {order}: es for a spatial scene (scene {scene.name!r}) takes orders "
+            f"{', '.join(map(str, ORDERS))}")
     n = scene.n
     dt = sp.Symbol("dt", positive=True)
     names = [f"{name[0]}{i}{name[1:]}" for i in range(1, n + 1) for name in COORDINATE_NAMES]

@@ -59,34 +59,24 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
                 for moment, spring, torque, link, w
                 in zip(dynamics, springs, torques, scene.links, wm)]
 
-    # The energy H = T + V of the state, by the same recursions at (q_0, w_0).
-    at_state = Definitions("state_")
-    frames0 = spatial_recursion.link_frames(scene, q0, at_state)
-    omegas = spatial_recursion.angular_velocities(frames0, w0, at_state)
-    velocities = spatial_recursion.com_velocities(frames0, omegas, at_state)
-    _, spring_energy, segments = spatial_recursion.spring_gradient(scene, frames0, at_state)
-    kinetic = spatial_recursion.kinetic_energy(scene, frames0, omegas, velocities)
-    energy = kinetic + spatial_recursion.gravity_potential(scene, frames0) + spring_energy
+    at_state, kinetic, energy, segments = state_energy(scene, q0, w0)
     applied_torques = None
     if scene.control:
         energy += state_shaping(scene, q0)
         applied_torques = ImmutableMatrix([torques[joint - 1] for joint in scene.actuated])
-    state_fields = joint_space_state(scene, q0, w0, energy)
-    if scene.actuated:
-        state_fields.update(holding_torques(scene, state_fields["initial_angles"]))
 
     return DiscreteScheme.of(
         method="midpoint", quadrature=None, scene=scene, summary=SUMMARY, dt=dt, unknowns=dw,
         residual=ImmutableMatrix(residual),
         next_state=ImmutableMatrix([q + dt * w for q, w in zip(q0, wm)] + list(w0 + dw)),
         predictor=ImmutableMatrix.zeros(n, 1),
-        **state_fields,
+        **joint_space_fields(scene, q0, w0, energy),
         unknowns_layout=Layout(tuple(f"dw_{i}" for i in range(1, n + 1)),
                                "the increment dw = w_1 - w_0 of the joint rates (rad/s)"),
         residual_description=("dt-scaled midpoint equations of motion M(q_m) dw + dt "
                               "(Coriolis + grad V - tau) at the mid-point, spatial chain (N m s)"),
         inputs=inputs, definitions=tuple(step.items), state_definitions=tuple(at_state.items),
-        segment_vectors=ImmutableMatrix([c for d in segments for c in d]),
+        segment_vectors=segments,
         input_work=dt * sp.Add(*(tau * w for tau, w in zip(plain, wm))),
         dissipated=dt * sp.Add(*(number(link.damping) * w ** 2
                                  for link, w in zip(scene.links, wm) if link.damping))
@@ -98,6 +88,29 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         newton_overrides=(("energy_tol", 0.0),) if scene.control else (),
     )
 
+
+def state_energy(scene: SpatialScene, q0, w0) -> tuple[Definitions, sp.Expr, sp.Expr,
+                                                        ImmutableMatrix]:
+    """The energy H = T + V of the state (q_0, w_0) by the recursions, as the state's
+    definitions: (those definitions, T, H, the springs' segment vectors as DiscreteScheme's
+    segment_vectors)."""
+    at_state = Definitions("state_")
+    frames0 = spatial_recursion.link_frames(scene, q0, at_state)
+    omegas = spatial_recursion.angular_velocities(frames0, w0, at_state)
+    velocities = spatial_recursion.com_velocities(frames0, omegas, at_state)
+    _, spring_energy, segments = spatial_recursion.spring_gradient(scene, frames0, at_state)
+    kinetic = spatial_recursion.kinetic_energy(scene, frames0, omegas, velocities)
+    energy = kinetic + spatial_recursion.gravity_potential(scene, frames0) + spring_energy
+    return at_state, kinetic, energy, ImmutableMatrix([c for d in segments for c in d])
+
+
+def joint_space_fields(scene: SpatialScene, q0, w0, energy) -> dict:
+    """The fields of a spatial scheme whose state is (q, w) (base.joint_space_state), with
+    the holding torques of an actuated scene."""
+    fields = joint_space_state(scene, q0, w0, energy)
+    if scene.actuated:
+        fields.update(holding_torques(scene, fields["initial_angles"]))
+    return fields
 
 
 def holding_torques(scene: SpatialScene, angles) -> dict:

@@ -36,10 +36,9 @@ from .base import (
     Layout,
     has_energy_flows,
     input_symbols,
-    joint_space_state,
     joint_torques,
 )
-from .spatial_midpoint import holding_torques
+from .spatial_midpoint import joint_space_fields, state_energy
 from .vi import FLOWS
 
 SUMMARY = ("Variational integrator in joint angles, discrete Euler-Lagrange equations in "
@@ -81,16 +80,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
     w1 = spatial_mass.cholesky_solve(factor, p1, step, "e")
 
     # The energy H = T + V of the state, by the recursions at (q_0, w_0), as the midpoint's.
-    at_state = Definitions("state_")
-    frames0 = spatial_recursion.link_frames(scene, q0, at_state)
-    omegas = spatial_recursion.angular_velocities(frames0, w0, at_state)
-    velocities = spatial_recursion.com_velocities(frames0, omegas, at_state)
-    _, spring_energy, segments = spatial_recursion.spring_gradient(scene, frames0, at_state)
-    kinetic = spatial_recursion.kinetic_energy(scene, frames0, omegas, velocities)
-    energy = kinetic + spatial_recursion.gravity_potential(scene, frames0) + spring_energy
-    state_fields = joint_space_state(scene, q0, w0, energy)
-    if scene.actuated:
-        state_fields.update(holding_torques(scene, state_fields["initial_angles"]))
+    at_state, kinetic, energy, segments = state_energy(scene, q0, w0)
 
     return DiscreteScheme.of(
         method="vi", quadrature=None, scene=scene, summary=SUMMARY, dt=dt,
@@ -99,7 +89,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         next_state=ImmutableMatrix([q + t for q, t in zip(q0, theta)] + w1),
         # First guess: the step at the current rates, v = w_0.
         predictor=w0,
-        **state_fields,
+        **joint_space_fields(scene, q0, w0, energy),
         unknowns_layout=Layout(
             tuple(f"v_{i}" for i in range(1, n + 1)),
             "the mean joint rates v = (q_1 - q_0)/dt of the step (rad/s)"),
@@ -107,7 +97,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
             "discrete Legendre transform: M(q_m) v - dt/2 (dT/dq - dV/dq + f) - M(q_0) w_0, "
             "v = (q_1 - q_0)/dt, spatial chain (N m s)"),
         inputs=inputs, definitions=tuple(step.items), state_definitions=tuple(at_state.items),
-        segment_vectors=ImmutableMatrix([c for d in segments for c in d]),
+        segment_vectors=segments,
         input_work=sp.Add(*(tau * t for tau, t in zip(torques, theta))),
         dissipated=sp.Add(*(number(link.damping) * t ** 2 for link, t in zip(scene.links, theta)
                             if link.damping)) / dt,
