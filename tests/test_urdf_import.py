@@ -265,13 +265,17 @@ def _numbers(values) -> str:
 
 
 def _inertial(rng, mass_scale: float = 1.0) -> str:
-    root = rng.normal(size=(3, 3))
-    inertia = 0.05 * root @ root.T + 0.01 * np.eye(3)
+    # A rigid body's: point masses' (|r|^2 1 - r r^T), so the principal moments keep the
+    # triangle inequality, as the scene reader asks; plus a sphere's 0.01 1.
+    points = 0.3 * rng.normal(size=(4, 3))
+    inertia = sum(point @ point * np.eye(3) - np.outer(point, point) for point in points) \
+        + 0.01 * np.eye(3)
     return (f'<inertial><origin xyz="{_numbers(0.1 * rng.normal(size=3))}" '
             f'rpy="{_numbers(rng.uniform(-np.pi, np.pi, 3))}"/>'
             f'<mass value="{mass_scale * rng.uniform(0.1, 3.0)!r}"/>'
-            f'<inertia ixx="{inertia[0, 0]!r}" iyy="{inertia[1, 1]!r}" izz="{inertia[2, 2]!r}" '
-            f'ixy="{inertia[0, 1]!r}" ixz="{inertia[0, 2]!r}" iyz="{inertia[1, 2]!r}"/>'
+            f'<inertia ixx="{float(inertia[0, 0])!r}" iyy="{float(inertia[1, 1])!r}" '
+            f'izz="{float(inertia[2, 2])!r}" ixy="{float(inertia[0, 1])!r}" '
+            f'ixz="{float(inertia[0, 2])!r}" iyz="{float(inertia[1, 2])!r}"/>'
             "</inertial>")
 
 

@@ -35,15 +35,21 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ChaingenError, install_hint
+from ..errors import ChaingenError, SceneError, install_hint
 from ..runtime.contract import MAX_SCENE_NAME_LENGTH
 from ..runtime.files import check_output_file, reported_write, write_text
 from ..scene.reader import NAME_PATTERN
+from .reader import parse_spatial_scene
 from .values import SpatialJoint, SpatialLink, SpatialScene
 from .writer import scene_text
 
 #: The gravity of an imported scene, m/s^2 in the world frame (URDF's z is up).
 GRAVITY = (0.0, 0.0, -9.81)
+
+#: The relative round-off of an inertia left after taking the links beyond the tip out of a
+#: body, relative to the largest moment about the joint's origin of the parts: below it the
+#: inertia about the centre of mass is zero.
+INERTIA_ROUND_OFF = 1e-12
 
 #: Pinocchio's joint models of URDF's revolute and continuous joints (axis along x, y or z, or
 #: any other unit vector; bounded, or unbounded with (cos q, sin q) as its configuration).
@@ -56,7 +62,9 @@ REVOLUTE_MODELS = frozenset({
 _JOINT_KINDS = {"JointModelPX": "prismatic", "JointModelPY": "prismatic",
                 "JointModelPZ": "prismatic", "JointModelPrismaticUnaligned": "prismatic",
                 "JointModelFreeFlyer": "floating", "JointModelPlanar": "planar",
-                "JointModelSpherical": "spherical", "JointModelSphericalZYX": "spherical"}
+                "JointModelSpherical": "spherical", "JointModelSphericalZYX": "spherical",
+                "JointModelMimic": "a mimic joint (its angle follows another joint's, which "
+                                   "a scene's independent joints cannot say)"}
 
 
 @dataclass(frozen=True)
@@ -139,12 +147,28 @@ def import_chain(path: str | os.PathLike, tip: str | None = None,
         initial_angles=tuple(_initial_angle(model, j) for j in chain),
         initial_velocities=(0.0,) * len(chain),
         actuated=tuple(range(1, len(chain) + 1)))
+    joint_names = tuple(model.names[j] for j in chain)
+    _check_readable(scene, body_names, joint_names, shown)
     left_out = tuple(model.frames[index].name for index in sorted(beyond)
                      if model.frames[index].type == pin.FrameType.BODY)
     root = _root_name(pin, model, chain[0])
     return ImportedChain(scene=scene, source=path.name, robot=model.name, root=root, tip=tip_name,
-                         joints=tuple(model.names[j] for j in chain), links=body_names,
-                         left_out=left_out)
+                         joints=joint_names, links=body_names, left_out=left_out)
+
+
+def _check_readable(scene: SpatialScene, links: tuple[str, ...], joints: tuple[str, ...],
+                    shown: str) -> None:
+    """Refuse a chain whose scene the scene reader would refuse (an inertia that is no rigid
+    body's, a negative damping, ...): its rules are the reader's, asked of the scene's text,
+    and the message names the URDF's link and joint."""
+    try:
+        parse_spatial_scene(scene_text(scene), "<import>")
+    except SceneError as error:
+        reason = str(error).removeprefix("<import>: ")
+        index = re.match(r"links\[(\d+)\]", reason)
+        where = (f"link {links[int(index[1])]!r} (joint {joints[int(index[1])]!r}): "
+                 if index else "")
+        raise ChaingenError(f"{shown}: {where}a scene cannot take it: {reason}") from None
 
 
 def write_scene(urdf: str | os.PathLike, output: str | os.PathLike, tip: str | None = None,
@@ -248,7 +272,12 @@ def _load_model(pin, path: Path):
         raise ChaingenError(f"{path}: not a file (give a URDF file)")
     with _stderr_captured() as complaints:
         try:
-            return pin.buildModelFromUrdf(str(path))
+            # mimic: a mimic joint becomes Pinocchio's JointModelMimic, which _check_revolute
+            # refuses (without it, Pinocchio makes it an independent revolute joint).
+            try:
+                return pin.buildModelFromUrdf(str(path), mimic=True)
+            except TypeError:     # a Pinocchio without the keyword: mimic joints unseen
+                return pin.buildModelFromUrdf(str(path))
         except (ValueError, RuntimeError) as error:
             failure = str(error).strip()
     details = [line.strip() for line in complaints
@@ -382,6 +411,9 @@ def _link(pin, model, j: int, beyond: set[int], shown: str) -> SpatialLink:
     model.joints[j].calc(data, pin.neutral(model))
     subspace = np.asarray(data.S).ravel()         # (linear, angular) of a unit joint velocity
     axis = subspace[3:]
+    if not (np.all(np.isfinite(axis)) and np.linalg.norm(axis) > 0.0):
+        raise ChaingenError(f"{shown}: joint {model.names[j]!r} has no axis (<axis xyz> is "
+                            f"{_floats(axis)}): a revolute joint needs a nonzero axis")
     return SpatialLink(
         mass=float(mass), com=_floats(com),
         inertia=tuple(float(about_com[a, b]) for a, b in ((0, 0), (1, 1), (2, 2), (0, 1),
@@ -405,14 +437,22 @@ def _less(inertia, removed) -> tuple[float, np.ndarray, np.ndarray]:
         return mass, mass * com, np.array(part.inertia) + mass * (com @ com * np.eye(3)
                                                                   - np.outer(com, com))
     mass, first, about_origin = moments(inertia)
+    scale = np.abs(about_origin).max()
     for part in removed:
         part_mass, part_first, part_about_origin = moments(part)
         mass, first, about_origin = (mass - part_mass, first - part_first,
                                      about_origin - part_about_origin)
+        scale = max(scale, np.abs(part_about_origin).max())
     if not mass > 0.0:
         return mass, np.zeros(3), np.zeros((3, 3))
     com = first / mass
-    return mass, com, about_origin - mass * (com @ com * np.eye(3) - np.outer(com, com))
+    about_com = about_origin - mass * (com @ com * np.eye(3) - np.outer(com, com))
+    # A link whose own inertia is zero (a point mass) keeps the round-off of the moments
+    # subtracted, of either sign, which the reader's rules (relative to the tensor's own
+    # size) would refuse: within that round-off the tensor is zero.
+    if np.abs(about_com).max() <= INERTIA_ROUND_OFF * scale:
+        about_com = np.zeros((3, 3))
+    return mass, com, about_com
 
 
 def _initial_angle(model, j: int) -> float:

@@ -1,0 +1,109 @@
+"""Third adversarial pass over the newest surfaces (passivity-based control, `chaingen import`,
+the command line): each test is an input that once gave a wrong answer, an error in the wrong
+words or place, or a file that chaingen itself could not read; it fails on the code before
+its fix.
+"""
+from __future__ import annotations
+
+import pytest
+from test_output_paths import snapshot
+
+from helpers import chaingen, require_module
+
+# -- chaingen import: URDFs the importer once turned into wrong or unreadable scenes ----------
+
+
+def robot_urdf(second_joint: str = "", second_inertia: str = 'ixx="0.01"',
+               first_extra: str = "") -> str:
+    """Two massive links on two revolute joints about y; the second joint's axis, mimic tag
+    and the second link's ixx given."""
+    def link(name, ixx='ixx="0.01"'):
+        return (f'<link name="{name}"><inertial><origin xyz="0 0 0.1"/><mass value="1.0"/>'
+                f'<inertia {ixx} iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>'
+                "</link>")
+    limit = '<limit lower="-1" upper="1" effort="1" velocity="1"/>'
+    second_joint = second_joint or '<axis xyz="0 1 0"/>'
+    return ('<robot name="r">' + link("base") + link("upper") + link("lower", second_inertia)
+            + '<joint name="shoulder" type="revolute"><parent link="base"/>'
+              f'<child link="upper"/><origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>{limit}'
+              f'{first_extra}</joint>'
+            + '<joint name="elbow" type="revolute"><parent link="upper"/>'
+              f'<child link="lower"/><origin xyz="0 0 0.2"/>{second_joint}{limit}</joint>'
+            + "</robot>")
+
+
+ODD_URDFS = {
+    # A zero axis: the importer divided by its norm and wrote NaN (internal error, exit 1).
+    "zero axis": (robot_urdf('<axis xyz="0 0 0"/>'),
+                  "joint 'elbow' has no axis (<axis xyz> is (0.0, 0.0, 0.0))"),
+    # A mimic joint was imported as an independent joint: a different robot, exit 0.
+    "mimic joint": (robot_urdf('<axis xyz="0 1 0"/><mimic joint="shoulder" multiplier="2"/>'),
+                    "joint 'elbow' on the chain to 'lower' is a mimic joint"),
+    # Inertias no rigid body has, and a negative damping: written (exit 0) as scenes that
+    # every other command then refused.
+    "negative principal moment": (robot_urdf(second_inertia='ixx="-0.01"'),
+                                  "link 'lower' (joint 'elbow'): a scene cannot take it: "
+                                  "links[1].inertia: must be a physically valid inertia"),
+    "triangle inequality": (robot_urdf(second_inertia='ixx="0.05"'),
+                            "link 'lower' (joint 'elbow'): a scene cannot take it: "
+                            "links[1].inertia: must be a physically valid inertia"),
+    "negative damping": (robot_urdf(first_extra='<dynamics damping="-1"/>'),
+                         "link 'upper' (joint 'shoulder'): a scene cannot take it: "
+                         "links[0].damping: must be >= 0"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(ODD_URDFS))
+def test_odd_urdfs_are_refused_in_one_line_and_write_nothing(case, tmp_path):
+    require_module("pinocchio", "robots")
+    text, expected = ODD_URDFS[case]
+    (tmp_path / "robot.urdf").write_text(text)
+    before = snapshot(tmp_path)
+    result = chaingen("import", "robot.urdf", "-o", "scene.toml", cwd=tmp_path)
+    lines = result.stderr.splitlines()
+    assert result.returncode == 2 and len(lines) == 1, (case, result.stderr)
+    assert lines[0].startswith(f"chaingen: error: robot.urdf: {expected}"), lines[0]
+    assert result.stdout == "" and snapshot(tmp_path) == before
+
+
+def test_a_well_formed_robot_still_imports_and_reads_back(tmp_path):
+    """The well-formed two-link robot still imports, and its scene reads back."""
+    require_module("pinocchio", "robots")
+    from chaingen.spatial.reader import load_spatial_scene
+
+    (tmp_path / "robot.urdf").write_text(robot_urdf())
+    result = chaingen("import", "robot.urdf", "-o", "scene.toml", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert load_spatial_scene(tmp_path / "scene.toml").n == 2
+
+
+def test_a_point_mass_link_with_a_hand_beyond_the_tip_reads_back(tmp_path):
+    """A link whose inertia is zero (a point mass) with a massive hand fixed beyond the tip:
+    taking the hand out again left round-off of either sign in the link's inertia (1e-17 of
+    0.1 kg m^2), and the file written was refused by the scene reader (a principal moment
+    < 0 or past the sum of the other two). Within that round-off it is a point mass."""
+    require_module("pinocchio", "robots")
+    from chaingen.spatial.reader import load_spatial_scene
+
+    def inertial(ixx, mass="1.3", origin='xyz="0.03 -0.02 0.05" rpy="0.3 -1.1 2.0"'):
+        return (f'<inertial><origin {origin}/><mass value="{mass}"/><inertia ixx="{ixx}" '
+                f'iyy="{ixx}" izz="{ixx}" ixy="0" ixz="0" iyz="0"/></inertial>')
+    limit = '<limit lower="-1" upper="1" effort="1" velocity="1"/>'
+    text = ('<robot name="r"><link name="base"/>'
+            f'<link name="upper">{inertial("0.02")}</link>'
+            f'<link name="lower">{inertial("0")}</link>'
+            f'<link name="hand">{inertial("0.1", "2.7")}</link>'
+            '<joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>'
+            f'<origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>{limit}</joint>'
+            '<joint name="elbow" type="revolute"><parent link="upper"/><child link="lower"/>'
+            f'<origin xyz="0.1 0 0.3" rpy="0.2 0.4 -0.7"/><axis xyz="0.6 0 0.8"/>{limit}'
+            '</joint>'
+            '<joint name="wrist" type="fixed"><parent link="lower"/><child link="hand"/>'
+            '<origin xyz="0.31 -0.17 0.23" rpy="1.3 -0.4 2.9"/></joint></robot>')
+    (tmp_path / "robot.urdf").write_text(text)
+    result = chaingen("import", "robot.urdf", "-o", "scene.toml", "--tip", "lower",
+                      cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    scene = load_spatial_scene(tmp_path / "scene.toml")
+    assert scene.links[1].mass == pytest.approx(1.3, rel=1e-12)
+    assert max(map(abs, scene.links[1].inertia)) <= 1e-15
