@@ -15,6 +15,7 @@ from .runtime import NewtonOptions, SimulationResult, Solver
 from .runtime.solver import MAX_SAMPLE_BYTES  # samples are held in memory before they are written
 from .scene import Scene, SolverSpec
 from .scene.solver_rules import REQUEST_KEYS, request_refusal
+from .scene.solver_spec import control_refusal
 from .spatial.values import SpatialScene
 
 #: A run of more steps is refused: at about 1 us a step it would take days.
@@ -72,7 +73,8 @@ def run_settings(scene: Scene | SpatialScene, *, method=None, quadrature=None, d
         atol=atol if atol is not None else defaults.atol)
     given = {"method": method, "quadrature": quadrature, "order": order, "gradient": gradient,
              "rtol": rtol, "atol": atol}
-    refused = request_refusal({key: getattr(settings, key) for key in REQUEST_KEYS})
+    refused = (request_refusal({key: getattr(settings, key) for key in REQUEST_KEYS})
+               or control_refusal(scene, settings.method, settings.order))
     if refused:
         # A value from the command line is named by its option, one from the scene by its key.
         where = (refused.option if given[refused.key] is not None

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 from test_output_paths import snapshot
 
-from helpers import chaingen, require_module
+from helpers import ROOT, chaingen, require_module
 
 # -- chaingen import: URDFs the importer once turned into wrong or unreadable scenes ----------
 
@@ -107,3 +107,76 @@ def test_a_point_mass_link_with_a_hand_beyond_the_tip_reads_back(tmp_path):
     scene = load_spatial_scene(tmp_path / "scene.toml")
     assert scene.links[1].mass == pytest.approx(1.3, rel=1e-12)
     assert max(map(abs, scene.links[1].inertia)) <= 1e-15
+
+
+# -- a controlled scene's refused method or order, named where the value came from ------------
+
+PBC = ROOT / "scenes" / "four_link_pbc.toml"
+
+
+def pbc_variant(tmp_path, old: str, new: str, name: str = "scene.toml"):
+    text = PBC.read_text()
+    assert old in text
+    (tmp_path / name).write_text(text.replace(old, new))
+    return name
+
+
+CONTROL_REFUSALS = {
+    # A value from the scene's [simulation] was named as the option --method / --order, which
+    # the user had not given.
+    "scene method, simulate": (
+        ('method = "es"', 'method = "vi"'), ("simulate", "scene.toml", "--t-end", "0.01"),
+        "chaingen: error: scene.toml: simulation.method: 'vi' has no controlled step"),
+    "scene order, check": (
+        ("quadrature = 3\n", "quadrature = 3\norder = 4\n"), ("check", "scene.toml"),
+        "chaingen: error: scene.toml: simulation.order: a controlled scene's step is the "
+        "scheme's own (order 2)"),
+    "scene method, generate": (
+        ('method = "es"', 'method = "vi"'), ("generate", "scene.toml", "-o", "package"),
+        "chaingen: error: scene.toml: simulation.method: 'vi' has no controlled step"),
+    "option still named": (
+        ('method = "es"', 'method = "es"'),
+        ("simulate", "scene.toml", "--method", "vi", "--t-end", "0.01"),
+        "chaingen: error: --method: 'vi' has no controlled step"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CONTROL_REFUSALS))
+def test_a_controlled_scenes_refusal_names_where_the_value_came_from(case, tmp_path):
+    (old, new), arguments, expected = CONTROL_REFUSALS[case]
+    pbc_variant(tmp_path, old, new)
+    before = snapshot(tmp_path)
+    result = chaingen(*arguments, cwd=tmp_path)
+    lines = result.stderr.splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0].startswith(expected), lines[0]
+    assert snapshot(tmp_path) == before
+
+
+SWEEP_REFUSALS = {
+    # The sweep spec's own `method` / `order` were named --method / --order.
+    "spec method": ('method = "vi"\n', ("", ""),
+                    "chaingen: error: spec.toml: method: 'vi' has no controlled step"),
+    "spec order": ("order = 4\n", ("", ""),
+                   "chaingen: error: spec.toml: order: a controlled scene's step"),
+    "scene method": ("", ('method = "es"', 'method = "vi"'),
+                     "chaingen: error: spec.toml: scene: "),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SWEEP_REFUSALS))
+def test_a_sweeps_control_refusal_names_its_spec_key_or_the_scene(case, tmp_path):
+    key, (old, new), expected = SWEEP_REFUSALS[case]
+    pbc_variant(tmp_path, old, new)
+    (tmp_path / "spec.toml").write_text(f'scene = "scene.toml"\nt_end = 0.5\n{key}'
+                                        '[axes]\n"control.target[0]" = [1.0]\n')
+    before = snapshot(tmp_path)
+    result = chaingen("sweep", "spec.toml", "-o", "out", cwd=tmp_path)
+    lines = result.stderr.splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0].startswith(expected), lines[0]
+    if case == "scene method":
+        assert lines[0].endswith("scene.toml: simulation.method: 'vi' has no controlled step: "
+                                 "scene 'four-link-pbc' has a [control] table, which es and "
+                                 "midpoint take"), lines[0]
+    assert snapshot(tmp_path) == before

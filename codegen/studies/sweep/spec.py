@@ -32,7 +32,7 @@ from ...runtime.contract import ADAPTIVE_TOLERANCES
 from ...scene import Scene, SolverSpec
 from ...scene.parameters import NumberPath
 from ...scene.solver_rules import REQUEST_KEYS, request_refusal
-from ...scene.solver_spec import numbers_of
+from ...scene.solver_spec import control_refusal, numbers_of
 from ...simulation import MAX_SAMPLE_BYTES, MAX_STEPS
 from ...spatial.reader import load_either_scene
 from ...spatial.values import SpatialScene
@@ -250,6 +250,10 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
     refused = request_refusal(request)
     if refused:
         raise fail(refused.key, refused.message)
+    refused = control_refusal(scene, request["method"], request["order"])
+    if refused:    # named where the value came from: this spec, or the scene's [simulation]
+        raise fail(refused.key if refused.key in document
+                   else f"scene: {scene_path}: simulation.{refused.key}", refused.message)
     method, quadrature, order = request["method"], request["quadrature"], request["order"]
     tolerances = {name: float(request[name]) for name in ADAPTIVE_TOLERANCES}
     mode = document.get("mode", "product")
