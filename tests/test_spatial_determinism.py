@@ -1,8 +1,9 @@
 """A spatial run is a function of its inputs, bit for bit: the same run twice, the same runs on
 six threads at once and alone, and (tools tier) the package's C under valgrind and natively.
 
-Every scheme, on scenes/spatial_three_link.toml with a torque on its actuated joint (joint 3)
-and its damped joint 2. Compile tier; the valgrind comparison is tools tier.
+Every scheme (and es at order 6, its Galerkin step), on scenes/spatial_three_link.toml with a
+torque on its actuated joint (joint 3) and its damped joint 2. Compile tier; the valgrind
+comparison is tools tier.
 
 glibc's libm chooses its code for sin, cos, exp ... by the CPU it runs on (ifunc): FMA and AVX2
 versions where the CPU has them, SSE2 ones elsewhere, whose results may differ in the last bit.
@@ -32,6 +33,9 @@ from helpers import ROOT, require_tools
 SCENE = load_spatial_scene(ROOT / "scenes" / "spatial_three_link.toml")
 DT, STEPS, EVERY = 0.005, 200, 1
 METHODS = ("midpoint", "vi", "es")
+#: (method, order) of every package compared: each scheme's own step, and es at order 6, which
+#: composes another step (its k = 1 Galerkin step in joint angles, docs/model.md 16).
+SCHEMES = tuple((method, 2) for method in METHODS) + (("es", 6),)
 THREADS = 6
 #: The libm code of both runs of the valgrind comparison (the module docstring says why).
 SAME_LIBM = "glibc.cpu.hwcaps=-AVX2,-FMA"
@@ -48,11 +52,12 @@ def starts(count: int):
              rng.uniform(-0.5, 0.5, SCENE.n)) for _ in range(count)]
 
 
-@pytest.fixture(scope="module", params=METHODS)
+@pytest.fixture(scope="module", params=SCHEMES, ids=lambda scheme: f"{scheme[0]}-order-{scheme[1]}")
 def solver(request):
     from chaingen.simulation import build_solver
 
-    return build_solver(SCENE, request.param, sensitivities=False)
+    method, order = request.param
+    return build_solver(SCENE, method, sensitivities=False, order=order)
 
 
 def run(solver, phi, omega) -> np.ndarray:
@@ -145,16 +150,16 @@ int main(void)
 
 
 @pytest.mark.tools
-@pytest.mark.parametrize("method", METHODS)
-def test_the_package_under_valgrind_gives_the_native_bits(tmp_path, method):
+@pytest.mark.parametrize("method, order", SCHEMES)
+def test_the_package_under_valgrind_gives_the_native_bits(tmp_path, method, order):
     """The package's simulate, compiled with its own flags into a program that prints every
     sample in hexadecimal: under valgrind's memcheck (no errors) the same bits as natively,
     both with glibc's libm held to one code path (SAME_LIBM, the module docstring)."""
     require_tools("gcc", "valgrind")
     from chaingen.generate.package import generate_package, write_package
 
-    package = write_package(generate_package(SCENE, method, 3, sensitivities=False),
-                            tmp_path / "package")
+    package = write_package(generate_package(SCENE, method, 3, sensitivities=False,
+                                             order=order), tmp_path / "package")
     manifest = json.loads((package / "chaingen.json").read_text())
     prefix = manifest["prefix"]
     phi, omega = starts(1)[0]
