@@ -180,3 +180,54 @@ def test_a_sweeps_control_refusal_names_its_spec_key_or_the_scene(case, tmp_path
                                  "scene 'four-link-pbc' has a [control] table, which es and "
                                  "midpoint take"), lines[0]
     assert snapshot(tmp_path) == before
+
+
+# -- python -m chaingen.studies.control: bad input is one line, exit 2; its flags are heard --
+
+STUDY_REFUSALS = {
+    # Each ran: -1 and nan raised from deep inside (tracebacks), 0 printed a table of
+    # "unstable (lost)" rows and "nan J" with exit 0, 0.3 ran dt = 0.2 s for 0.4 s.
+    "negative": (["--t-end", "-1"], "--t-end: must be > 0 and finite (s), got -1.0"),
+    "nan": (["--t-end", "nan"], "--t-end: must be > 0 and finite (s), got nan"),
+    "zero": (["--t-end", "0"], "--t-end: must be > 0 and finite (s), got 0.0"),
+    "not whole steps": (["--t-end", "0.3"],
+                        "--t-end: 0.3 s is not a whole number of steps of dt = 0.2 s"),
+    "too long": (["--t-end", "1e9"], "--t-end: 1000000000.0 s at dt = 0.001 s is"),
+    "no scene": (["missing.toml"], "missing.toml: cannot read scene file"),
+    "no control": ([str(ROOT / "scenes" / "three_link_mono.toml")],
+                   "the scene has no [control] table"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(STUDY_REFUSALS))
+def test_the_control_studys_bad_input_is_one_line_exit_2(case, capsys, monkeypatch):
+    from chaingen.studies import control
+
+    def no_runs(*arguments, **keywords):
+        raise AssertionError("the study ran with bad input")
+    monkeypatch.setattr(control, "run_table", no_runs)
+    arguments, expected = STUDY_REFUSALS[case]
+    assert control.main(arguments) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and len(captured.err.splitlines()) == 1, captured.err
+    assert captured.err.startswith("python -m chaingen.studies.control: error: "), captured.err
+    assert expected in captured.err, captured.err
+
+
+@pytest.mark.parametrize("arguments, t_end, dts", [
+    (["--quick", "--t-end", "0.2"], 0.2, (0.01, 0.1)),   # --t-end was ignored: ran 2 s
+    (["--quick"], 2.0, (0.01, 0.1)),
+    ([], 20.0, (0.001, 0.01, 0.05, 0.1, 0.2)),
+])
+def test_the_control_study_runs_the_t_end_it_is_given(arguments, t_end, dts, capsys,
+                                                        monkeypatch):
+    from chaingen.studies import control
+
+    asked = []
+    monkeypatch.setattr(control, "run_table",
+                        lambda scene, dts, scales, t_end: asked.append((dts, t_end)) or [])
+    assert control.main(arguments) == 0
+    assert asked == [(dts, t_end)]
+    output = capsys.readouterr().out
+    assert f"t_end {t_end:g} s" in output
+    assert "of the discrete law in es: no run of it took a step" in output

@@ -1,6 +1,6 @@
 """The passivity study: the discrete-gradient control law against the sampled one, measured.
 
-    python -m chaingen.studies.control [SCENE] [--t-end T] [--quick]
+    python -m chaingen.studies.control [SCENE] [--t-end T] [--quick] [--rows]
 
 For a scene with a [control] table (default: scenes/four_link_pbc.toml), runs the closed loop at
 several dt and gain scales (every stiffness and damping gain times s) with the discrete law in es
@@ -19,11 +19,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import NewtonError
+from ..errors import ChaingenError, NewtonError
+from ..runtime.solver import MAX_SAMPLE_BYTES
 from ..scene import Scene, kinematics
 from ..simulation import build_solver
 from ..spatial import dynamics
@@ -198,29 +200,64 @@ def pivot(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
+#: t_end / dt is a whole number of steps when within this relative distance of one (as a
+#: sweep's, chaingen.studies.sweep.spec.WHOLE_STEPS_RTOL).
+WHOLE_STEPS_RTOL = 1e-9
+
+
+def t_end_refusal(t_end: float, dts, n: int) -> str | None:
+    """Why the study cannot run every dt for t_end, or None: t_end must be finite and > 0, a
+    whole number of steps of each dt (a run takes round(t_end / dt) steps, so another t_end
+    would run for another time than the table says), and its samples must fit in memory."""
+    if not (np.isfinite(t_end) and t_end > 0):
+        return f"must be > 0 and finite (s), got {t_end!r}"
+    for dt in dts:
+        steps = t_end / dt
+        if abs(steps - round(steps)) > WHOLE_STEPS_RTOL * steps:
+            return (f"{t_end!r} s is not a whole number of steps of dt = {dt:g} s (the study "
+                    f"runs dt = {', '.join(f'{dt:g}' for dt in dts)} s): t_end / dt = {steps:.12g}")
+    steps = round(t_end / min(dts))
+    if (steps + 1) * (2 * n + 3) * 8 > MAX_SAMPLE_BYTES:
+        return (f"{t_end!r} s at dt = {min(dts):g} s is {steps} steps, whose samples would "
+                f"take more than {MAX_SAMPLE_BYTES / 2 ** 30:.0f} GiB")
+    return None
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m chaingen.studies.control",
-                                     description=__doc__.split("\n\n")[0])
+    program = "python -m chaingen.studies.control"
+    parser = argparse.ArgumentParser(prog=program, description=__doc__.split("\n\n")[0])
     parser.add_argument("scene", nargs="?", default="four_link_pbc")
-    parser.add_argument("--t-end", type=float, default=20.0)
+    parser.add_argument("--t-end", type=float, default=None,
+                        help="the length of every run in s, a whole number of steps of every "
+                             "dt (default: 20, with --quick 2)")
     parser.add_argument("--quick", action="store_true", help="two dt, two scales, 2 s")
     parser.add_argument("--rows", action="store_true",
                         help="one line per run (with the worst step balance), not per setting")
     args = parser.parse_args(argv)
-    scene = load_either_scene(args.scene)
+
+    def refuse(message: str) -> int:     # one line, exit status 2, as chaingen's commands
+        print(f"{program}: error: {message}", file=sys.stderr)
+        return 2
+
+    try:
+        scene = load_either_scene(args.scene)
+    except ChaingenError as error:
+        return refuse(str(error))
     if scene.control is None:
-        parser.error(f"{args.scene}: the scene has no [control] table")
-    if args.quick:
-        rows = run_table(scene, (0.01, 0.1), (1.0, 100.0), 2.0)
-    else:
-        rows = run_table(scene, t_end=args.t_end)
-    print(f"scene {scene.name}, t_end {2.0 if args.quick else args.t_end:g} s, gains x s "
-          "(stiffness and damping)")
+        return refuse(f"{args.scene}: the scene has no [control] table")
+    dts, scales = ((0.01, 0.1), (1.0, 100.0)) if args.quick else (DTS, SCALES)
+    t_end = args.t_end if args.t_end is not None else (2.0 if args.quick else 20.0)
+    refused = t_end_refusal(t_end, dts, scene.n)
+    if refused:
+        return refuse(f"--t-end: {refused}")
+    rows = run_table(scene, dts, scales, t_end)
+    print(f"scene {scene.name}, t_end {t_end:g} s, gains x s (stiffness and damping)")
     print(table(rows) if args.rows else pivot(rows))
-    worst = max((row.balance for row in rows if row.law.startswith("discrete, es")
-                 and row.balance is not None), default=float("nan"))
+    balances = [row.balance for row in rows if row.law.startswith("discrete, es")
+                and row.balance is not None]
+    worst = f"{max(balances):.1e} J" if balances else "no run of it took a step"
     print(f"\nworst step balance |H_d(k+1) - H_d(k) - work + dissipated| of the discrete law "
-          f"in es: {worst:.1e} J")
+          f"in es: {worst}")
     return 0
 
 
