@@ -59,6 +59,9 @@ def assembled_jacobian(factors: np.ndarray, pattern, n: int) -> np.ndarray:
     ("four_link_actuated", ()),              # torques and damping
     ("four_link_actuated", ("all",)),        # every number a run-time parameter
     ("five_link_biarticular", ()),           # COMs off the links' axes
+    ("four_link_pbc", ()),                   # a control law on every joint: H fills up
+    ("four_link_pbc_partial", ()),           # ... on three of four joints
+    ("four_link_pbc", ("all",)),             # its gains and target run-time parameters too
 ])
 def test_the_factors_assemble_the_newton_jacobian(arm_solve, name, parameters):
     arm_solve(True)
@@ -181,6 +184,38 @@ def test_step_sensitivities_by_the_factors_equal_dense_lus(arm_solve, order):
                              np.array(scene.initial_velocities) + 0.5)
     u = np.full(len(scene.actuated_joints), 0.4)
     results = [solver.step_sensitivities(x0, u, 0.01) for solver in (dense, factored)]
+    for field in ("x1", "ds_ds", "ds_du"):
+        expected, got = getattr(results[0], field), getattr(results[1], field)
+        np.testing.assert_allclose(got, expected, rtol=0,
+                                   atol=1e-9 * max(1.0, np.abs(expected).max()))
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("name", ["four_link_pbc", "four_link_pbc_partial"])
+def test_a_controlled_step_by_the_factors_is_dense_lus(arm_solve, name):
+    """A control law's torque couples its joint's arms to all outboard ones, so H is dense;
+    the factors take it as they take a banded H. The same root as dense LU: trajectories to
+    Newton's tolerance with the same iterations, H_d's balance at round-off, the torques
+    control_torques reports and the step sensitivities the same."""
+    scene, (dense, factored) = packages(name, arm_solve, sensitivities=True)
+    runs = [solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.02,
+                            n_steps=300) for solver in (dense, factored)]
+    np.testing.assert_allclose(runs[1].phi, runs[0].phi, rtol=0, atol=1e-9)
+    assert abs(runs[1].mean_newton_iterations - runs[0].mean_newton_iterations) <= 0.05
+    for run in runs:
+        assert np.max(np.abs(run.balance_error)) <= 1e-12 * np.max(np.abs(run.energy))
+        assert np.max(run.constraint_error) <= 1e-13
+    x0 = dense.initial_state(np.array(scene.initial_angles) + 0.2,
+                             np.array(scene.initial_velocities) + 0.5)
+    u = np.full(len(scene.actuated_joints), 0.3)
+    steps = []
+    for solver in (dense, factored):
+        solver.reset()
+        steps.append(solver.control_torques(x0, u, 0.02))
+    np.testing.assert_allclose(steps[1].tau, steps[0].tau, rtol=0,
+                               atol=1e-10 * np.abs(steps[0].tau).max())
+    np.testing.assert_allclose(steps[1].x1, steps[0].x1, rtol=0, atol=1e-10)
+    results = [solver.step_sensitivities(x0, u, 0.02) for solver in (dense, factored)]
     for field in ("x1", "ds_ds", "ds_du"):
         expected, got = getattr(results[0], field), getattr(results[1], field)
         np.testing.assert_allclose(got, expected, rtol=0,
