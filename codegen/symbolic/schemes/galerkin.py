@@ -61,7 +61,8 @@ SUMMARY = ("Energy-conserving k = 1 Petrov-Galerkin step in joint angles and can
 FLOWS = FlowDescription(
     "sum_i tau_i (phi_1 - phi_0)_i", "dt sum_g b_g sum_i d_i phidot_i(s_g)^2",
     "phidot(s_g) the rates of the quadratic trial function at the Gauss-Lobatto nodes s_g "
-    "(weights b_g). H_1 - H_0 = flows[0] - flows[1] to quadrature and solver accuracy.")
+    "(weights b_g). H_1 - H_0 = flows[0] - flows[1] to round-off and the Newton tolerance "
+    "(the energy correction closes the rule's defect; docs/model.md, section 16).")
 
 def gauss_lobatto_nodes(points: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Nodes s_g in [0, 1] (both ends included) and weights b_g (summing to 1) of the
