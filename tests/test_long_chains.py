@@ -282,7 +282,7 @@ def test_vi_splits_a_step_without_a_root_at_once():
     Simplified Newton takes a Newton step wherever the kept Jacobian contracts poorly and gives
     up on the first Newton step that fails the monotonicity test, so such a step is split after
     a few solves, not after 60, and not retried from the predictor when its first solve
-    started there with a Jacobian there (the retry would repeat it). Measured: 6.87 iterations
+    started there with a Jacobian there (the retry would repeat it). Measured: 6.91 iterations
     a step with 48 split steps (7.03 with the repeated retry; before:
     32.3 with 95; the largest energy error 13.1 J, 117 J before, H = 73.9 J at the start); on
     20 links 3.67 (before: 6.29), the trajectory the same to 3.3e-10. The goal of issue 32,
