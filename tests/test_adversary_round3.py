@@ -231,3 +231,49 @@ def test_the_control_study_runs_the_t_end_it_is_given(arguments, t_end, dts, cap
     output = capsys.readouterr().out
     assert f"t_end {t_end:g} s" in output
     assert "of the discrete law in es: no run of it took a step" in output
+
+
+# -- chaingen plot names a controlled run's energy as its summary does: H_d -----------------
+
+def write_run(directory, name: str, energy: str | None):
+    """A two-joint trajectory with energy flows, and its metadata (with `energy` as a
+    controlled package's run records it, or without)."""
+    import json
+
+    import numpy as np
+    header = "t,phi1,phi2,omega1,omega2,energy,constraint_error,input_work,dissipated"
+    rows = [[k * 0.01, 0.1, 0.2, 0.0, 0.0, 5.0 - 0.1 * k, 0.0, 0.0, 0.1 * k + 1e-9 * k]
+            for k in range(4)]
+    np.savetxt(directory / name, rows, delimiter=",", header=header, comments="")
+    meta = {"scene": "arm", "method": "es", "quadrature": 3, "order": 2, "dt": 0.01}
+    if energy is not None:
+        meta["energy"] = energy
+    (directory / f"{name}.json").write_text(json.dumps(meta))
+    return directory / name
+
+
+@pytest.mark.parametrize("energies, label", [
+    # A controlled run's axis said |H - H0 - W + D| while its summary and metadata said H_d.
+    (["H_d = T + V + V_s: the closed loop's storage"], "|H_d - H_d0 - W + D| [J]"),
+    ([None], "|H - H0 - W + D| [J]"),
+    ([None, "H_d = T + V + V_s"], "|H - H0 - W + D|, |H_d - H_d0 - W + D| [J]"),
+])
+def test_plot_names_the_energy_the_run_recorded(energies, label, tmp_path, monkeypatch):
+    from chaingen.views import plots
+
+    figures = []
+    monkeypatch.setattr(plots, "save_png", lambda figure, path: figures.append(figure) or path)
+    runs = [plots.load_run(write_run(tmp_path, f"run{index}.csv", energy))
+            for index, energy in enumerate(energies)]
+    plots.plot_runs(runs, tmp_path / "figure.png")
+    assert figures[0].axes[1].get_ylabel() == label
+
+
+def test_plot_refuses_an_energy_key_that_is_not_a_string(tmp_path):
+    from chaingen.errors import PlotError
+    from chaingen.views import plots
+
+    path = write_run(tmp_path, "run.csv", None)
+    (tmp_path / "run.csv.json").write_text('{"scene": "arm", "energy": 5}')
+    with pytest.raises(PlotError, match="key 'energy' must be a string, got 5"):
+        plots.load_run(path)

@@ -52,6 +52,9 @@ class TrajectoryRun:
     quadrature: int | None
     dt: float | None
     order: int = 2        # of the step (metadata; 2 where it has none)
+    #: What the energy column is: H, or H_d = T + V + V_s for a controlled package (the
+    #: metadata's "energy" key, which only a run of one writes).
+    storage: str = "H"
     #: The run-time parameters' values (metadata: path -> value), and those the label names.
     parameters: dict = dataclasses.field(default_factory=dict)
     named: tuple[str, ...] = ()
@@ -74,8 +77,8 @@ class TrajectoryRun:
 
     @property
     def abs_balance_error(self) -> np.ndarray:
-        """|e_B| = |H - H_0 - W + D| at every sample (model.md section 8); without energy
-        flows in the file, |e_E| = |H - H_0|."""
+        """|e_B| = |H - H_0 - W + D| at every sample (model.md section 8; H_d for a
+        controlled run); without energy flows in the file, |e_E| = |H - H_0|."""
         error = self.column("energy") - self.column("energy")[0]
         if self.balanced:
             work, dissipated = contract.FLOW_ENTRIES
@@ -150,6 +153,7 @@ def load_run(path) -> TrajectoryRun:
                          quadrature=int(quadrature) if quadrature is not None else None,
                          dt=float(dt) if dt is not None else None,
                          order=meta.get("order", 2),
+                         storage="H_d" if "energy" in meta else "H",
                          parameters={path: float(value)
                                      for path, value in meta.get("parameters", {}).items()})
 
@@ -160,7 +164,7 @@ def run_from_result(result, source) -> TrajectoryRun:
     return TrajectoryRun(path=Path(source), columns=tuple(result.columns),
                          rows=np.asarray(result.samples), n=n, scene=result.scene,
                          method=result.method, quadrature=result.quadrature,
-                         dt=result.dt, order=result.order,
+                         dt=result.dt, order=result.order, storage=result.storage,
                          parameters=dict(result.parameters))
 
 
@@ -198,6 +202,7 @@ METADATA_KEYS = {
     "n_steps": (lambda v: _is_integer(v) and v >= 0, "an integer >= 0"),
     "rtol": (lambda v: _is_number(v) and v >= 0, "a number >= 0"),
     "atol": (lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    "energy": (lambda v: isinstance(v, str), "a string"),
     "parameters": (lambda v: isinstance(v, dict) and all(isinstance(path, str) and _is_number(value)
                                                          for path, value in v.items()),
                    "an object of numbers by key path"),
@@ -322,8 +327,10 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
         angles.legend(handles=handles, fontsize=7, loc="upper right", ncol=2)
     angles.set_ylabel("joint angle phi_i [rad]")
     angles.grid(True, alpha=0.3)
-    energy_label = ("|H - H0 - W + D| [J]" if any(run.balanced for run in runs)
-                    else "|H - H0| [J]")
+    # Named as the run's summary names it: H, or a controlled run's H_d (both, overlaid).
+    balance = " - W + D" if any(run.balanced for run in runs) else ""
+    energy_label = ", ".join(f"|{storage} - {storage}0{balance}|" for storage in
+                             sorted({run.storage for run in runs})) + " [J]"
     _error_axis(energy, runs, [run.abs_balance_error for run in runs], energy_label,
                 "energy error 0 at every sample")
     _error_axis(constraint, runs, [run.constraint_error for run in runs],
