@@ -39,9 +39,14 @@ def command_animate(args) -> int:
     if args.t_end is not None and not (np.isfinite(args.t_end) and args.t_end > 0):
         raise ChaingenError(f"--t-end: must be > 0 and finite, got {args.t_end}")
     if args.trajectory is not None:
-        if args.method is not None or args.quadrature is not None or args.dt is not None:
-            raise ChaingenError("--method/--quadrature/--dt: only when animate simulates; the "
-                                f"trajectory {args.trajectory} is already a run")
+        # Every option of the run (the scheme, dt, the Newton options): none would change a
+        # run already made, so one given is refused rather than ignored.
+        given = [name for name in ("method", "quadrature", "gradient", "order", "dt")
+                 if getattr(args, name) is not None] + list(newton_overrides(args))
+        if given:
+            flags = "/".join("--" + name.replace("_", "-") for name in given)
+            raise ChaingenError(f"{flags}: only when animate simulates; the trajectory "
+                                f"{args.trajectory} is already a run")
         run = load_run(args.trajectory)
     else:
         from .views.animate import check_output

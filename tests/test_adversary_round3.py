@@ -235,17 +235,19 @@ def test_the_control_study_runs_the_t_end_it_is_given(arguments, t_end, dts, cap
 
 # -- chaingen plot names a controlled run's energy as its summary does: H_d -----------------
 
-def write_run(directory, name: str, energy: str | None):
-    """A two-joint trajectory with energy flows, and its metadata (with `energy` as a
+def write_run(directory, name: str, energy: str | None, n: int = 2, scene: str = "arm"):
+    """An n-joint trajectory with energy flows, and its metadata (with `energy` as a
     controlled package's run records it, or without)."""
     import json
 
     import numpy as np
-    header = "t,phi1,phi2,omega1,omega2,energy,constraint_error,input_work,dissipated"
-    rows = [[k * 0.01, 0.1, 0.2, 0.0, 0.0, 5.0 - 0.1 * k, 0.0, 0.0, 0.1 * k + 1e-9 * k]
-            for k in range(4)]
+    header = ",".join(["t", *(f"phi{i}" for i in range(1, n + 1)),
+                       *(f"omega{i}" for i in range(1, n + 1)),
+                       "energy", "constraint_error", "input_work", "dissipated"])
+    rows = [[k * 0.01, *(0.1 * i for i in range(1, n + 1)), *([0.0] * n), 5.0 - 0.1 * k, 0.0,
+             0.0, 0.1 * k + 1e-9 * k] for k in range(4)]
     np.savetxt(directory / name, rows, delimiter=",", header=header, comments="")
-    meta = {"scene": "arm", "method": "es", "quadrature": 3, "order": 2, "dt": 0.01}
+    meta = {"scene": scene, "method": "es", "quadrature": 3, "order": 2, "dt": 0.01}
     if energy is not None:
         meta["energy"] = energy
     (directory / f"{name}.json").write_text(json.dumps(meta))
@@ -277,3 +279,29 @@ def test_plot_refuses_an_energy_key_that_is_not_a_string(tmp_path):
     (tmp_path / "run.csv.json").write_text('{"scene": "arm", "energy": 5}')
     with pytest.raises(PlotError, match="key 'energy' must be a string, got 5"):
         plots.load_run(path)
+
+
+# -- chaingen animate of a run already made: an option of the run is refused, never ignored --
+
+@pytest.mark.parametrize("options, flags", [
+    # Each was ignored (exit 0, the animation written); only --method/--quadrature/--dt were
+    # refused.
+    (["--order", "4"], "--order"),
+    (["--gradient", "chain"], "--gradient"),
+    (["--rtol", "1e-6"], "--rtol"),
+    (["--max-iterations", "3", "--warm-start", "off"], "--max-iterations/--warm-start"),
+    (["--method", "es", "--dt", "0.1"], "--method/--dt"),
+])
+def test_animate_of_a_trajectory_refuses_the_options_of_a_run(options, flags, tmp_path):
+    from helpers import chaingen_in_process
+
+    (tmp_path / "scene.toml").write_text((ROOT / "scenes" / "three_link_mono.toml").read_text())
+    write_run(tmp_path, "run.csv", None, n=3, scene="three-link-mono")
+    before = snapshot(tmp_path)
+    result = chaingen_in_process("animate", "scene.toml", "run.csv", *options, "-o", "a.gif",
+                                 cwd=tmp_path)
+    lines = result.stderr.splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0] == (f"chaingen: error: {flags}: only when animate simulates; the "
+                        "trajectory run.csv is already a run"), lines[0]
+    assert snapshot(tmp_path) == before
