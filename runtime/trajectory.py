@@ -23,14 +23,19 @@ def metadata_path(path) -> Path:
     return path.with_name(path.name + ".json")
 
 
+#: What a controlled package's energy is, where a run's records name it (the trajectory's
+#: metadata, a sweep's record and trajectories).
+CLOSED_LOOP_ENERGY = ("H_d = T + V + V_s: the closed loop's storage (a [control] law, "
+                      "docs/controllers.md)")
+
+
 def run_metadata(result: SimulationResult) -> dict:
     metadata = {"scene": result.scene, "method": result.method, "quadrature": result.quadrature,
                 "order": result.order, "dt": result.dt, "every": result.every,
                 "n_steps": result.n_steps, "rtol": result.rtol, "atol": result.atol,
                 "columns": list(result.columns)}
     if result.storage != "H":      # the energy column of a controlled package
-        metadata["energy"] = ("H_d = T + V + V_s: the closed loop's storage (a [control] law, "
-                              "docs/controllers.md)")
+        metadata["energy"] = CLOSED_LOOP_ENERGY
     if result.parameters:          # a solver's run-time parameters: the values the run took
         metadata["parameters"] = {path: float(value) for path, value in result.parameters.items()}
     if result.adaptive:

@@ -305,3 +305,40 @@ def test_animate_of_a_trajectory_refuses_the_options_of_a_run(options, flags, tm
     assert lines[0] == (f"chaingen: error: {flags}: only when animate simulates; the "
                         "trajectory run.csv is already a run"), lines[0]
     assert snapshot(tmp_path) == before
+
+
+# -- a sweep of a controlled scene says that its energy is H_d -------------------------------
+
+@pytest.mark.compile
+def test_a_controlled_sweep_records_that_its_energy_is_h_d(tmp_path):
+    """The trajectories' energy and runs.parquet's max_energy_error of a controlled scene are
+    the closed loop's H_d (and its balance), as `simulate`'s metadata says; the sweep's
+    record and trajectories named nothing of it. A row is also a single run's, bit for bit."""
+    import json
+
+    import numpy as np
+    import pandas as pd
+    import zarr
+
+    from chaingen import build_solver, load_scene
+
+    (tmp_path / "spec.toml").write_text(
+        f'scene = "{PBC}"\nt_end = 0.2\nevery = 5\n'
+        '[axes]\n"control.target[0]" = [4.0, -3.5]\n')
+    result = chaingen("sweep", "-q", "spec.toml", "-o", "out", "--jobs", "1",
+                          cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    record = json.loads((tmp_path / "out" / "sweep.json").read_text())
+    assert record.get("energy", "").startswith("H_d = T + V + V_s"), record
+    store = zarr.open_group(tmp_path / "out" / "trajectories.zarr", mode="r")
+    assert store.attrs.get("energy") == record["energy"]
+    runs = pd.read_parquet(tmp_path / "out" / "runs.parquet")
+    scene = load_scene(PBC)
+    single = build_solver(scene, parameters=["control.target[0]"], sensitivities=False)
+    for _, row in runs.iterrows():
+        alone = single.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
+                                n_steps=20, parameters=[row["control.target[0]"]])
+        assert np.array_equal(alone.phi[-1], row[["phi1", "phi2", "phi3", "phi4"]].to_numpy(
+            dtype=float))
+        stored = np.asarray(store["energy"][int(row["run"])])
+        assert np.array_equal(stored, alone.energy[::5])

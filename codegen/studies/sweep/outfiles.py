@@ -1,6 +1,7 @@
 """The files of a sweep's OUT beside SweepStore: the names it writes, where a sweep may write
 (not inside another sweep's OUT), its staged files (named by the store id, so a leftover is
-provably the sweep's own), the digest of a chunk's trajectory rows, and the record's versions."""
+provably the sweep's own), the digest of a chunk's trajectory rows, and the record's versions
+and energy."""
 from __future__ import annotations
 
 import contextlib
@@ -16,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...runtime.trajectory import CLOSED_LOOP_ENERGY
 from ...version import VERSION
 
 SPEC_FILE = "sweep.json"
@@ -28,6 +30,13 @@ PART_NAME = re.compile(r"runs-([0-9]{9})\.parquet")
 #: target's name, this OUT's store id and a random token (`staged`).
 TOKEN = 16
 FIGURE = re.compile(r"[\w.-]+\.png|\.[\w.-]+\.png\.[A-Za-z0-9_]+(?:\.png)?")
+
+
+def energy_record(spec) -> dict:
+    """{"energy": what it is} for a SweepSpec of a controlled scene, whose energy (the
+    trajectories' energy, runs.parquet's max_energy_error) is the closed loop's H_d, as a
+    run's metadata says; {} for H."""
+    return {"energy": CLOSED_LOOP_ENERGY} if getattr(spec.scene, "control", None) else {}
 
 
 def versions() -> dict:

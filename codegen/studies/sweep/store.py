@@ -47,6 +47,7 @@ from .outfiles import (
     SPEC_FILE,
     TRAJECTORIES,
     enclosing_sweep,
+    energy_record,
     leftover,
     lexists,
     removed_on_failure,
@@ -237,6 +238,7 @@ class SweepStore:
                       "versions": versions(), "machine": platform.platform(),
                       "processor": platform.processor() or platform.machine(),
                       "engine": engine, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+            record.update(energy_record(self.spec))
             # The record first: it marks OUT as this sweep's; what follows is its own.
             with writes(record_path, "the sweep record"):
                 self._write_text(record_path, json.dumps(record, indent=2, default=str) + "\n")
@@ -356,7 +358,7 @@ class SweepStore:
             group.attrs.update({"scene": spec.scene.name, "method": spec.method,
                                 "sweep_digest": self.digest,
                                 "units": "phi rad, omega rad/s, energy J, constraint_error m, "
-                                         "t s"})
+                                         "t s", **energy_record(spec)})
 
             def coordinate(name: str, values: np.ndarray, dimension: str) -> None:
                 array = group.create_array(name, shape=values.shape, dtype=values.dtype,
