@@ -20,6 +20,16 @@ def command_plot(args) -> int:
                                 "the metric to draw")
         print(f"wrote {plot_sweep(args.trajectories[0], args.metric, args.output)}")
         return 0
+    # --metric draws a sweep's column; trajectory files have none to draw: refused, not
+    # ignored. A sweep directory among trajectory files is named as what it is.
+    for path in args.trajectories:
+        if path.is_dir():
+            raise ChaingenError(f"{path}: a directory: a sweep's results are drawn alone "
+                                "(chaingen plot OUT --metric METRIC), not among trajectory "
+                                "files")
+    if args.metric is not None:
+        raise ChaingenError(f"--metric: only for a sweep's result directory; "
+                            f"{args.trajectories[0]} is a trajectory file")
     from .views.plots import plot_files
 
     print(f"wrote {plot_files(args.trajectories, args.output)}")

@@ -342,3 +342,27 @@ def test_a_controlled_sweep_records_that_its_energy_is_h_d(tmp_path):
             dtype=float))
         stored = np.asarray(store["energy"][int(row["run"])])
         assert np.array_equal(stored, alone.energy[::5])
+
+
+# -- chaingen plot: --metric with trajectory files is refused, not ignored ---------------------
+
+@pytest.mark.parametrize("arguments, expected", [
+    # Drew the trajectory's figure (exit 0), --metric ignored.
+    (["run.csv", "--metric", "newton_mean", "-o", "a.png"],
+     "chaingen: error: --metric: only for a sweep's result directory; run.csv is a trajectory "
+     "file"),
+    # Said "sweep: no such trajectory file" of a directory.
+    (["sweep", "run.csv", "-o", "a.png"],
+     "chaingen: error: sweep: a directory: a sweep's results are drawn alone"),
+])
+def test_plot_of_trajectory_files_takes_no_sweep_option(arguments, expected, tmp_path):
+    from helpers import chaingen_in_process
+
+    write_run(tmp_path, "run.csv", None)
+    (tmp_path / "sweep").mkdir()
+    before = snapshot(tmp_path)
+    result = chaingen_in_process("plot", *arguments, cwd=tmp_path)
+    lines = result.stderr.splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0].startswith(expected), lines[0]
+    assert snapshot(tmp_path) == before
