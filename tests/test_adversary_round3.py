@@ -47,6 +47,14 @@ ODD_URDFS = {
     "triangle inequality": (robot_urdf(second_inertia='ixx="0.05"'),
                             "link 'lower' (joint 'elbow'): a scene cannot take it: "
                             "links[1].inertia: must be a physically valid inertia"),
+    # An inertia urdfdom cannot parse (NaN, numpy's repr of a float) was read as none: the
+    # link became a point mass (inertia 0), exit 0.
+    "nan inertia": (robot_urdf(second_inertia='ixx="nan"'),
+                    "the URDF parser could not read part of it (and would leave it out): "
+                    "Inertial: inertia element ixx is not a valid double; Could not parse "
+                    "inertial element for Link [lower]"),
+    "malformed inertia": (robot_urdf(second_inertia='ixx="np.float64(0.01)"'),
+                          "the URDF parser could not read part of it"),
     "negative damping": (robot_urdf(first_extra='<dynamics damping="-1"/>'),
                          "link 'upper' (joint 'shoulder'): a scene cannot take it: "
                          "links[0].damping: must be >= 0"),

@@ -265,23 +265,33 @@ def _stderr_captured() -> Iterator[list[str]]:
 
 def _load_model(pin, path: Path):
     """Pinocchio's model of the URDF (fixed base); ChaingenError when there is no such file or
-    it is not a URDF Pinocchio reads, with the parser's first complaint."""
+    it is not a URDF Pinocchio reads, with the parser's first complaint, and also when the
+    parser complained of an element and read the file without it (urdfdom reads a link whose
+    <inertial> it cannot parse, a NaN or a malformed number, as a point mass or as no mass)."""
     if not path.exists():
         raise ChaingenError(f"{path}: no such file")
     if not path.is_file():
         raise ChaingenError(f"{path}: not a file (give a URDF file)")
+    model, failure = None, ""
     with _stderr_captured() as complaints:
         try:
             # mimic: a mimic joint becomes Pinocchio's JointModelMimic, which _check_revolute
             # refuses (without it, Pinocchio makes it an independent revolute joint).
             try:
-                return pin.buildModelFromUrdf(str(path), mimic=True)
+                model = pin.buildModelFromUrdf(str(path), mimic=True)
             except TypeError:     # a Pinocchio without the keyword: mimic joints unseen
-                return pin.buildModelFromUrdf(str(path))
+                model = pin.buildModelFromUrdf(str(path))
         except (ValueError, RuntimeError) as error:
             failure = str(error).strip()
     details = [line.strip() for line in complaints
                if line.strip() and not line.strip().startswith("at line ")]
+    errors = [line.removeprefix("Error:").strip() for line in details
+              if line.startswith("Error:")]
+    if model is not None:
+        if not errors:
+            return model
+        raise ChaingenError(f"{path}: the URDF parser could not read part of it (and would "
+                            f"leave it out): {'; '.join(errors[:2])}")
     reason = details[0].removeprefix("Error:").strip() if details else failure
     raise ChaingenError(f"{path}: not a URDF file Pinocchio can read: {reason}")
 
