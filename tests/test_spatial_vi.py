@@ -14,7 +14,7 @@ import dataclasses
 import numpy as np
 import pytest
 import sympy as sp
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from test_spatial_dynamics import random_scene
 from test_spatial_midpoint import reference_run, wrapped
@@ -96,6 +96,8 @@ def test_residual_vanishes_at_a_numeric_solution_of_the_del_equations(seed, n, d
 
 @settings(max_examples=8, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7))
+@example(seed=72, n=1)     # 3.2e-13 of max |M|: the draw that showed the cancellation
+@example(seed=144, n=1)    # 4.3e-13 of max |M|
 def test_composite_rigid_body_mass_matrix_and_its_cholesky_solve(seed, n):
     """spatial_mass.mass_matrix against chaingen.spatial.dynamics.mass_matrix (checked against
     Pinocchio's crba in test_spatial_dynamics), and cholesky_solve against numpy's solve."""
@@ -114,8 +116,17 @@ def test_composite_rigid_body_mass_matrix_and_its_cholesky_solve(seed, n):
                                      [*(m for row in matrix for m in row), *solution])(*q, *b),
                       dtype=float).ravel()
     expected = dynamics.mass_matrix(scene, q)
+    # The composite rigid bodies are summed about the world origin: terms of size
+    # m (|c| + |o|)^2 (c the COMs, o the farthest joint origin) cancel down to M's entries, so
+    # round-off is relative to them, not to M. Measured over 600 draws (n = 1, 2, 4, 7): at
+    # most 2.8e-15 of this scale, up to 4.3e-13 of max |M| (a single link far from the origin
+    # about its own COM: M = 0.013 kg m^2 from terms of 2.2).
+    poses = dynamics.link_poses(scene, q)
+    far = max(np.linalg.norm(origin) for _, origin in poses)
+    scale = sum(link.mass * (np.linalg.norm(com) + far) ** 2 + np.abs(link.inertia).max()
+                for link, com in zip(scene.links, dynamics.com_positions(scene, q)))
     np.testing.assert_allclose(values[:n * n].reshape(n, n), expected, rtol=0,
-                               atol=1e-13 * np.abs(expected).max())
+                               atol=2e-14 * scale)
     np.testing.assert_allclose(expected @ values[n * n:], b, rtol=0, atol=1e-11)
     # O(n^2) entries of the factor and the solves, not one expanded expression per entry
     assert max(sp.count_ops(expression) for _, expression in defs.items) <= 8 * n + 40
