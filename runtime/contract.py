@@ -14,8 +14,9 @@ The features a package may have:
 - ``sensitivities``: the package was generated with the step sensitivities;
 - ``segments``: the scene has springs, whose segments are watched for collapse;
 - ``parameters``: the package takes some of the scene's numbers as run-time parameters p;
-- ``energy_check``: the scheme's step does not keep the energy balance exactly (vi, midpoint), so
-  a converged step is checked against it (a spurious Newton root, docs/model.md, section 13);
+- ``energy_check``: the scheme's step does not keep the energy balance exactly (vi, midpoint), or
+  keeps it only at the roots of its unreduced equations (spatial es), so a converged step is
+  checked against it (a spurious Newton root, docs/model.md, sections 13 and 4.8);
 - ``control``: a control law solved inside the step sets the actuated joints' torques (issue 34).
 
 This module is plain data: it imports nothing of chaingen and nothing beyond the standard library.
@@ -233,8 +234,8 @@ NEWTON_OPTIONS = (
     OptionField("warm_start", "int", 1, "continue from the previous solutions", switch=True),
     OptionField("reuse_jacobian", "int", JACOBIAN_EVERY_ITERATE, "one of the JACOBIAN_* modes"),
     OptionField("energy_tol", "double", DEFAULT_ENERGY_TOL,
-                "vi, midpoint: a step with |H_1 - H_0 - W + D| > energy_tol (T_0 + T_1) is "
-                "refused and split; 0: no check"),
+                "vi, midpoint, spatial es: a step with |H_1 - H_0 - W + D| > energy_tol "
+                "(T_0 + T_1) is refused and split; 0: no check"),
     OptionField("rtol", "double", 0.0, "adaptive steps: relative local error, 0 or >= 1e-14; 0 "
                                        "with atol 0: fixed steps of dt"),
     OptionField("atol", "double", 0.0, "adaptive steps: absolute local error (rad, rad/s), 0 "

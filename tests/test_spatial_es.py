@@ -536,3 +536,29 @@ def test_spatial_es_example_is_clean_under_valgrind_and_the_sanitizers(tmp_path,
         if runner:
             assert "ERROR SUMMARY: 0 errors" in run.stderr, run.stderr
         assert ("final tracking error" in run.stdout) == bool(actuated), run.stdout
+
+
+@pytest.mark.compile
+def test_a_root_that_turns_a_link_half_round_is_refused_and_split():
+    """spatial_three_link at dt = 0.05 s: its tenth step from the start turns link 3 by 180
+    degrees, where P(q_m) no longer spans the null space of G(q_m), and the projected residual
+    has a root that is not a root of the step: it gained 47.8 J (H = 24.6 J), and the run
+    failed with NaN at step 29 after more such steps. The energy check (ENERGY_TOL) refuses it
+    and splits it: the run completes 2 s with the balance at round-off."""
+    from chaingen.simulation import build_solver
+    from chaingen.spatial import load_spatial_scene
+
+    from helpers import scene_path
+
+    scene = load_spatial_scene(scene_path("spatial_three_link"))
+    solver = build_solver(scene, "es", sensitivities=False)
+    x = solver.initial_state(scene.initial_angles, scene.initial_velocities)
+    for _ in range(9):
+        x = solver.step(x, dt=0.05).x1
+    unchecked = solver.step(x, dt=0.05, options={"energy_tol": 0.0})
+    balance = (solver.outputs(unchecked.x1)[2] - solver.outputs(x)[2]
+               - unchecked.input_work + unchecked.dissipated)
+    assert abs(balance) > 1.0
+    run = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.05, n_steps=40)
+    assert run.split_steps >= 1
+    assert np.max(np.abs(run.balance_error)) <= 1e-12 * np.max(np.abs(run.energy))
