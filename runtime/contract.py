@@ -14,9 +14,8 @@ The features a package may have:
 - ``sensitivities``: the package was generated with the step sensitivities;
 - ``segments``: the scene has springs, whose segments are watched for collapse;
 - ``parameters``: the package takes some of the scene's numbers as run-time parameters p;
-- ``energy_check``: the scheme's step does not keep the energy balance exactly (vi, midpoint), or
-  keeps it only at the roots of its unreduced equations (spatial es), so a converged step is
-  checked against it (a spurious Newton root, docs/model.md, sections 13 and 4.8);
+- ``energy_check``: a converged step is checked against the energy balance, which the step does
+  not keep exactly (vi, midpoint) or at a spurious root (spatial es; docs/model.md 13, 4.8);
 - ``control``: a control law solved inside the step sets the actuated joints' torques (issue 34).
 
 This module is plain data: it imports nothing of chaingen and nothing beyond the standard library.
