@@ -321,14 +321,14 @@ def expected(package: Package, case: Case) -> dict:
     # A dt so small that a stage of the composed step, or a split half of it, rounds to zero
     # is refused there (BAD_ARGUMENT) when the step is taken.
     underflows = {BAD_ARGUMENT} if dt_ok and case.dt < 1e-300 else set()
-    failing = KNOWN - {OK, BAD_ARGUMENT, BAD_PARAMETER} | underflows
-    stepped = guarded((dt_ok, BAD_ARGUMENT), (p_ok, BAD_PARAMETER))
+    # A step's entry points refuse a NaN or Inf in x0 or u before any work (BAD_ARGUMENT),
+    # after dt and before the parameters.
+    stepped = guarded((dt_ok and x_ok and inputs_ok, BAD_ARGUMENT), (p_ok, BAD_PARAMETER))
     collapsed = case.collapsed and case.poison == 0   # a poisoned state is another one
     if stepped == OK and collapsed:
         stepped = SEGMENT_COLLAPSED
     if stepped == OK:
-        stepped = (failing if not (x_ok and inputs_ok)
-                   else KNOWN - {BAD_ARGUMENT, BAD_PARAMETER} | underflows)
+        stepped = KNOWN - {BAD_ARGUMENT, BAD_PARAMETER} | underflows
     arguments = (dt_ok and finite(case.t0) and case.n_steps >= 0 and case.every >= 1
                  and count >= 0)
     run = guarded((arguments, BAD_ARGUMENT), (p_ok, BAD_PARAMETER), (x_ok, BAD_ARGUMENT))
@@ -337,11 +337,11 @@ def expected(package: Package, case: Case) -> dict:
     if run == OK:
         run = INTERRUPTED if case.stop else KNOWN - {BAD_ARGUMENT, BAD_PARAMETER} | underflows
     controlled = BAD_ARGUMENT if case.hold < 1 else run
-    # control_torques: UNAVAILABLE without a control law; a state with a NaN or Inf is a bad
-    # argument (step takes it and fails); a step it would split is NOT_CONVERGED.
+    # control_torques: UNAVAILABLE without a control law; a state or an input with a NaN or
+    # Inf is a bad argument (as for step); a step it would split is NOT_CONVERGED.
     law = UNAVAILABLE
     if package.manifest.get("control"):
-        law = guarded((dt_ok and x_ok, BAD_ARGUMENT), (p_ok, BAD_PARAMETER))
+        law = guarded((dt_ok and x_ok and inputs_ok, BAD_ARGUMENT), (p_ok, BAD_PARAMETER))
         if law == OK and collapsed:
             law = SEGMENT_COLLAPSED
         if law == OK:

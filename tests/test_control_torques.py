@@ -174,6 +174,17 @@ def test_arguments_are_checked_as_steps(identity_solver):
     assert failure.value.status == STATUS_CODES["BAD_ARGUMENT"]
     with pytest.raises(NewtonError, match="bad argument"):
         solver.control_torques(np.full(solver.nx, np.nan), np.zeros(4), DT)
+    # A NaN or Inf in x0 or u is a bad argument in every entry point that takes a step, before
+    # any Newton iteration (step said NONFINITE after 10 iterations on a NaN x0, and a NaN u
+    # came back NONFINITE or NOT_CONVERGED from both).
+    bad_start = x0.copy()
+    bad_start[1] = np.inf
+    for take in (solver.step, solver.control_torques):
+        for arguments in ((bad_start, np.zeros(4)), (x0, np.array([0.0, np.nan, 0.0, 0.0]))):
+            with pytest.raises(NewtonError, match="bad argument") as failure:
+                take(*arguments, DT)
+            assert failure.value.status == STATUS_CODES["BAD_ARGUMENT"], take
+            assert "after 0 Newton iterations" in str(failure.value), take
     # u omitted: zero torques, as step
     assert np.array_equal(solver.control_torques(x0, dt=DT).tau, np.zeros(4))
 

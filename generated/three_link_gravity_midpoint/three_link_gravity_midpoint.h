@@ -77,8 +77,8 @@ extern "C" {
 #define THREE_LINK_GRAVITY_MIDPOINT_NONFINITE 3         /* NaN or Inf in the residual or the
                                                          * iterate */
 #define THREE_LINK_GRAVITY_MIDPOINT_BAD_ARGUMENT 4      /* a null pointer, dt <= 0 or not finite, a
-                                                         * NaN or Inf in a state or posture,
-                                                         * n_steps < 0, every < 1, interval < 1,
+                                                         * NaN or Inf in a state, posture or input
+                                                         * u, n_steps < 0, every < 1, interval < 1,
                                                          * hold < 1, more sample rows than memory
                                                          * can address, an unknown reuse_jacobian
                                                          * or a bad rtol, atol or energy_tol */

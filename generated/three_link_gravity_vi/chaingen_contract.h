@@ -11,9 +11,10 @@
 #define CHAINGEN_SINGULAR_JACOBIAN 2 /* Newton: no usable pivot in the LU factorisation */
 #define CHAINGEN_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define CHAINGEN_BAD_ARGUMENT 4      /* a null pointer, dt <= 0 or not finite, a NaN or Inf in a
-                                      * state or posture, n_steps < 0, every < 1, interval < 1,
-                                      * hold < 1, more sample rows than memory can address, an
-                                      * unknown reuse_jacobian or a bad rtol, atol or energy_tol */
+                                      * state, posture or input u, n_steps < 0, every < 1,
+                                      * interval < 1, hold < 1, more sample rows than memory can
+                                      * address, an unknown reuse_jacobian or a bad rtol, atol or
+                                      * energy_tol */
 #define CHAINGEN_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define CHAINGEN_SEGMENT_COLLAPSED 6 /* a spring segment came within its tolerance of the
                                       * geometry's size of zero length, or passed through it
@@ -49,7 +50,7 @@ typedef struct {
     double residual_tol;    /* default 1e-8; units of F */
     int warm_start;         /* default 1; continue from the previous solutions */
     int reuse_jacobian;     /* default 0; one of the JACOBIAN_* modes */
-    double energy_tol;      /* default 0.01; vi, midpoint: a step with |H_1 - H_0 - W + D| > energy_tol (T_0 + T_1) is refused and split; 0: no check */
+    double energy_tol;      /* default 0.01; vi, midpoint, spatial es: a step with |H_1 - H_0 - W + D| > energy_tol (T_0 + T_1) is refused and split; 0: no check */
     double rtol;            /* default 0.0; adaptive steps: relative local error, 0 or >= 1e-14; 0 with atol 0: fixed steps of dt */
     double atol;            /* default 0.0; adaptive steps: absolute local error (rad, rad/s), 0 or >= 1e-14 */
 } chaingen_options;

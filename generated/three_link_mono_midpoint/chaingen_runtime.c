@@ -1392,6 +1392,13 @@ static int cg_take_step(const chaingen_model *table, const cg_solver *c, const d
  * carve the workspace, reset the step's counters, derive the parameters' quantities and check
  * the start state's segments (a run checks its start once: each later step starts where the one
  * before ended, checked as its x1). A NaN or Inf in x0 is left to the step (Newton fails on it). */
+/* A NaN or Inf in the start state x0 or the inputs u: BAD_ARGUMENT before any work, in every
+ * entry point that takes a step (not NONFINITE after Newton has spent its iterations on it). */
+static int cg_bad_values(const chaingen_model *model, const double *x0, const double *u)
+{
+    return (x0 && !cg_all_finite(x0, model->nx)) || (u && !cg_all_finite(u, model->nu));
+}
+
 static int cg_begin_step(const chaingen_model *model, const chaingen_workspace *workspace,
                          cg_solver *c, const double *x0, const double *u, int nu,
                          const double *p, int np, double dt)
@@ -1400,7 +1407,7 @@ static int cg_begin_step(const chaingen_model *model, const chaingen_workspace *
     if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
-    if (!(dt > 0.0) || !isfinite(dt)) {
+    if (!(dt > 0.0) || !isfinite(dt) || cg_bad_values(model, x0, u)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     cg_carve(model, workspace, c);
@@ -1460,7 +1467,7 @@ CHAINGEN_LINKAGE int chaingen_control_torques(const chaingen_model *table, const
     if (model && (!model->applied_torques || model->nstage > 0)) {
         return CHAINGEN_UNAVAILABLE;
     }
-    if (!x0 || !tau || !x1 || (model && !cg_all_finite(x0, model->nx))) {
+    if (!x0 || !tau || !x1) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     status = cg_begin_step(model, workspace, c, x0, u, nu, p, np, dt);
@@ -1512,7 +1519,7 @@ static int cg_stage_sensitivities(const chaingen_model *table, const cg_solver *
     double *rhs;
     int i, j, k, status;
     if ((!p && np > 0) || !x1 || !ds_ds || (!ds_du && nu > 0) || (!ds_dp && np > 0)
-        || (whole && (!(dt > 0.0) || !isfinite(dt)))) {
+        || (whole && (!(dt > 0.0) || !isfinite(dt) || cg_bad_values(model, x0, u)))) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     status = cg_derive(model, c, p);
@@ -1614,7 +1621,7 @@ static int cg_composed_sensitivities(const chaingen_model *table, const cg_solve
     const double *from = x0;
     int s, i, j, k, spent = 0, status = CHAINGEN_OK;
     if (!x0 || (!p && np > 0) || !x1 || !ds_ds || (!ds_du && nu > 0) || (!ds_dp && np > 0)
-        || !(dt > 0.0) || !isfinite(dt)) {
+        || !(dt > 0.0) || !isfinite(dt) || cg_bad_values(model, x0, u)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     if (model->nsegment > 0) {

@@ -76,11 +76,11 @@ extern "C" {
                                                       * factorisation */
 #define THREE_LINK_MONO_MIDPOINT_NONFINITE 3         /* NaN or Inf in the residual or the iterate */
 #define THREE_LINK_MONO_MIDPOINT_BAD_ARGUMENT 4      /* a null pointer, dt <= 0 or not finite, a
-                                                      * NaN or Inf in a state or posture, n_steps
-                                                      * < 0, every < 1, interval < 1, hold < 1,
-                                                      * more sample rows than memory can address,
-                                                      * an unknown reuse_jacobian or a bad rtol,
-                                                      * atol or energy_tol */
+                                                      * NaN or Inf in a state, posture or input
+                                                      * u, n_steps < 0, every < 1, interval < 1,
+                                                      * hold < 1, more sample rows than memory
+                                                      * can address, an unknown reuse_jacobian or
+                                                      * a bad rtol, atol or energy_tol */
 #define THREE_LINK_MONO_MIDPOINT_EVALUATION_FAILED 5 /* a generated function reported an error */
 #define THREE_LINK_MONO_MIDPOINT_SEGMENT_COLLAPSED 6 /* a spring segment came within 1e-06 of the
                                                       * geometry's size of zero length, or passed
