@@ -180,6 +180,8 @@ def test_a_controlled_runs_files_say_what_its_energy_is(tmp_path):
                             text=True, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "(H_d - H_d_0 - work + dissipated)" in result.stdout
+    energy_line, = (line for line in result.stdout.splitlines() if "max |energy error|" in line)
+    assert energy_line.rstrip().endswith("J (|H_d - H_d_0|)"), energy_line
     assert json.loads((tmp_path / "run.csv.json").read_text())["energy"].startswith("H_d = ")
 
 

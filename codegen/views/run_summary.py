@@ -28,7 +28,10 @@ def run_summary(result, settings, out: Path | None) -> str:
         f"every {result.every})",
         f"  wall time (C loop)     {result.wall_time:.4g} s ({per_step * 1e6:.3g} us/{step})",
         f"  t_realtime             {result.t_realtime:.3g}",
-        f"  max |energy error|     {np.abs(result.energy_error).max():.3e} J{over}",
+        # A controlled run's energy is the closed loop's H_d, named as the balance line does.
+        f"  max |energy error|     {np.abs(result.energy_error).max():.3e} J"
+        + (f" (|{result.storage} - {result.storage}_0|)" if result.storage != "H" else "")
+        + over,
     ]
     if result.has_flows:
         lines += [
