@@ -74,7 +74,8 @@ def run_settings(scene: Scene | SpatialScene, *, method=None, quadrature=None, d
     given = {"method": method, "quadrature": quadrature, "order": order, "gradient": gradient,
              "rtol": rtol, "atol": atol}
     refused = (request_refusal({key: getattr(settings, key) for key in REQUEST_KEYS})
-               or control_refusal(scene, settings.method, settings.order))
+               or control_refusal(scene, settings.method, settings.order, settings.rtol,
+                                  settings.atol))
     if refused:
         # A value from the command line is named by its option, one from the scene by its key.
         where = (refused.option if given[refused.key] is not None

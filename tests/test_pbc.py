@@ -198,3 +198,37 @@ def test_the_compensation_follows_the_run_time_model_parameters():
         assert np.abs(result.phi[-1] - scene.control.target).max() < 1e-6
         balance = np.diff(result.energy - result.input_work + result.dissipated)
         assert np.abs(balance).max() <= 1e-12 * np.abs(result.energy).max()
+
+
+def test_the_sampled_law_is_refused_with_adaptive_steps(tmp_path):
+    """The sampled law is held over each step: with adaptive steps its hold period would be
+    the adaptive step, not dt, and a study of sampling at dt would read another controller
+    (stable at about 5 ms steps where it is lost at dt). Refused, named where the tolerance came
+    from: the option, the scene's [simulation], or the sweep spec's key; the discrete law takes
+    adaptive steps."""
+    from importlib.resources import files
+
+    from chaingen.errors import SettingsError
+    from chaingen.simulation import run_settings
+    from chaingen.studies.control import with_law
+    from chaingen.studies.sweep.spec import SweepError, load_spec
+
+    sampled = with_law(SCENES["four_link_pbc"], "sampled")
+    with pytest.raises(SettingsError, match=r"^--rtol: adaptive steps would hold the sampled "):
+        run_settings(sampled, rtol=1e-6)
+    with pytest.raises(SettingsError, match=r"^--atol: adaptive steps would hold"):
+        run_settings(sampled, atol=1e-6)
+    in_scene = dataclasses.replace(
+        sampled, simulation=dataclasses.replace(sampled.simulation, rtol=1e-6))
+    with pytest.raises(SettingsError, match=r"^pbc\.toml: simulation\.rtol: adaptive steps"):
+        run_settings(in_scene, source="pbc.toml")
+    assert run_settings(sampled).rtol == 0.0
+    assert run_settings(SCENES["four_link_pbc"], rtol=1e-6).rtol == 1e-6
+    text = (files("chaingen.scenes") / "four_link_pbc.toml").read_text()
+    assert text.count('\nlaw = "discrete"\n') == 1
+    (tmp_path / "pbc.toml").write_text(text.replace('\nlaw = "discrete"\n',
+                                                    '\nlaw = "sampled"\n'))
+    (tmp_path / "spec.toml").write_text('scene = "pbc.toml"\nrtol = 1e-6\n'
+                                        '[axes]\n"control.damping[0]" = [1.0, 2.0]\n')
+    with pytest.raises(SweepError, match=r"spec\.toml: rtol: adaptive steps would hold"):
+        load_spec(tmp_path / "spec.toml")

@@ -113,9 +113,11 @@ class SolverSpec:
 CONTROLLED_METHODS = ("es", "midpoint")
 
 
-def control_refusal(scene: Scene | SpatialScene, method: str, order: int) -> Refusal | None:
+def control_refusal(scene: Scene | SpatialScene, method: str, order: int,
+                    rtol: float = 0.0, atol: float = 0.0) -> Refusal | None:
     """Why a scene with a [control] table cannot have this solver, or None: the control law
-    is built into es's and midpoint's own step (order 2)."""
+    is built into es's and midpoint's own step (order 2); the sampled law is held over each
+    step, so adaptive steps (rtol or atol > 0) would change its hold period from dt."""
     if getattr(scene, "control", None) is None:
         return None
     if method not in CONTROLLED_METHODS:
@@ -124,6 +126,11 @@ def control_refusal(scene: Scene | SpatialScene, method: str, order: int) -> Ref
     if order != 2:
         return Refusal("order", "a controlled scene's step is the scheme's own (order 2): the "
                                 "control torque is held over one step", order)
+    if scene.control.law == "sampled" and (rtol > 0 or atol > 0):
+        key, value = ("rtol", rtol) if rtol > 0 else ("atol", atol)
+        return Refusal(key, "adaptive steps would hold the sampled law (control.law = "
+                            "\"sampled\") over each adaptive step instead of the sample period "
+                            "dt; take fixed steps", value)
     return None
 
 

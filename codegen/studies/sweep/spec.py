@@ -250,7 +250,8 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
     refused = request_refusal(request)
     if refused:
         raise fail(refused.key, refused.message)
-    refused = control_refusal(scene, request["method"], request["order"])
+    refused = control_refusal(scene, request["method"], request["order"],
+                              *(float(request[name]) for name in ADAPTIVE_TOLERANCES))
     if refused:    # named where the value came from: this spec, or the scene's [simulation]
         raise fail(refused.key if refused.key in document
                    else f"scene: {scene_path}: simulation.{refused.key}", refused.message)
