@@ -288,6 +288,7 @@ def reduced_step(scheme, q, v, u, dt):
     return w, np.array(finish(*w, *q, *v, *u, dt), dtype=float).ravel()
 
 
+@pytest.mark.heavy    # SymPy on chains of up to 6-7 links: 4-5 s, out of the fast tier
 @settings(max_examples=4, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 3))
 def test_scheme_is_the_numpy_step(seed, n):

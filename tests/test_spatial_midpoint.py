@@ -62,6 +62,7 @@ def test_residual_is_the_inverse_dynamics_of_pinocchio(seed, n, dt):
     assert np.abs(ours - expected).max() <= 1e-10 * max(1.0, np.abs(expected).max())
 
 
+@pytest.mark.heavy    # SymPy on chains of up to 6-7 links: 4-5 s, out of the fast tier
 @settings(max_examples=8, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
 def test_actuated_damped_residual_subtracts_torques_and_damping(seed, n):
@@ -86,6 +87,7 @@ def test_actuated_damped_residual_subtracts_torques_and_damping(seed, n):
     assert np.abs(ours - expected).max() <= 1e-10 * max(1.0, np.abs(expected).max())
 
 
+@pytest.mark.heavy    # SymPy on chains of up to 6-7 links: 4-5 s, out of the fast tier
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7))
 def test_energy_and_segments_of_a_state_are_the_numeric_ones(seed, n):
