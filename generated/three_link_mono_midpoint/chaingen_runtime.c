@@ -1417,7 +1417,7 @@ static int cg_begin_step(const chaingen_model *model, const chaingen_workspace *
     if (status != CHAINGEN_OK) {
         return status;
     }
-    if (model->nsegment > 0 && x0 && cg_all_finite(x0, model->nx)) {
+    if (model->nsegment > 0 && x0) {   /* finite: cg_bad_values above */
         return cg_start_segments(model, c, x0);
     }
     return CHAINGEN_OK;
@@ -1527,7 +1527,7 @@ static int cg_stage_sensitivities(const chaingen_model *table, const cg_solver *
         return status;
     }
     if (whole && model->nsegment > 0) {
-        status = x0 && cg_all_finite(x0, model->nx) ? cg_start_segments(model, c, x0) : CHAINGEN_OK;
+        status = x0 ? cg_start_segments(model, c, x0) : CHAINGEN_OK;   /* finite: above */
         if (status != CHAINGEN_OK) {
             return status;
         }
@@ -1627,7 +1627,7 @@ static int cg_composed_sensitivities(const chaingen_model *table, const cg_solve
     if (model->nsegment > 0) {
         /* The start state's segments (the stages' later states are checked as their x1). */
         status = cg_derive(model, c, p);
-        if (status == CHAINGEN_OK && cg_all_finite(x0, nx)) {
+        if (status == CHAINGEN_OK) {   /* x0 finite: cg_bad_values above */
             status = cg_start_segments(model, c, x0);
         }
         if (status != CHAINGEN_OK) {
