@@ -280,13 +280,16 @@ def test_vi_splits_a_step_without_a_root_at_once():
     steps have no root at dt (their root, followed from dt/2 by continuation, ends in a fold
     between 0.005 and 0.0099 s; vi's discrete Legendre transform is not invertible there).
     Simplified Newton takes a Newton step wherever the kept Jacobian contracts poorly and gives
-    up on the first Newton step that fails the monotonicity test, so such a step is split after
-    a few solves, not after 60, and not retried from the predictor when its first solve
-    started there with a Jacobian there (the retry would repeat it). Measured: 6.91 iterations
-    a step with 48 split steps (7.03 with the repeated retry; before:
-    32.3 with 95; the largest energy error 13.1 J, 117 J before, H = 73.9 J at the start); on
-    20 links 3.67 (before: 6.29), the trajectory the same to 3.3e-10. The goal of issue 32,
-    6 a step at n = 50, is not met."""
+    up on the first Newton step that fails the monotonicity test, or when twice in the solve a
+    Newton step's update is no smaller than the one of the Newton step before it (h >= 2), so
+    such a step is split after a few solves, not after 60, and not retried from the predictor
+    when its first solve started there with a Jacobian there (the retry would repeat it).
+    Measured: 6.825 iterations a step with 48 split steps (6.91 without the second test, the
+    same trajectory bit for bit; 7.03 with the repeated retry; before: 32.3 with 95; the
+    largest energy error 13.1 J, 117 J before, H = 73.9 J at the start); on 20 links 3.67
+    (before: 6.29), the trajectory the same to 3.3e-10. The goal of issue 32, 6 a step at
+    n = 50, is not met: docs/model.md, section 13, says where the iterations go. The run is
+    chaotic from t = 1.8 s: an initial angle moved by 1e-9 rad gives 6.82 to 6.92."""
     from chaingen.simulation import build_solver
 
     means = {}
@@ -298,4 +301,4 @@ def test_vi_splits_a_step_without_a_root_at_once():
         means[n] = result.mean_newton_iterations
         energy = result.column("energy")
         assert np.abs(energy - energy[0]).max() <= 0.3 * abs(energy[0]), n
-    assert means[20] <= 4.0 and means[50] <= 6.95, means
+    assert means[20] <= 4.0 and means[50] <= 6.87, means

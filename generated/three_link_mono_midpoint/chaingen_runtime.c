@@ -67,6 +67,14 @@
  * than this many further updates to meet the tolerance: a Newton step converges quadratically,
  * in about as many. */
 #define CG_REFRESH_ITERATIONS 2.0
+/* Simplified Newton in a package whose own Newton is simplified (vi) gives up on a solve in which
+ * this many Newton steps were followed at once by a Newton step with an update no smaller: the
+ * ratio of successive Newton updates estimates h / 2, h = omega |dz| the Kantorovich quantity,
+ * and h >= 2 lies outside the region where Newton's method is known to converge. From a first
+ * guess far from the root it happens once, and Newton recovers; twice, in every solve of the
+ * scaling chain of 50 links that did so, there was no root within reach (docs/model.md,
+ * section 13). */
+#define CG_NEWTON_GROWTHS 2
 /* A model's Newton matrix (an approximation of dF/dz, spatial es) that had to be replaced within
  * a solve (it contracted poorly: a long step of a fast chain) is not tried again for this many
  * solves: they start with dF/dz itself, as the model's matrix would only cost them iterations. */
@@ -893,8 +901,11 @@ static double cg_residual_norm(const chaingen_model *table, const cg_solver *c)
  * changes fast along the motion). In a package whose own Newton is simplified (vi) it gives up,
  * *diverged set, when a Newton step fails the monotonicity test: the next update, by the
  * Jacobian evaluated at the step's start, did not shrink (after a residual that did not shrink,
- * that Jacobian is kept for this test). There is then no root within Newton's reach (on a long
- * chain at dt = 0.01 s, the root of a step ends in a fold at a shorter dt: vi's discrete
+ * that Jacobian is kept for this test); or when CG_NEWTON_GROWTHS Newton steps were each
+ * followed at once by a Newton step with an update no smaller (the residual shrank, if by less
+ * than CHAINGEN_REFRESH_RATE, so the Jacobian was evaluated anew and the test above had no
+ * update to compare). There is then no root within Newton's reach (on a long chain at
+ * dt = 0.01 s, the root of a step ends in a fold at a shorter dt: vi's discrete
  * Legendre transform is no longer invertible), and the step is split at once. Full Newton,
  * Newton-chord and es's and midpoint's simplified Newton never give up early.
  *
@@ -925,6 +936,8 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     int evaluated_at = 0;   /* the iteration at whose iterate dF/dz was last evaluated (0: none) */
     int evaluations = 0;    /* of dF/dz within this call */
     int refreshed = 0;      /* dF/dz evaluated at an iterate after the first guess */
+    double newton_update = -1.0;   /* the last iterate's update when it was a Newton step */
+    int growths = 0;        /* Newton steps followed at once by one with an update no smaller */
     /* The model's Newton matrix may be this solve's first (chord, and it did not fail lately),
      * and was. */
     const int approximate = chord && model->newton_matrix && s->exact_first == 0;
@@ -1017,6 +1030,12 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
             }
             z[i] += dz[i];
         }
+        if (gives_up) {
+            if (here && newton_update > 0.0 && update_norm >= newton_update) {
+                ++growths;
+            }
+            newton_update = here ? update_norm : -1.0;
+        }
         if (!isfinite(update_norm)) {
             status = CHAINGEN_NONFINITE;
         } else if (options->reuse_jacobian == CHAINGEN_JACOBIAN_EVERY_ITERATE) {
@@ -1056,9 +1075,11 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
                             || (rate >= CG_FLOOR_RATE && residual_norm <= CG_ROUNDOFF_RESIDUAL));
             if (residual_norm <= options->residual_tol && (contracted || floor)) {
                 status = CHAINGEN_OK;
-            } else if (gives_up && measured && evaluated_at == iteration - 1 && rate >= 1.0) {
+            } else if (gives_up && ((measured && evaluated_at == iteration - 1 && rate >= 1.0)
+                                    || growths >= CG_NEWTON_GROWTHS)) {
                 /* The Newton step from the previous iterate failed the monotonicity test:
-                 * the update by the Jacobian evaluated there did not shrink. */
+                 * the update by the Jacobian evaluated there did not shrink; or Newton steps
+                 * kept growing (h >= 2 each time: CG_NEWTON_GROWTHS). */
                 *diverged = 1;
                 break;
             } else if (measured
