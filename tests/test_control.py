@@ -248,6 +248,7 @@ def test_a_package_without_sensitivities_has_no_sensitivity_path():
     assert ".sensitivities = 0," in package.files["three_link_mono_vi.c"]
     assert not package.manifest["entry_points"]["step_sensitivities"]["available"]
     assert "sensitivity" not in package.files["three_link_mono_vi_model.c"]
+    assert package.manifest["sources"] == ["three_link_mono_vi.c", "three_link_mono_vi_model.c"]
     solver = solver_for("three_link_mono", "vi", 3)
     assert not solver.has_sensitivities
     with pytest.raises(ValueError, match="without step sensitivities"):

@@ -7,7 +7,7 @@ import pytest
 
 from chaingen.generate import sensitivities
 from chaingen.generate.casadi_functions import scheme_functions
-from chaingen.generate.package import render_package
+from chaingen.generate.package import model_c_bytes, render_package
 from chaingen.scene.solver_spec import SolverSpec
 from chaingen.studies.bench.scenes import scaling_scene
 from chaingen.symbolic.schemes import build_scheme
@@ -97,7 +97,7 @@ def sensitivity_bytes(method: str, order: int, n: int) -> int:
         spec = SolverSpec.create(scaling_scene(n), method, order=order,
                                  sensitivities=with_them)
         package = render_package(build_scheme(spec), sensitivities=with_them)
-        sizes.append(len(package.files[f"{package.prefix}_model.c"]))
+        sizes.append(model_c_bytes(package))
     return sizes[0] - sizes[1]
 
 

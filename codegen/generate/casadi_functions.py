@@ -64,6 +64,10 @@ class SchemeFunctions:
     # pattern, (rows, columns) of its nonzeros in that order. None: dense LU of dF/dz.
     newton_factors: ca.Function | None = None
     arm_pattern: tuple[tuple[int, ...], tuple[int, ...]] | None = None
+    # -> (F, factors) with H taken of ArmSpace.newton_forces (the springs' quadrature without
+    # the exact gradient's correction), in newton_factors' layout and pattern: the chord's
+    # Newton matrix (model.md 18); None: newton_factors serves the chord too.
+    chord_factors: ca.Function | None = None
     # -> (F, A): the scheme's Newton matrix A ~ dF/dz (StepSystem.newton_matrix), which Newton
     # takes in place of dF/dz; None: dF/dz.
     newton_matrix: ca.Function | None = None
@@ -79,7 +83,16 @@ class SchemeFunctions:
                      self.outputs, self.initial_state, self.sensitivity_rhs,
                      self.sensitivity_map, self.joint_maps, self.holding_torques,
                      self.segment_margins, self.energy_check, self.newton_factors,
-                     self.parameters, self.newton_matrix, self.applied_torques)
+                     self.chord_factors, self.parameters, self.newton_matrix,
+                     self.applied_torques)
+        return tuple(function for function in functions if function is not None)
+
+    def derivatives(self) -> tuple[ca.Function, ...]:
+        """The functions a forward run's step never calls, in their own C file (package.py):
+        the step sensitivities' and, where the chord has its own factors, dF/dz's (for
+        residual_jacobian, the sensitivities and full Newton)."""
+        exact = self.newton_factors if self.chord_factors is not None else None
+        functions = (self.sensitivity_rhs, self.sensitivity_map, self.joint_maps, exact)
         return tuple(function for function in functions if function is not None)
 
 
@@ -276,12 +289,17 @@ def holding_torques(t: SchemeTranslation) -> GeneratedFunction | None:
                              tuple(["phi"] + t.with_p[1]), (torques,), ("tau",))
 
 
-def newton_factors(t: SchemeTranslation) -> tuple[GeneratedFunction | None, tuple | None]:
-    """es's Newton matrix by its factors (ArmSpace): -> (F, factors), and H's pattern."""
-    if t.scheme.step.arm_space is None:
-        return None, None
-    factors, pattern = arm_factors(t.scheme, t.bindings, t.parameters, t.step, t.z)
-    return t.step_function("newton_factors", [t.residual, factors], ["F", "factors"]), pattern
+def newton_factors(t: SchemeTranslation) -> tuple[GeneratedFunction | None,
+                                                 GeneratedFunction | None, tuple | None]:
+    """es's Newton matrix by its factors (ArmSpace): -> (F, factors); the chord's, of
+    ArmSpace.newton_forces, where it has them (else None); and H's pattern, which both share."""
+    arms = t.scheme.step.arm_space
+    if arms is None:
+        return None, None, None
+    exact, chord, pattern = arm_factors(t.scheme, t.bindings, t.parameters, t.step, t.z)
+    return (t.step_function("newton_factors", [t.residual, exact], ["F", "factors"]),
+            None if chord is None else
+            t.step_function("chord_factors", [t.residual, chord], ["F", "factors"]), pattern)
 
 
 def newton_matrix(t: SchemeTranslation) -> GeneratedFunction | None:
@@ -346,7 +364,7 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
     found["segment_margins"] = segment_margins(t)
     found["energy_check"] = energy_check(t)
     found["holding_torques"] = holding_torques(t)
-    found["newton_factors"], pattern = newton_factors(t)
+    found["newton_factors"], found["chord_factors"], pattern = newton_factors(t)
     found["newton_matrix"] = newton_matrix(t)
     found["applied_torques"] = applied_torques(t)
     jacobian = t.residual if t.jacobian is None else t.jacobian
@@ -381,12 +399,14 @@ def scheme_functions(scheme: DiscreteScheme, prefix: str, *,
 
 
 def arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
-                 step: SympyToCasadi, z: ca.SX) -> tuple[ca.SX, tuple]:
-    """The factors of es's Newton matrix (ArmSpace) as one vector in the step's inputs, and
-    H's pattern. h and c are translated with the arm increments w as free symbols, so that
-    dh/dw and dc/dw are CasADi's sparse symbolic Jacobians (a few entries per link), then w is
-    put back as the function of z it is. Raises ValueError if h or c depend on dv other than
-    through w, or the blocks of G_mu and G_c are not one 2-vector per link."""
+                 step: SympyToCasadi, z: ca.SX) -> tuple[ca.SX, ca.SX | None, tuple]:
+    """The factors of es's Newton matrix (ArmSpace) as one vector in the step's inputs; those
+    of the chord's Newton matrix, H taken of ArmSpace.newton_forces (None without them); and
+    H's pattern, the union of both H's, in which both vectors give its nonzeros. h and c are
+    translated with the arm increments w as free symbols, so that dh/dw and dc/dw are CasADi's
+    sparse symbolic Jacobians (a few entries per link), then w is put back as the function of z
+    it is. Raises ValueError if h or c depend on dv other than through w, or the blocks of
+    G_mu and G_c are not one 2-vector per link."""
     arms = scheme.step.arm_space
     n = scheme.scene.n
     w = ca.SX.sym("w", 2 * n)
@@ -402,6 +422,11 @@ def arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
     if ca.jacobian(ca.vertcat(forces, rows), z[:2 * n]).nnz():
         raise ValueError("es: the arm forces depend on dv other than through w = B dv")
     H = ca.jacobian(forces, w)
+    chord_H = None
+    if arms.newton_forces is not None:
+        chord_H = ca.jacobian(sx_vector(local, arms.newton_forces), w)
+        union = H.sparsity() + chord_H.sparsity()
+        H, chord_H = ca.project(H, union), ca.project(chord_H, union)
     g_mu = ca.jacobian(forces, z[2 * n:])
     g_c = ca.jacobian(rows, w)
     for name, block, shape in (("G_mu", g_mu, lambda r, c: r // 2 == c),
@@ -410,12 +435,17 @@ def arm_factors(scheme: DiscreteScheme, bindings: dict, parameters: list,
             raise ValueError(f"es: {name} is not one 2-vector per link")
     g_mu = ca.vertcat(*[g_mu[r, r // 2] for r in range(2 * n)])
     g_c = ca.vertcat(*[g_c[c // 2, c] for c in range(2 * n)])
-    local_values = ca.vertcat(*H.nonzeros(), g_mu, g_c)
-    local_values = ca.substitute(local_values, w,
-                                 ca.vertcat(*[step(symbol) for symbol in arms.arm_increments]))
-    factors = ca.vertcat(local_values, sx_vector(step, arms.masses), sx_vector(step, arms.maps))
+    arm_increments = ca.vertcat(*[step(symbol) for symbol in arms.arm_increments])
+    constants = ca.vertcat(sx_vector(step, arms.masses), sx_vector(step, arms.maps))
+
+    def factors(jacobian):
+        local_values = ca.substitute(ca.vertcat(*jacobian.nonzeros(), g_mu, g_c), w,
+                                     arm_increments)
+        return ca.vertcat(local_values, constants)
+
     rows_h, columns_h = H.sparsity().get_triplet()
-    return factors, (tuple(rows_h), tuple(columns_h))
+    return (factors(H), None if chord_H is None else factors(chord_H),
+            (tuple(rows_h), tuple(columns_h)))
 
 
 #: The name of the generated function that computes the derived parameters q from p.

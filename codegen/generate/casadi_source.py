@@ -26,21 +26,37 @@ def work_sizes(functions) -> WorkSizes:
                      w=max(f.sz_w() for f in functions))
 
 
-def casadi_c_source(functions, prefix: str) -> tuple[str, str]:
+def casadi_c_source(functions, prefix: str, part: str = "") -> tuple[str, str]:
     """C source and header of `functions` from CasADi's CodeGenerator, symbols prefixed.
 
-    Internal symbols get `prefix` through CasADi's own prefix option; the exported ones are
-    the function names, which already carry it. No export attributes: visibility is left to
-    the build.
+    Internal symbols get `prefix` and `part` through CasADi's own prefix option (a few of
+    them are not static: each source of one package takes its own `part`); the exported ones
+    are the function names, which already carry the prefix. No export attributes: visibility
+    is left to the build.
     """
     generator = ca.CodeGenerator(f"{prefix}_model.c", {
-        "prefix": f"{prefix}_", "with_header": True, "with_export": False,
+        "prefix": f"{prefix}_{part}", "with_header": True, "with_export": False,
         "casadi_int": "long long int"})
     for function in functions:
         generator.add(function)
     source = mark_parameters_used(generator.dump())
-    header = _casadi_header(functions, prefix)
+    header = casadi_header(functions, prefix)
     return source, header
+
+
+def model_c_sources(functions, prefix: str) -> tuple[dict[str, str], str]:
+    """The model C of a package's SchemeFunctions, {file name: source}, and its header. The
+    step's functions are in <prefix>_model.c; those a forward run never calls (the
+    sensitivities', dF/dz's factors where the chord has its own: functions.derivatives()),
+    if any, in <prefix>_derivatives.c. Each file's optimisation is its own (package.py), so
+    the step keeps -O2 where the sensitivities' code would make one file large."""
+    derivatives = functions.derivatives()
+    step = [function for function in functions.all() if function not in derivatives]
+    sources = {f"{prefix}_model.c": casadi_c_source(step, prefix)[0]}
+    if derivatives:
+        sources[f"{prefix}_derivatives.c"] = casadi_c_source(derivatives, prefix,
+                                                             "derivatives_")[0]
+    return sources, casadi_header(functions.all(), prefix)
 
 
 _DEFINITION = re.compile(r"^(?:static )?[A-Za-z_][\w \*]*\b(\w+)\(([^()]*)\) ?\{$")
@@ -65,7 +81,7 @@ def mark_parameters_used(source: str) -> str:
     return "".join(lines)
 
 
-def _casadi_header(functions, prefix: str) -> str:
+def casadi_header(functions, prefix: str) -> str:
     """Declarations of the evaluation entry points we call (CasADi's header declares many more
     bookkeeping functions we never use)."""
     guard = f"{prefix.upper()}_MODEL_H"

@@ -29,7 +29,7 @@ from ..symbolic.schemes import DiscreteScheme, build_scheme
 from ..symbolic.schemes.base import actuated_joints
 from ..version import VERSION
 from .casadi_functions import chains_state, scheme_functions
-from .casadi_source import casadi_c_source, work_sizes
+from .casadi_source import model_c_sources, work_sizes
 from .example import example_context
 from .interface import CInterface, c_literal, dimension_macros
 from .key import input_hash
@@ -58,6 +58,7 @@ MODEL_FUNCTIONS = (
     ("parameters", "parameters"), ("initial_state", "initial_state"), ("outputs", "outputs"),
     ("holding_torques", "holding_torques"), ("residual", "residual"),
     ("residual_jacobian", "residual_jacobian"), ("newton_factors", "newton_factors"),
+    ("chord_factors", "chord_factors"),
     ("predictor", "predictor"), ("next_state", "next_state"),
     ("segment_margins", "segment_margins"), ("energy_terms", "energy_check"),
     ("sensitivity_rhs", "sensitivity_rhs"), ("sensitivity_map", "sensitivity_map"),
@@ -90,6 +91,11 @@ class GeneratedPackage:
     @property
     def sources(self) -> tuple[str, ...]:
         return tuple(name for name in sorted(self.files) if name.endswith(".c"))
+
+
+def model_c_bytes(package: GeneratedPackage) -> int:
+    """Bytes of the package's generated model C, all its sources (model_c_sources)."""
+    return sum(len(package.files[name].encode()) for name in package.manifest["sources"][1:])
 
 
 def c_list(values) -> str:
@@ -274,13 +280,12 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
     if progress is not None:
         progress(2, "C code of the model")
-    model_source, model_header = casadi_c_source(functions.all(), prefix)
+    model_sources, model_header = model_c_sources(functions, prefix)
     work = {key: max(1, value) for key, value in dataclasses.asdict(
         work_sizes(functions.all())).items()}
-    model_flags = LARGE_MODEL_FLAGS if len(model_source) > LARGE_MODEL_BYTES else ()
-    source_flags = {f"{prefix}.c": list(SOLVER_FLAGS)}
-    if model_flags:
-        source_flags[f"{prefix}_model.c"] = list(model_flags)
+    source_flags = {f"{prefix}.c": list(SOLVER_FLAGS), **{name: list(LARGE_MODEL_FLAGS) for
+                    name, text in model_sources.items() if len(text) > LARGE_MODEL_BYTES}}
+    model_flags = LARGE_MODEL_FLAGS if len(source_flags) > 1 else ()
     defaults = newton_defaults(scheme)
     features = package_features(scheme, sensitivities)
     interface = CInterface(prefix)
@@ -375,7 +380,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "chord_margin": c_literal(contract.CHORD_MARGIN),
         "source_flags": {name: " ".join(flags) for name, flags in source_flags.items()},
         "model_flags": " ".join(model_flags), "large_model_bytes": LARGE_MODEL_BYTES,
-        "sources": [f"{prefix}.c", f"{prefix}_model.c"],
+        "sources": [f"{prefix}.c", *model_sources],
         "strict_flags": " ".join(contract.STRICT_FLAGS),
         "public_headers": [f"{prefix}.h", *PUBLIC_RUNTIME_HEADERS],
     }
@@ -383,7 +388,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
     files = {output.format(prefix=prefix): environment.get_template(
         CONTROLLED_EXAMPLE if features.control and template == "example.c.j2" else template
     ).render(context) for template, output in TEMPLATES.items()}
-    files[f"{prefix}_model.c"] = f"{c_banner}\n{model_source}"
+    files.update({name: f"{c_banner}\n{text}" for name, text in model_sources.items()})
     files[f"{prefix}_model.h"] = f"{c_banner}\n{model_header}"
     for name in RUNTIME_FILES:
         files[name] = importlib.resources.files("chaingen.runtime").joinpath("c", name).read_text()

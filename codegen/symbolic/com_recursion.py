@@ -121,6 +121,9 @@ class EsStep(NamedTuple):
     rates: list                  # joint rates at the mid-point, n
     arm_increments: list         # w = B dv, one defined (x, y) pair per link
     forces: list                 # h(w, mu), one (x, y) pair per link, on the arms
+    # h with the springs' K-point average alone, without the exact gradient's correction: the
+    # chord's Newton matrix is taken of it (model.md 18); None where it is h itself
+    newton_forces: list | None = None
 
 
 def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
@@ -198,6 +201,11 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
                 c2 = number(link.com ** 2 + link.com_normal ** 2)
                 forces[k] = add(forces[k], scale(-dt * weight / c2, perp(arms[k])))
 
+    # The chord's Newton matrix needs dh/dw only approximately (the root is the residual's):
+    # where the springs' gradient is the exact one, h's Jacobian is taken of the K-point rule's
+    # average alone, whose derivative differs from the corrected one's by the correction's,
+    # O(|dd|^(2K)), and costs 0.6 of it (model.md 18).
+    newton_forces = list(forces) if scene.springs and gradient == "exact" else None
     for i, spring in enumerate(scene.springs):
         offsets = scene.spring_fastenings(spring)
         js = list(range(spring.first, spring.last + 1))
@@ -205,16 +213,24 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
                   for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
         changes = [defs.vector(f"spring{i}_dd{j}", chain.segment(j, r0, r1, arm_steps, True))
                    for j, (r0, r1) in zip(js, zip(offsets[:-1], offsets[1:]))]
-        if gradient == "exact":
-            totals = exact_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
-        elif gradient == "chain":
+        averaged = None
+        if gradient == "chain":
             totals = chain_rule_spring_gradient(spring, i, js, starts, changes, defs)
         else:
-            totals = averaged_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
+            averaged = averaged_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
+            totals = averaged
+            if gradient == "exact":
+                totals = exact_spring_gradient(spring, i, js, starts, changes, quadrature, defs,
+                                               averaged)
         for j, total, r0, r1 in zip(js, totals, offsets[:-1], offsets[1:]):
             total = defs.vector(f"spring{i}_f{j}", scale(dt, total))
             for k, pulled in chain.segment_transpose(j, r0, r1, total):
                 forces[k - 1] = add(forces[k - 1], pulled)
+        if newton_forces is not None:
+            for j, total, r0, r1 in zip(js, averaged, offsets[:-1], offsets[1:]):
+                total = defs.vector(f"newton_spring{i}_f{j}", scale(dt, total))
+                for k, pulled in chain.segment_transpose(j, r0, r1, total):
+                    newton_forces[k - 1] = add(newton_forces[k - 1], pulled)
 
     direct = []
     for k, link in enumerate(scene.links):
@@ -225,11 +241,11 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
         direct.append(term)
     gradient = chain.sweep(direct, forces, "sweep_")
     momentum = [g[0] for g in gradient] + [g[1] for g in gradient]
-    return EsStep(momentum, constraint_increments, rates, w, forces)
+    return EsStep(momentum, constraint_increments, rates, w, forces, newton_forces)
 
 
 def exact_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
-                          defs: Definitions) -> list:
+                          defs: Definitions, averaged: list | None = None) -> list:
     """An exact discrete gradient of one spring's energy V = k/2 (sum_j s_j - S_0)^2 in its
     segment vectors d_j (model.md 4.3, the exact discrete gradient): the K-point average G_j of
     averaged_spring_gradient, corrected along the step (Gonzalez's construction, in the
@@ -248,8 +264,9 @@ def exact_spring_gradient(spring, i: int, js, starts, changes, quadrature: int,
     step would otherwise be round-off divided by |dd|^2). V(1) - V(0) is taken without
     cancellation, k/2 (L_0 + L_1 - 2 S_0) (L_1 - L_0) with
     s_j(1) - s_j(0) = (2 d_j(0) + dd_j) . dd_j / (s_j(0) + s_j(1)): its round-off is
-    eps |G| |dd|, not eps V. One (x, y) per segment."""
-    totals = averaged_spring_gradient(spring, i, js, starts, changes, quadrature, defs)
+    eps |G| |dd|, not eps V. One (x, y) per segment. averaged: G_j, when defined already."""
+    totals = averaged or averaged_spring_gradient(spring, i, js, starts, changes, quadrature,
+                                                  defs)
     sums, increments, projected, squared = [], [], [], []
     for j, start, change, total in zip(js, starts, changes, totals):
         end = add(start, change)

@@ -26,7 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from chaingen.generate.package import generate_package, write_package
+from chaingen.generate.package import generate_package, model_c_bytes, write_package
 from chaingen.scene.solver_spec import SolverSpec
 from chaingen.studies.bench.scaling import scaling_scene
 
@@ -90,7 +90,7 @@ int main(void)
 
 
 def model_bytes(package) -> int:
-    return len(package.files[f"{package.prefix}_model.c"].encode())
+    return model_c_bytes(package)
 
 
 def build_seconds(method: str, n: int, order: int, timeout: float) -> float | None:

@@ -59,6 +59,7 @@ static const chaingen_model MODEL = {
     .residual = four_link_actuated_es_model_residual,
     .residual_jacobian = NULL,
     .newton_factors = four_link_actuated_es_model_newton_factors,
+    .chord_factors = four_link_actuated_es_model_chord_factors,
     .predictor = four_link_actuated_es_model_predictor,
     .next_state = four_link_actuated_es_model_next_state,
     .segment_margins = four_link_actuated_es_model_segment_margins,

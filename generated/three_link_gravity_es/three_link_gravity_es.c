@@ -50,6 +50,7 @@ static const chaingen_model MODEL = {
     .residual = three_link_gravity_es_model_residual,
     .residual_jacobian = three_link_gravity_es_model_residual_jacobian,
     .newton_factors = NULL,
+    .chord_factors = NULL,
     .predictor = three_link_gravity_es_model_predictor,
     .next_state = three_link_gravity_es_model_next_state,
     .segment_margins = NULL,

@@ -599,15 +599,17 @@ static chaingen_arm_system cg_arm_system(const chaingen_model *table, const cg_s
     return system;
 }
 
-/* F and the factors of dF/dz at z (arm solve): the factors go to the workspace. */
-static int cg_newton_factors(const chaingen_model *table, const cg_solver *c, const double *z,
-                             const double *x0, const double *u, double dt, double *residual)
+/* F and the factors of a Newton matrix at z (arm solve): `factors` is the model's
+ * newton_factors (dF/dz's) or chord_factors (the chord's); the factors go to the workspace. */
+static int cg_newton_factors(const chaingen_model *table, const cg_solver *c,
+                             chaingen_function factors, const double *z, const double *x0,
+                             const double *u, double dt, double *residual)
 {
     const chaingen_model *const model = CG_MODEL(table);
     cg_step_arguments(model, c, z, x0, u, &dt);
     c->res[0] = residual;
     c->res[1] = c->arm_factors;
-    return cg_evaluate(model->newton_factors, c);
+    return cg_evaluate(factors, c);
 }
 
 /* Factorise the Newton matrix: with the arm solve, the reduced n x n system of
@@ -672,7 +674,7 @@ static int cg_evaluate_residual_jacobian(const chaingen_model *table, const cg_s
     }
     if (model->arm_nh > 0) {
         c->s->factors_valid = 0;
-        if (cg_newton_factors(model, c, z, x0, u, dt, residual)) {
+        if (cg_newton_factors(model, c, model->newton_factors, z, x0, u, dt, residual)) {
             return CHAINGEN_EVALUATION_FAILED;
         }
         {
@@ -819,7 +821,8 @@ static int cg_choose_warm_start(const chaingen_model *table, const cg_solver *c,
 }
 
 /* F (with_jacobian: and dF/dz, factorised later, and the residual's scale at it) at z, for
- * Newton; with_jacobian 2: the model's Newton matrix in place of dF/dz where it has one.
+ * Newton; with_jacobian 2: the model's Newton matrix in place of dF/dz where it has one (its
+ * newton_matrix, or with the arm solve its chord_factors).
  * Returns nonzero when an evaluation failed. */
 static int cg_newton_evaluate(const chaingen_model *table, const cg_solver *c, const double *x0,
                               const double *u, const double *p, double dt, int with_jacobian)
@@ -834,7 +837,11 @@ static int cg_newton_evaluate(const chaingen_model *table, const cg_solver *c, c
     c->s->factors_valid = 0;   /* the factors' storage is overwritten */
     if (model->arm_nh > 0) {
         chaingen_arm_system system = cg_arm_system(model, c);
-        evaluated = cg_newton_factors(model, c, z, x0, u, dt, c->residual);
+        /* with_jacobian 2: the chord's factors, where the model has them (an approximate H) */
+        evaluated = cg_newton_factors(model, c,
+                                      with_jacobian == 2 && model->chord_factors
+                                          ? model->chord_factors : model->newton_factors,
+                                      z, x0, u, dt, c->residual);
         /* The residual's scale at this Jacobian, 1 + sum_j |dF_i/dz_j| |z_j|, bounded by its
          * factors. */
         if (!evaluated) {
@@ -938,9 +945,14 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     int refreshed = 0;      /* dF/dz evaluated at an iterate after the first guess */
     double newton_update = -1.0;   /* the last iterate's update when it was a Newton step */
     int growths = 0;        /* Newton steps followed at once by one with an update no smaller */
-    /* The model's Newton matrix may be this solve's first (chord, and it did not fail lately),
-     * and was. */
+    /* The model's Newton matrix (an approximation of dF/dz, spatial es) may be this solve's
+     * first (chord, and it did not fail lately), and was. */
     const int approximate = chord && model->newton_matrix && s->exact_first == 0;
+    /* The chord's every Newton matrix is of the model's chord factors, where it has them
+     * (planar es with the exact gradient: H of the springs' quadrature alone, without its
+     * correction, whose derivative is of the quadrature's error; docs/model.md 18). A chord
+     * that fails climbs the ladder to full Newton, whose matrices are dF/dz. */
+    const int chord_matrix = chord && model->chord_factors;
     int approximated = 0;
     z = c->z;
     dz = c->dz;
@@ -975,7 +987,8 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
             approximated = approximate;
         }
         if (cg_newton_evaluate(model, c, x0, u, p, dt,
-                               here && evaluations == 0 && approximate ? 2 : here)) {
+                               here && (chord_matrix || (evaluations == 0 && approximate))
+                                   ? 2 : here)) {
             status = CHAINGEN_EVALUATION_FAILED;
             break;
         }
@@ -1561,7 +1574,8 @@ static int cg_stage_sensitivities(const chaingen_model *table, const cg_solver *
         return status;
     }
     /* dF/dz at the converged z, factorised once. */
-    if (model->arm_nh > 0 ? cg_newton_factors(model, c, c->z, x0, u, dt, c->residual)
+    if (model->arm_nh > 0 ? cg_newton_factors(model, c, model->newton_factors, c->z, x0, u, dt,
+                                              c->residual)
                           : cg_evaluate_residual_jacobian(model, c, c->z, x0, u, p, dt, c->residual,
                                                           c->jacobian)) {
         return CHAINGEN_EVALUATION_FAILED;

@@ -45,6 +45,10 @@ typedef int (*chaingen_function)(const double **arg, double **res, long long int
  *   residual          (z, x0, u, q, dt) -> (F)
  *   residual_jacobian (z, x0, u, q, dt) -> (F, dF/dz)          dense packages (arm_nh == 0)
  *   newton_factors    (z, x0, u, q, dt) -> (F, factors)        arm solve (arm_nh > 0)
+ *   chord_factors     (z, x0, u, q, dt) -> (F, factors)        the same F and layout, H of
+ *                                                   the springs' quadrature alone, without the
+ *                                                   exact gradient's correction: the chord's
+ *                                                   Newton matrix (arm solve, exact gradient)
  *   predictor         (x0, q, dt) -> (z)
  *   next_state        (z, x0, u, q, dt) -> (x1, flows[2] when flows)
  *   segment_margins   (x0, x1, q) -> (margins[2 nsegment])     when nsegment > 0
@@ -89,6 +93,7 @@ typedef struct {
     chaingen_function residual;
     chaingen_function residual_jacobian;
     chaingen_function newton_factors;
+    chaingen_function chord_factors;
     chaingen_function predictor;
     chaingen_function next_state;
     chaingen_function segment_margins;

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...generate.package import render_package
+from ...generate.package import model_c_bytes, render_package
 from ...runtime.build import compiler
 from ...scene import Scene
 from .config import HARNESS_FLAGS, SCALING_DTS, VARIANTS, BenchConfig
@@ -164,7 +164,7 @@ def measure_scaling_point(method: str, quadrature: int, n: int, *, n_steps: int,
         build_seconds = harness.build_seconds
     return {"generate_seconds": generate_seconds, "build_seconds": build_seconds,
             "generate_peak_kb": generate_peak, "compile_peak_kb": compile_peak,
-            "model_c_bytes": len(package.files[f"{package.prefix}_model.c"].encode()),
+            "model_c_bytes": model_c_bytes(package),
             "timings": timings}
 
 

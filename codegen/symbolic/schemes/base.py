@@ -48,6 +48,9 @@ class ArmSpace:
     forces: ImmutableMatrix           # h: 2n entries, link by link
     masses: ImmutableMatrix           # m_k
     maps: ImmutableMatrix             # A_k = L_k R_k, row-major, 4 entries per link
+    # h with the springs' K-point average alone (EsStep.newton_forces): the chord's Newton
+    # matrix is taken of it (chord_factors); None: of `forces`
+    newton_forces: ImmutableMatrix | None = None
 
 
 @dataclass(frozen=True)

@@ -120,6 +120,8 @@ def build(scene: Scene, quadrature: int, order: int = 2,
         arm_space = ArmSpace(
             arm_increments=ImmutableMatrix([c for w in parts.arm_increments for c in w]),
             forces=ImmutableMatrix([c for h in parts.forces for c in h]),
+            newton_forces=None if parts.newton_forces is None else
+            ImmutableMatrix([c for h in parts.newton_forces for c in h]),
             masses=ImmutableMatrix([number(link.mass) for link in scene.links]),
             maps=ImmutableMatrix([number(link.length) * entry for link in scene.links
                                   for entry in com_frame_map(link)]))
