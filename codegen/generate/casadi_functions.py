@@ -68,6 +68,8 @@ class SchemeFunctions:
     # the exact gradient's correction), in newton_factors' layout and pattern: the chord's
     # Newton matrix (model.md 18); None: newton_factors serves the chord too.
     chord_factors: ca.Function | None = None
+    # -> y, the step's constants those take as their last input (generate.step_constants)
+    step_constants: ca.Function | None = None
     # -> (F, A): the scheme's Newton matrix A ~ dF/dz (StepSystem.newton_matrix), which Newton
     # takes in place of dF/dz; None: dF/dz.
     newton_matrix: ca.Function | None = None
@@ -84,7 +86,7 @@ class SchemeFunctions:
                      self.sensitivity_map, self.joint_maps, self.holding_torques,
                      self.segment_margins, self.energy_check, self.newton_factors,
                      self.chord_factors, self.parameters, self.newton_matrix,
-                     self.applied_torques)
+                     self.applied_torques, self.step_constants)
         return tuple(function for function in functions if function is not None)
 
     def derivatives(self) -> tuple[ca.Function, ...]:

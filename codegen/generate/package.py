@@ -33,6 +33,7 @@ from .casadi_source import model_c_sources, work_sizes
 from .example import example_context
 from .interface import CInterface, c_literal, dimension_macros
 from .key import input_hash
+from .step_constants import with_step_constants
 
 #: template -> file it renders ({prefix} is replaced by the package prefix)
 TEMPLATES = {
@@ -58,13 +59,11 @@ MODEL_FUNCTIONS = (
     ("parameters", "parameters"), ("initial_state", "initial_state"), ("outputs", "outputs"),
     ("holding_torques", "holding_torques"), ("residual", "residual"),
     ("residual_jacobian", "residual_jacobian"), ("newton_factors", "newton_factors"),
-    ("chord_factors", "chord_factors"),
-    ("predictor", "predictor"), ("next_state", "next_state"),
-    ("segment_margins", "segment_margins"), ("energy_terms", "energy_check"),
-    ("sensitivity_rhs", "sensitivity_rhs"), ("sensitivity_map", "sensitivity_map"),
-    ("joint_maps", "joint_maps"), ("newton_matrix", "newton_matrix"),
-    ("applied_torques", "applied_torques"),
-)
+    ("chord_factors", "chord_factors"), ("step_constants", "step_constants"),
+    ("predictor", "predictor"), ("next_state", "next_state"), ("segment_margins",
+    "segment_margins"), ("energy_terms", "energy_check"), ("sensitivity_rhs", "sensitivity_rhs"),
+    ("sensitivity_map", "sensitivity_map"), ("joint_maps", "joint_maps"),
+    ("newton_matrix", "newton_matrix"), ("applied_torques", "applied_torques"))
 
 #: A generated model source larger than this is compiled with LARGE_MODEL_FLAGS in place of the
 #: optimisation level: on a single function of some 10^5 lines gcc's -O2 takes minutes (n = 20:
@@ -75,7 +74,6 @@ LARGE_MODEL_FLAGS = ("-O1",)
 #: vectorises the LU's column updates only there, which halves the factorisation at n = 20
 #: (60 unknowns) and is neutral at n = 3 (docs/benchmarks.md).
 SOLVER_FLAGS = ("-O3",)
-
 #: Stages of generate_package that report progress (a build adds one: compiling).
 GENERATE_STAGES = 3
 
@@ -277,12 +275,15 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
                         scheme.parameter_paths, scheme.order, scheme.gradient)
     if progress is not None:
         progress(1, "CasADi functions and derivatives")
-    functions = scheme_functions(scheme, prefix, sensitivities=sensitivities)
+    functions = with_step_constants(scheme_functions(scheme, prefix,
+                                                     sensitivities=sensitivities), prefix)
+    ny = functions.step_constants.size1_out(0) if functions.step_constants else 0
     if progress is not None:
         progress(2, "C code of the model")
     model_sources, model_header = model_c_sources(functions, prefix)
     work = {key: max(1, value) for key, value in dataclasses.asdict(
         work_sizes(functions.all())).items()}
+    work["w"] += ny   # the step's constants y lead the real work array (chaingen_runtime.c)
     source_flags = {f"{prefix}.c": list(SOLVER_FLAGS), **{name: list(LARGE_MODEL_FLAGS) for
                     name, text in model_sources.items() if len(text) > LARGE_MODEL_BYTES}}
     model_flags = LARGE_MODEL_FLAGS if len(source_flags) > 1 else ()
@@ -313,7 +314,7 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
         "error_entries": n if scheme.method == "es" and scheme.order == 2 else 2 * n,
         "flows": int(features.flows), "energy_check": int(features.energy_check),
         "sensitivities": int(sensitivities), "chain_state": int(chain_state),
-        "arm_nh": len(functions.arm_pattern[0]) if functions.arm_pattern else 0,
+        "arm_nh": len(functions.arm_pattern[0]) if functions.arm_pattern else 0, "ny": ny,
     }
     tables, model_fields = model_table(scheme, functions, sizes, defaults)
     parameters_listed = list(zip(scheme.parameter_paths, scheme.parameter_units,

@@ -216,10 +216,10 @@ typedef chaingen_control four_link_actuated_es_control;
  * itself. Its size is chaingen_workspace.h's formula at this package's sizes. */
 typedef struct {
     chaingen_workspace_scalars scalars;
-    const double *arg[4];
+    const double *arg[5];
     double *res[4];
     long long int iw[1];
-    double w[479];
+    double w[612];
     int ints[CHAINGEN_WORKSPACE_INTS(FOUR_LINK_ACTUATED_ES_NZ, 0)];
     double doubles[CHAINGEN_WORKSPACE_DOUBLES(FOUR_LINK_ACTUATED_ES_N_JOINTS, FOUR_LINK_ACTUATED_ES_NX, FOUR_LINK_ACTUATED_ES_NZ,
                                               FOUR_LINK_ACTUATED_ES_NU, FOUR_LINK_ACTUATED_ES_NP, 0, 0, 40, 1, 0, 3, 4)];

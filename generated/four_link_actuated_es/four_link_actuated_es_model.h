@@ -13,5 +13,6 @@ int four_link_actuated_es_model_holding_torques(const double** arg, double** res
 int four_link_actuated_es_model_segment_margins(const double** arg, double** res, long long int* iw, double* w, int mem);
 int four_link_actuated_es_model_newton_factors(const double** arg, double** res, long long int* iw, double* w, int mem);
 int four_link_actuated_es_model_chord_factors(const double** arg, double** res, long long int* iw, double* w, int mem);
+int four_link_actuated_es_model_step_constants(const double** arg, double** res, long long int* iw, double* w, int mem);
 
 #endif /* FOUR_LINK_ACTUATED_ES_MODEL_H */

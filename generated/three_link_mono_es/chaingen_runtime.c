@@ -99,6 +99,9 @@ typedef struct {
     double **res;
     long long int *iw;
     double *w;
+    /* The step's constants y = step_constants(x0, u, q, dt) that the residual and the Newton
+     * factors take (model->ny, ahead of CasADi's work array w in the workspace's). */
+    double *y;
     /* Newton: the iterate, its update, the residual and its scale 1 + S_i. */
     double *z, *dz, *residual, *residual_scale;
     /* The Newton matrix: dense dF/dz (NZ x NZ) and its LU factors in jacobian; or es's factors
@@ -162,7 +165,8 @@ static void cg_carve(const chaingen_model *table, const chaingen_workspace *work
     c->arg = workspace->arg;
     c->res = workspace->res;
     c->iw = workspace->iw;
-    c->w = workspace->w;
+    c->y = model->ny > 0 ? workspace->w : NULL;
+    c->w = workspace->w + model->ny;
     c->z = cg_take(&d, nz, 1);
     c->dz = cg_take(&d, nz, 1);
     c->residual = cg_take(&d, nz, 1);
@@ -563,8 +567,10 @@ CHAINGEN_LINKAGE int chaingen_holding_torques(const chaingen_model *table, const
     return cg_evaluate(model->holding_torques, c);
 }
 
-/* Point the generated step functions' inputs at (z, x0, [u], [q], dt): u when the model has
- * inputs, q = Q(p) (derived by the caller) when it has parameters. */
+/* Point the generated step functions' inputs at (z, x0, [u], [q], dt, [y]): u when the model
+ * has inputs, q = Q(p) (derived by the caller) when it has parameters, y the step's constants
+ * (cg_step_constants, evaluated by the caller for this x0, u, q and dt) when it has them; a
+ * function that does not take y reads the inputs before it. */
 static void cg_step_arguments(const chaingen_model *table, const cg_solver *c, const double *z,
                               const double *x0, const double *u, const double *dt)
 {
@@ -579,6 +585,32 @@ static void cg_step_arguments(const chaingen_model *table, const cg_solver *c, c
         c->arg[k++] = c->q;
     }
     c->arg[k] = dt;
+    if (model->ny > 0) {
+        c->arg[k + 1] = c->y;
+    }
+}
+
+/* The step's constants y in the workspace, for x0, u, dt and the derived q (cg_derive first):
+ * every entry point evaluates them before the residual or the Newton factors at a new start,
+ * Newton once a solve. */
+static int cg_step_constants(const chaingen_model *table, const cg_solver *c, const double *x0,
+                             const double *u, double dt)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    int k = 1;
+    if (model->ny == 0) {
+        return CHAINGEN_OK;
+    }
+    c->arg[0] = x0;
+    if (model->nu > 0) {
+        c->arg[k++] = u;
+    }
+    if (model->np > 0) {
+        c->arg[k++] = c->q;
+    }
+    c->arg[k] = &dt;
+    c->res[0] = c->y;
+    return cg_evaluate(model->step_constants, c);
 }
 
 /* The Newton matrix's factors in the workspace, as chaingen_arm_solve.h reads them (es's arm
@@ -637,10 +669,11 @@ static void cg_solve_newton(const chaingen_model *table, const cg_solver *c, dou
     }
 }
 
-/* The residual for Newton, whose steps may be negative (a stage of a composed step). */
+/* The residual for Newton, whose steps may be negative (a stage of a composed step); with
+ * `constants`, the step's constants evaluated first (Newton evaluates them once a solve). */
 static int cg_evaluate_residual(const chaingen_model *table, const cg_solver *c, const double *z,
                                 const double *x0, const double *u, const double *p, double dt,
-                                double *residual)
+                                double *residual, int constants)
 {
     const chaingen_model *const model = CG_MODEL(table);
     int status;
@@ -648,6 +681,9 @@ static int cg_evaluate_residual(const chaingen_model *table, const cg_solver *c,
         return CHAINGEN_BAD_ARGUMENT;
     }
     status = cg_derive(model, c, p);
+    if (status == CHAINGEN_OK && constants) {
+        status = cg_step_constants(model, c, x0, u, dt);
+    }
     if (status != CHAINGEN_OK) {
         return status;
     }
@@ -669,6 +705,9 @@ static int cg_evaluate_residual_jacobian(const chaingen_model *table, const cg_s
         return CHAINGEN_BAD_ARGUMENT;
     }
     status = cg_derive(model, c, p);
+    if (status == CHAINGEN_OK) {
+        status = cg_step_constants(model, c, x0, u, dt);
+    }
     if (status != CHAINGEN_OK) {
         return status;
     }
@@ -703,7 +742,7 @@ CHAINGEN_LINKAGE int chaingen_residual(const chaingen_model *table, const double
         return CHAINGEN_BAD_ARGUMENT;
     }
     cg_carve(model, workspace, &solver);
-    return cg_evaluate_residual(model, &solver, z, x0, u, p, dt, residual);
+    return cg_evaluate_residual(model, &solver, z, x0, u, p, dt, residual, 1);
 }
 
 CHAINGEN_LINKAGE int chaingen_residual_jacobian(const chaingen_model *table, const double *z,
@@ -832,7 +871,7 @@ static int cg_newton_evaluate(const chaingen_model *table, const cg_solver *c, c
     const double *z = c->z, *jacobian = c->jacobian;
     int i, j, evaluated;
     if (!with_jacobian) {
-        return cg_evaluate_residual(model, c, z, x0, u, p, dt, c->residual);
+        return cg_evaluate_residual(model, c, z, x0, u, p, dt, c->residual, 0);
     }
     c->s->factors_valid = 0;   /* the factors' storage is overwritten */
     if (model->arm_nh > 0) {
@@ -960,6 +999,13 @@ static int cg_newton(const chaingen_model *table, const cg_solver *c, const doub
     *diverged = 0;
     *cold = 0;
     status = cg_first_guess(model, c, x0, dt, warm);
+    /* The step's constants, once for every iterate of this solve. */
+    if (status == CHAINGEN_OK) {
+        status = cg_derive(model, c, p);
+    }
+    if (status == CHAINGEN_OK) {
+        status = cg_step_constants(model, c, x0, u, dt);
+    }
     /* The Jacobian kept from the last solve: simplified Newton's, unless dt changed or the last
      * solve replaced one within it; the chord's across steps, when this step continues the last
      * (chained: its start is the last end, the same dt). */
@@ -1573,7 +1619,11 @@ static int cg_stage_sensitivities(const chaingen_model *table, const cg_solver *
     if (status != CHAINGEN_OK) {
         return status;
     }
-    /* dF/dz at the converged z, factorised once. */
+    /* dF/dz at the converged z, factorised once (the step's constants of this start, whatever
+     * evaluated them last). */
+    if (cg_step_constants(model, c, x0, u, dt) != CHAINGEN_OK) {
+        return CHAINGEN_EVALUATION_FAILED;
+    }
     if (model->arm_nh > 0 ? cg_newton_factors(model, c, model->newton_factors, c->z, x0, u, dt,
                                               c->residual)
                           : cg_evaluate_residual_jacobian(model, c, c->z, x0, u, p, dt, c->residual,

@@ -42,13 +42,15 @@ typedef int (*chaingen_function)(const double **arg, double **res, long long int
  *   initial_state     (phi, phidot, q) -> (x)
  *   outputs           (x, q) -> (phi, omega, H, constraint[nconstraint])
  *   holding_torques   (phi, q) -> (tau[n_joints])
- *   residual          (z, x0, u, q, dt) -> (F)
+ *   residual          (z, x0, u, q, dt[, y]) -> (F)          y: when ny > 0
  *   residual_jacobian (z, x0, u, q, dt) -> (F, dF/dz)          dense packages (arm_nh == 0)
- *   newton_factors    (z, x0, u, q, dt) -> (F, factors)        arm solve (arm_nh > 0)
- *   chord_factors     (z, x0, u, q, dt) -> (F, factors)        the same F and layout, H of
+ *   newton_factors    (z, x0, u, q, dt[, y]) -> (F, factors)   arm solve (arm_nh > 0)
+ *   chord_factors     (z, x0, u, q, dt[, y]) -> (F, factors)   the same F and layout, H of
  *                                                   the springs' quadrature alone, without the
  *                                                   exact gradient's correction: the chord's
  *                                                   Newton matrix (arm solve, exact gradient)
+ *   step_constants    (x0, u, q, dt) -> (y[ny])   what those three compute from the step's
+ *                                                   start alone (generate/step_constants.py)
  *   predictor         (x0, q, dt) -> (z)
  *   next_state        (z, x0, u, q, dt) -> (x1, flows[2] when flows)
  *   segment_margins   (x0, x1, q) -> (margins[2 nsegment])     when nsegment > 0
@@ -83,6 +85,7 @@ typedef struct {
     const double *p_lower;  /* per parameter: its lower bound, */
     const int *p_inclusive; /* and whether p_i may equal it */
     int arm_nh;             /* es's arm solve: structural nonzeros of H (0: dense LU) */
+    int ny;                 /* the step's constants (0: none); they lead the work array w */
     const int *arm_h_row;   /* their rows and columns on the arms */
     const int *arm_h_col;
     chaingen_options defaults;  /* the package's Newton defaults */
@@ -94,6 +97,7 @@ typedef struct {
     chaingen_function residual_jacobian;
     chaingen_function newton_factors;
     chaingen_function chord_factors;
+    chaingen_function step_constants;
     chaingen_function predictor;
     chaingen_function next_state;
     chaingen_function segment_margins;
