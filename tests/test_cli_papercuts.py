@@ -203,6 +203,7 @@ class Terminal(io.StringIO):
         return True
 
 
+@pytest.mark.heavy
 def test_the_progress_bar_shows_the_compile_with_no_time_left(monkeypatch):
     """While the C compiles (here 1.2 s, after a generate that reported its stages quickly),
     the bar names the compile, its running time is redrawn, and no time left is shown."""

@@ -63,6 +63,7 @@ def on_manifold(scheme, rng):
                                 st.floats(-0.2, 0.2), st.sampled_from([0.0, 0.01, 0.3])),
                       min_size=1, max_size=4),
        seed=st.integers(0, 2 ** 32 - 1))
+@pytest.mark.heavy
 def test_projected_rates_equal_the_kkt_solve(links, seed):
     scene = parse_scene(chain_text(links), "<projection>", "projection")
     scheme = build_scheme(scene, "es", 1, order=4)

@@ -703,12 +703,14 @@ def test_seed_scenes_load_and_survive_the_toml_writer(seed):
         assert parse_scene(text, SOURCE, DEFAULT_NAME) == scene
 
 
+@pytest.mark.heavy
 @budget(800)
 @given(seed=st.sampled_from(SEEDS), data=st.data())
 def test_document_mutations_load_or_raise_a_clear_scene_error(seed, data):
     check_outcome(document_text(data, mutated_document(data, seed)))
 
 
+@pytest.mark.heavy
 @budget(600)
 @given(seed=st.sampled_from(SEEDS), data=st.data())
 def test_text_mutations_load_or_raise_a_clear_scene_error(seed, data):

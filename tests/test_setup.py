@@ -62,6 +62,7 @@ def test_the_readme_names_what_the_set_up_needs():
     assert "pip install -e '.[test,peers]'" in readme and "gfortran" in readme
 
 
+@pytest.mark.heavy
 def test_compiled_peer_tests_skip_without_numbalsoda(tmp_path):
     """With numbalsoda and numba missing (modules that refuse to import, first on the path),
     every test of a numbalsoda method skips naming the extra, before anything is built (CC

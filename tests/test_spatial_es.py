@@ -327,6 +327,7 @@ def test_scheme_is_the_numpy_step(seed, n):
                                    atol=1e-14)
 
 
+@pytest.mark.heavy
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
 def test_turns_keep_the_constraints_and_the_twists_span_their_null_space(seed, n):

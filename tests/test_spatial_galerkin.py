@@ -60,6 +60,7 @@ def lagrangian_at(scene, q, w) -> float:
 
 # -- the scheme, without a compiler -----------------------------------------------------------
 
+@pytest.mark.heavy
 def test_spatial_es_takes_order_6_by_its_galerkin_step_with_the_scenes_k():
     """orders_taken asks the builder: es now studies 2, 4 and 6 on a spatial scene. Order 6
     is the Galerkin step (4n unknowns, joint-space state, K nodes after the start, Suzuki's
@@ -95,6 +96,7 @@ def test_a_controlled_spatial_scene_is_refused_at_order_6():
         SPATIAL_BUILDERS["es"](scene, 3, 6)
 
 
+@pytest.mark.heavy
 def test_the_nodes_are_the_numpy_chains_mass_matrix_and_lagrangian():
     """At a random step (unknowns, state, torques): every node's rates solve
     M(q_g) w_g = p_g with chaingen.spatial.dynamics' M, and its force is dL/dq + tau - D w

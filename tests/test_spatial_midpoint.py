@@ -49,6 +49,7 @@ def residual_function(scheme):
 @settings(max_examples=12, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7),
        dt=st.floats(1e-4, 0.1))
+@pytest.mark.heavy
 def test_residual_is_the_inverse_dynamics_of_pinocchio(seed, n, dt):
     """M(q) qddot + C(q, qdot) qdot + g(q) + dV_s/dq: Pinocchio's rnea and our springs."""
     pin = require_module("pinocchio", "robots")
@@ -107,6 +108,7 @@ def test_energy_and_segments_of_a_state_are_the_numeric_ones(seed, n):
                                dynamics.spring_lengths(scene, q), rtol=1e-12)
 
 
+@pytest.mark.heavy
 def test_holding_torques_are_gravity_and_springs():
     """An actuated scene's holding torques: dV/dq from the numeric gravity and spring forces."""
     scene = dataclasses.replace(random_scene(5, 4, springs=True, physical=False), actuated=(1, 3))

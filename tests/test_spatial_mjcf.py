@@ -284,6 +284,7 @@ def test_a_compound_pendulum_follows_its_ode():
     assert error.max() <= 1e-10
 
 
+@pytest.mark.heavy
 def test_a_random_chain_follows_its_equations_of_motion():
     """A random 3-link chain (via-point springs, damping, two actuated joints whose torques
     change every 0.1 s): MuJoCo's RK4 at dt = 2.5e-4 against DOP853 on M qddot = tau - d qdot

@@ -639,6 +639,7 @@ def mutated(data, document: dict[str, Any]) -> str:
 
 @settings(max_examples=400, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
+@pytest.mark.heavy
 @given(seed=st.sampled_from(sorted(SEEDS)), data=st.data())
 def test_mutations_load_or_raise_a_scene_error_naming_a_key_path(seed, data):
     """Every mutation of a good file loads (to a scene that keeps the format's rules) or

@@ -94,6 +94,7 @@ def test_residual_vanishes_at_a_numeric_solution_of_the_del_equations(seed, n, d
                                rtol=0, atol=1e-7 * scale)
 
 
+@pytest.mark.heavy
 @settings(max_examples=8, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7))
 @example(seed=72, n=1)     # 3.2e-13 of max |M|: the draw that showed the cancellation
@@ -132,6 +133,7 @@ def test_composite_rigid_body_mass_matrix_and_its_cholesky_solve(seed, n):
     assert max(sp.count_ops(expression) for _, expression in defs.items) <= 8 * n + 40
 
 
+@pytest.mark.heavy
 @settings(max_examples=8, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
 def test_momenta_and_kinetic_gradient_are_the_numeric_ones(seed, n):
