@@ -127,7 +127,8 @@ class EsStep(NamedTuple):
 
 
 def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
-            defs: Definitions, gradient: str = "exact", control=None) -> EsStep:
+            defs: Definitions, gradient: str = "exact", control=None,
+            chord: bool = False) -> EsStep:
     """The es residual (model.md 4.4) by recursions.
 
     Everything but the COM masses and gravity acts on the arms d_k = x_k - X_k = (B q)_k and is
@@ -205,7 +206,8 @@ def es_step(scene: Scene, q0, v0, dv, mu, dt, quadrature: int, torques_of,
     # where the springs' gradient is the exact one, h's Jacobian is taken of the K-point rule's
     # average alone, whose derivative differs from the corrected one's by the correction's,
     # O(|dd|^(2K)), and costs 0.6 of it (model.md 18).
-    newton_forces = list(forces) if scene.springs and gradient == "exact" else None
+    # Only for the arm solve (`chord`), whose factors take it.
+    newton_forces = list(forces) if chord and scene.springs and gradient == "exact" else None
     for i, spring in enumerate(scene.springs):
         offsets = scene.spring_fastenings(spring)
         js = list(range(spring.first, spring.last + 1))
