@@ -64,7 +64,7 @@ def command_animate(args) -> int:
         settings = run_settings(scene, method=args.method,
                                 quadrature=args.quadrature, dt=args.dt, t_end=args.t_end,
                                 order=args.order, gradient=args.gradient,
-                                source=str(args.scene))
+                                rtol=args.rtol, atol=args.atol, source=str(args.scene))
         try:
             result = simulate_scene(scene, settings, options=newton_overrides(args))
         except NewtonError as error:

@@ -120,6 +120,25 @@ def ctypes_type(c_type: str, prefix: str):
     raise ValueError(f"no ctypes type for the C type {c_type!r}")
 
 
+#: Why adaptive steps are refused with a control law held from the step's start (a scene's
+#: control.law = "sampled": a package's manifest's control_law, its model table's held_control,
+#: for which C's simulate loops return BAD_ARGUMENT). What every reader says after the option.
+HELD_LAW_REFUSAL = ("adaptive steps would hold the sampled law (control.law = \"sampled\") "
+                    "over each adaptive step instead of the sample period dt; take fixed steps")
+
+
+def _for_simulate(options, control_law: str | None) -> OptionsStruct:
+    """The C options of simulate in a package whose step has the law `control_law` (the
+    manifest's: "discrete", "sampled" or None): rtol or atol > 0 with the sampled law, whose
+    hold period they would change from dt, is a one-line ValueError, as C refuses it."""
+    if control_law == "sampled":
+        for name in contract.ADAPTIVE_TOLERANCES:
+            if getattr(options, name):
+                raise ValueError(f"simulate: {name}: {HELD_LAW_REFUSAL}, got "
+                                 f"{getattr(options, name):g}")
+    return options.as_c()
+
+
 def _newton_options_class():
     fields = [(field.name, field.python_type,
                dataclasses.field(default=field.python_type(field.default)))
@@ -132,6 +151,7 @@ def _newton_options_class():
         "as_c": lambda self: OptionsStruct(*[
             int(value) if isinstance(value, bool) else value
             for value in dataclasses.astuple(self)]),
+        "for_simulate": _for_simulate,
     }
     options = dataclasses.make_dataclass("NewtonOptions", fields, namespace=namespace,
                                          frozen=True)

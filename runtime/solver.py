@@ -443,7 +443,7 @@ class Solver:
         rows = self._call("sample_count", n_steps=n_steps, every=every)
         samples = np.zeros((rows, self.nsample))
         stats, control = StatsStruct(), ControlStruct()
-        c_options = self.newton_options(options).as_c()
+        c_options = self.newton_options(options).for_simulate(self.manifest.get("control_law"))
         arguments = dict(x0=_pointer(x0), t0=0.0, dt=dt, n_steps=n_steps, every=every, u=inputs,
                          p=_pointer(p_values) if self.parameters else None,
                          options=ctypes.byref(c_options),

@@ -310,3 +310,30 @@ def test_a_path_no_file_can_have_is_bad_input(tmp_path, monkeypatch, command):
     assert ("File name too long" in lines[0] or "symbolic links" in lines[0]
             or "no such" in lines[0].lower() or "cannot read" in lines[0]), lines[0]
     assert sorted(path.name for path in tmp_path.iterdir()) == ["loop"]
+
+
+@pytest.mark.parametrize("command", ["simulate", "animate"])
+@pytest.mark.parametrize("flag", ["--rtol", "--atol", "scene"])
+def test_adaptive_steps_of_the_sampled_law_exit_2_in_one_line(command, flag, tmp_path):
+    """A sampled law (held over the step) with adaptive steps, from the command line or the
+    scene's [simulation]: exit 2, one line naming where the tolerance came from and why, no
+    traceback, nothing written. animate passed --rtol to the run without this check before
+    (a sampled four_link_pbc animated at exit 0 on 1e-8's adaptive steps)."""
+    text = scene_path("four_link_pbc").read_text()
+    assert text.count('\nlaw = "discrete"\n') == 1
+    text = text.replace('\nlaw = "discrete"\n', '\nlaw = "sampled"\n')
+    if flag == "scene":
+        text = text.replace("\ndt = 0.01\n", "\ndt = 0.01\nrtol = 1e-8\n")
+    scene = tmp_path / "pbc.toml"
+    scene.write_text(text)
+    output = ["-o", tmp_path / "pbc.gif"] if command == "animate" else []
+    options = [] if flag == "scene" else [flag, "1e-8"]
+    result = chaingen_in_process(command, scene, *options, *output, cwd=tmp_path)
+    where = f"{scene}: simulation.rtol" if flag == "scene" else flag
+    assert result.returncode == 2, result
+    assert result.stdout == "" and "Traceback" not in result.stderr
+    assert result.stderr.splitlines() == [
+        f"chaingen: error: {where}: adaptive steps would hold the sampled law (control.law = "
+        '"sampled") over each adaptive step instead of the sample period dt; take fixed steps, '
+        "got 1e-08"]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["pbc.toml"]

@@ -232,3 +232,113 @@ def test_the_sampled_law_is_refused_with_adaptive_steps(tmp_path):
                                         '[axes]\n"control.damping[0]" = [1.0, 2.0]\n')
     with pytest.raises(SweepError, match=r"spec\.toml: rtol: adaptive steps would hold"):
         load_spec(tmp_path / "spec.toml")
+
+
+@pytest.fixture(scope="module")
+def loaded_laws(tmp_path_factory):
+    """four_link_pbc's es package with each law, written out and loaded as a user loads a
+    package (Solver.from_directory: no SolverSpec, no run_settings on the way)."""
+    from chaingen.generate.package import generate_package, write_package
+    from chaingen.runtime import Solver
+    from chaingen.studies.control import with_law
+
+    loaded = {}
+    for law in ("discrete", "sampled"):
+        package = generate_package(with_law(SCENES["four_link_pbc"], law), "es", 3,
+                                   sensitivities=False)
+        directory = write_package(package, tmp_path_factory.mktemp(law) / package.prefix)
+        loaded[law] = (Solver.from_directory(directory), package)
+    return loaded
+
+
+def _held_start():
+    scene = SCENES["four_link_pbc"]
+    return scene.initial_angles, scene.initial_velocities
+
+
+@pytest.mark.parametrize("name", ["rtol", "atol"])
+def test_a_loaded_sampled_package_refuses_adaptive_steps(loaded_laws, name):
+    """The package's own fact, not the scene's: a loaded sampled package refuses rtol or atol
+    > 0 in simulate (open loop and with a controller) in one line naming the option and why.
+    Before the package stated its law, simulate(options={"rtol": 1e-8}) of this package at
+    dt = 0.05 s ran silently: 7032 adaptive steps (13 refused, the shortest 2.3e-5 s) over 40
+    sample intervals, each holding the law, a controller whose H_d never rose where the law
+    sampled at dt raises it by 516 J, ending 3.0 rad from the fixed-step run. The discrete law
+    takes the same options; the sampled one takes fixed steps."""
+    phi0, omega0 = _held_start()
+    solver, package = loaded_laws["sampled"]
+    assert package.manifest["control_law"] == "sampled"
+    assert "    .held_control = 1," in package.files[f"{package.prefix}.c"]
+    message = (rf"^simulate: {name}: adaptive steps would hold the sampled law \(control\.law = "
+               r"\"sampled\"\) over each adaptive step instead of the sample period dt; take "
+               r"fixed steps, got 1e-08$")
+    with pytest.raises(ValueError, match=message):
+        solver.simulate(phi0, omega0, dt=0.05, n_steps=40, options={name: 1e-8})
+    with pytest.raises(ValueError, match=message):
+        solver.simulate(phi0, omega0, dt=0.05, n_steps=40, options={name: 1e-8},
+                        controller=lambda t, phi, omega: np.zeros(4))
+    fixed = solver.simulate(phi0, omega0, dt=0.05, n_steps=40)
+    assert fixed.n_steps == 40 and not fixed.adaptive
+    discrete, package = loaded_laws["discrete"]
+    assert package.manifest["control_law"] == "discrete"
+    assert "    .held_control = 0," in package.files[f"{package.prefix}.c"]
+    adaptive = discrete.simulate(phi0, omega0, dt=0.05, n_steps=40, options={name: 1e-8})
+    assert adaptive.adaptive and adaptive.accepted_steps > 40
+
+
+def _c_run(solver, entry: str, options: dict) -> tuple[int, int]:
+    """(status, steps) of a C simulate entry point called straight through the loader's
+    ctypes binding (bypassing Solver.simulate's own refusal): 5 steps of 0.05 s."""
+    import ctypes
+
+    from chaingen.runtime.interface import StatsStruct
+
+    pointer = ctypes.POINTER(ctypes.c_double)
+    x0 = solver.initial_state(*_held_start())
+    samples = np.zeros((6, solver.nsample))
+    stats, c_options = StatsStruct(), solver.newton_options(options).as_c()
+    arguments = dict(x0=x0.ctypes.data_as(pointer), t0=0.0, dt=0.05, n_steps=5, every=1,
+                     u=None, p=None, options=ctypes.byref(c_options),
+                     workspace=solver._workspace, samples=samples.ctypes.data_as(pointer),
+                     x_final=None, stats=ctypes.byref(stats), observer=None, context=None,
+                     interval=1, control=None)
+    callback = None
+    if entry == "simulate_controlled":
+        callback = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_long, ctypes.c_double,
+                                    ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                                    ctypes.c_void_p)(lambda *arguments: 0)
+        arguments.update(controller=ctypes.cast(callback, ctypes.c_void_p).value, hold=1,
+                         torques=None)
+    return solver._call(entry, **arguments), int(stats.steps)
+
+
+@pytest.mark.parametrize("entry", ["simulate_observed", "simulate_controlled"])
+def test_the_c_entry_points_refuse_adaptive_steps_of_a_held_law(loaded_laws, entry):
+    """C itself refuses (the model table's held_control): BAD_ARGUMENT before any step for
+    rtol or atol > 0 with the sampled law; the discrete law's package runs the same call."""
+    from chaingen.runtime.contract import STATUS_CODES
+
+    sampled, discrete = loaded_laws["sampled"][0], loaded_laws["discrete"][0]
+    for name in ("rtol", "atol"):
+        assert _c_run(sampled, entry, {name: 1e-8}) == (STATUS_CODES["BAD_ARGUMENT"], 0)
+        assert _c_run(discrete, entry, {name: 1e-8}) == (STATUS_CODES["OK"], 5)
+    assert _c_run(sampled, entry, {}) == (STATUS_CODES["OK"], 5)
+
+
+def test_a_stepper_takes_no_adaptive_steps_of_any_law(loaded_laws):
+    """No gap on this path: a Stepper (and step, control_torques) takes the dt it is given and
+    refuses rtol and atol for every package, whatever its law; with fixed steps the sampled
+    package's Stepper steps."""
+    phi0, omega0 = _held_start()
+    for law in ("sampled", "discrete"):
+        solver = loaded_laws[law][0]
+        for name in ("rtol", "atol"):
+            with pytest.raises(ValueError, match=r"^Stepper: rtol and atol \(adaptive steps\) "
+                                                 r"apply to simulate only"):
+                solver.stepper(phi0, omega0, 0.05, options={name: 1e-8})
+            with pytest.raises(ValueError, match=r"^control_torques: rtol and atol"):
+                solver.control_torques(solver.initial_state(phi0, omega0), None, 0.05,
+                                       options={name: 1e-8})
+    stepper = loaded_laws["sampled"][0].stepper(phi0, omega0, 0.05)
+    stepper.step(np.zeros(4))
+    assert np.all(np.isfinite(stepper.phi))

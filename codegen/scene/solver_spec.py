@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..errors import SceneError
+from ..runtime.interface import HELD_LAW_REFUSAL
 from ..spatial import parameters as spatial_parameters
 from ..spatial.values import SpatialScene
 from . import parameters as planar_parameters
@@ -128,9 +129,7 @@ def control_refusal(scene: Scene | SpatialScene, method: str, order: int,
                                 "control torque is held over one step", order)
     if scene.control.law == "sampled" and (rtol > 0 or atol > 0):
         key, value = ("rtol", rtol) if rtol > 0 else ("atol", atol)
-        return Refusal(key, "adaptive steps would hold the sampled law (control.law = "
-                            "\"sampled\") over each adaptive step instead of the sample period "
-                            "dt; take fixed steps", value)
+        return Refusal(key, HELD_LAW_REFUSAL, value)
     return None
 
 

@@ -33,6 +33,7 @@ static const chaingen_model MODEL = {
     .nz = 12,
     .nu = 4,
     .np = 0,
+    .held_control = 0,
     .nq = 0,
     .nsample = 13,
     .nconstraint = 4,

@@ -1876,7 +1876,9 @@ static int cg_joint_state(const chaingen_model *table, const cg_solver *c, const
  * block (the angles, at least 1 rad; the rates): the two results differ by round-off of that
  * size even as h -> 0 (an angle comes from coordinates of the chain's size, a relative rate
  * from the links' rates), so an entry near zero with atol = 0 (or atol below that round-off)
- * would refuse every step down to the floor of MIN_STEP_FRACTION dt. From x0 over the interval
+ * would refuse every step down to the floor of MIN_STEP_FRACTION dt. A model whose control law
+ * is held over the step (held_control) takes no adaptive steps: cg_run refuses them with
+ * BAD_ARGUMENT, as the law's hold period would become the step's. From x0 over the interval
  * dt to x1; the controller's proposal carries over from interval to interval in the
  * workspace. */
 static int cg_adaptive_interval(const chaingen_model *table, const cg_solver *c, const double *x0,
@@ -2103,6 +2105,9 @@ static int cg_run(const chaingen_model *table, const cg_solver *c,
         return CHAINGEN_BAD_ARGUMENT;
     }
     adaptive = options->rtol > 0.0 || options->atol > 0.0;
+    if (adaptive && model->held_control) {
+        return CHAINGEN_BAD_ARGUMENT;   /* the held law's period is dt, not an adaptive step */
+    }
     memset(&counters, 0, sizeof counters);
     if (!adaptive && n_steps > 0) {
         counters.smallest_dt = dt;

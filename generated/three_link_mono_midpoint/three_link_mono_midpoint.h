@@ -336,7 +336,10 @@ long three_link_mono_midpoint_sample_count(long n_steps, long every);
  * is refused and retried shorter instead of stopping the run. stats->accepted_steps,
  * rejected_steps, smallest_dt and largest_dt count them. "es" conserves energy on any sequence
  * of step lengths, so its energy error stays at round-off while the step adapts; "vi" and
- * "midpoint" are symplectic for a fixed step only. step() always takes one step of dt. */
+ * "midpoint" are symplectic for a fixed step only. step() always takes one step of dt.
+ * A package whose control law is held over the step (a scene's control.law = "sampled", the
+ * manifest's control_law) takes no adaptive steps: its hold period would become the adaptive
+ * step's instead of dt, so rtol or atol > 0 is THREE_LINK_MONO_MIDPOINT_BAD_ARGUMENT, before any step. */
 THREE_LINK_MONO_MIDPOINT_API
 int three_link_mono_midpoint_simulate(const double *x0, double t0, double dt, long n_steps,
                                       long every, const double *u, int nu, const double *p, int np,

@@ -24,6 +24,7 @@ static const chaingen_model MODEL = {
     .nz = 3,
     .nu = 0,
     .np = 0,
+    .held_control = 0,
     .nq = 0,
     .nsample = 9,
     .nconstraint = 0,

@@ -81,6 +81,10 @@ typedef struct {
     int energy_check;       /* a converged step is checked against the energy balance */
     int sensitivities;      /* the package has the step sensitivities */
     int chain_state;        /* composed sensitivities chain in x, not s */
+    int held_control;       /* the step's control law is held from its start (a scene's
+                             * control.law = "sampled"): its hold period is the step, so
+                             * adaptive steps (rtol or atol > 0), which would make it the
+                             * adaptive step's instead of dt, are BAD_ARGUMENT */
     double start_margin;    /* a start state's segment margins must be at least this */
     const double *p_lower;  /* per parameter: its lower bound, */
     const int *p_inclusive; /* and whether p_i may equal it */

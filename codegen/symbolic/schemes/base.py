@@ -325,6 +325,14 @@ class DiscreteScheme:
                               maps.initial_state)
 
     @property
+    def control_law(self) -> str | None:
+        """The kind of the [control] law in the step: "discrete", or "sampled" (held from the
+        step's start, its hold period the step: the model table's held_control, which keeps
+        simulate to fixed steps, and the manifest's control_law); None without a law."""
+        control = getattr(self.scene, "control", None)
+        return None if control is None or self.flows.applied_torques is None else control.law
+
+    @property
     def has_energy_flows(self) -> bool:
         """Whether energy can enter (inputs) or leave (damping, a constant or a parameter)."""
         return bool(self.flows.inputs.shape[0]) or self.flows.dissipated != 0

@@ -513,6 +513,7 @@ void pendulum_model_init(chaingen_model *model, const pendulum_variant *variant)
     model->energy_check = variant->energy_check;
     model->sensitivities = variant->sensitivities;
     model->chain_state = variant->chain_state;
+    model->held_control = variant->held_control;
     model->start_margin = PENDULUM_START_TOLERANCE / PENDULUM_RUN_TOLERANCE;
     model->p_lower = config.np ? p_lower : NULL;
     model->p_inclusive = config.np ? p_inclusive : NULL;

@@ -74,6 +74,7 @@ typedef struct {
     int holding;         /* holding_torques present */
     int control;         /* applied_torques present: tau = u + dt domega + phi0^2 (a stand-in
                           * for a control law solved in the step: it reads z, x0, u and dt) */
+    int held_control;    /* the model's held_control: its law held over the step */
     int composition;     /* PENDULUM_PLAIN, _YOSHIDA4, _SUZUKI4, _KAHAN_LI6 */
     int error_entries;   /* 1 (angles) or 2 (angles and rates); 0: 2 */
 } pendulum_variant;

@@ -1977,6 +1977,48 @@ static int control_torques(const double *x0, double u0, double dt, double *tau, 
  * workspace history, warm starts included) and returns applied_torques at its converged z; a
  * step that step() splits is NOT_CONVERGED with tau and x1 untouched; a composed step or a model
  * without the function is UNAVAILABLE; bad arguments as step(). */
+/* A law held over the step (held_control) takes fixed steps only: adaptive ones (rtol or atol
+ * > 0) would hold it over each adaptive step instead of dt. simulate_observed and
+ * simulate_controlled refuse them with BAD_ARGUMENT before any step; without held_control the
+ * same options run. */
+static void test_held_control(void)
+{
+    const double p[1] = {PENDULUM_STIFFNESS}, x0[2] = {1.0, 0.5};
+    double samples[7 * 8];
+    chaingen_stats stats;
+    chaingen_options options;
+    controlling c;
+    int held, tolerance;
+    pendulum_variant v = full_variant();
+    begin("held_control");
+    v.control = 1;
+    v.sensitivities = 0;
+    for (held = 0; held <= 1; ++held) {
+        v.held_control = held;
+        use(v);
+        for (tolerance = 0; tolerance < 3; ++tolerance) {
+            const int want = held && tolerance ? CHAINGEN_BAD_ARGUMENT : CHAINGEN_OK;
+            chaingen_default_options(&model, &options);
+            options.rtol = tolerance == 1 ? 1e-8 : 0.0;
+            options.atol = tolerance == 2 ? 1e-8 : 0.0;
+            memset(&stats, 0, sizeof stats);
+            STATUS(chaingen_simulate_observed(&model, x0, 0.0, 0.01, 5, 1, NULL, 1, p, 1,
+                                              &options, &ws, samples, NULL, &stats, NULL, NULL,
+                                              1, NULL), want);
+            EXPECT(stats.steps == (want == CHAINGEN_OK ? 5 : 0),
+                   "held %d, tolerance %d: %ld steps", held, tolerance, stats.steps);
+            memset(&c, 0, sizeof c);
+            c.stop_at = -1;
+            STATUS(chaingen_simulate_controlled(&model, x0, 0.0, 0.01, 5, 1, control_law, &c, 1,
+                                                p, 1, &options, &ws, samples, NULL, NULL,
+                                                &stats, NULL), want);
+            EXPECT(c.calls == (want == CHAINGEN_OK ? 5 : 0),
+                   "held %d, tolerance %d: %ld controller calls", held, tolerance, c.calls);
+        }
+    }
+    end();
+}
+
 static void test_control_torques(void)
 {
     enum { STEPS = 6 };
@@ -2125,6 +2167,7 @@ static const test_group groups[] = {
     {"simulate_observed", test_simulate_observed},
     {"simulate_controlled", test_simulate_controlled},
     {"control_torques", test_control_torques},
+    {"held_control", test_held_control},
 };
 
 int main(int argc, char **argv)
