@@ -31,6 +31,7 @@ def test_check_passes_on_the_generated_packages(name, method):
             "joint rates", "initial state", "next state"} <= names
     assert ("d s1 / d u" in names) == (name == "four_link_underactuated")
     assert ("constraint error" in names) == (method != "midpoint")
+    assert "control torques" not in names     # no [control] law: no control_torques
 
 
 class Perturbed:
@@ -201,3 +202,57 @@ def test_the_reference_newton_stops_at_the_round_off_floor():
             return np.array([(args[0] - 0.5) ** 2 + 1.0])
 
     assert _converged_unknowns(NoRoot(), [], 0.01, [], [], 1) is None
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("name, method, law", [
+    ("four_link_pbc", "es", "discrete"), ("four_link_pbc", "midpoint", "discrete"),
+    ("four_link_pbc", "es", "sampled"), ("four_link_pbc_partial", "es", "discrete")])
+def test_check_compares_the_control_law_with_sympy(name, method, law):
+    """A scene with a [control] law gets the row "control torques": control_torques' tau and
+    x1 against the SymPy law evaluated at the step the reference solves on its own, for both
+    laws, es and midpoint, fully and partly actuated."""
+    from chaingen.simulation import build_solver
+    from chaingen.studies.control import with_law
+
+    scene = with_law(load(name), law)
+    solver = build_solver(scene, method, 3, sensitivities=False)
+    report = check_solver(build_scheme(scene, method, 3), solver, samples=2)
+    assert report.passed, report.table()
+    row = next(row for row in report.rows if row.quantity == "control torques")
+    assert row.reference == "SymPy" and row.worst < 1e-12, report.table()
+
+
+@pytest.mark.compile
+def test_check_catches_a_wrong_control_law():
+    """Mutations of the law, each caught by the "control torques" row: a reference whose
+    damping gain D_1 is 1 % off (the residual and the next state, which hold the law, fail
+    too); a reference whose first torque alone is off by 1e-7 of itself, and a generated
+    control_torques whose tau is, each failing that row alone."""
+    import sympy as sp
+
+    scene = load("four_link_pbc")
+    good = solver_for("four_link_pbc", "es", 3)
+    scheme = build_scheme(scene, "es", 3)
+    assert check_solver(scheme, good, samples=2).passed
+
+    control = dataclasses.replace(scene.control, damping=(
+        scene.control.damping[0] * 1.01, *scene.control.damping[1:]))
+    wrong_gain = build_scheme(dataclasses.replace(scene, control=control), "es", 3)
+    failed = [row.quantity for row in check_solver(wrong_gain, good, samples=2).rows
+              if not row.passed]
+    assert "control torques" in failed and set(failed) <= {
+        "control torques", "residual", "next state"}, failed
+
+    torques = scheme.flows.applied_torques
+    wrong_torque = scheme.replaced(applied_torques=sp.ImmutableMatrix(
+        [torques[0] * (1 + 1e-7), *torques[1:]]))
+    report = check_solver(wrong_torque, good, samples=2)
+    assert [row.quantity for row in report.rows if not row.passed] == ["control torques"]
+
+    def control_torques(x0, u=None, dt=None, *, options=None, parameters=None):
+        result = good.control_torques(x0, u, dt, options=options, parameters=parameters)
+        return dataclasses.replace(result, tau=result.tau * (1 + 1e-7))
+
+    report = check_solver(scheme, Perturbed(good, control_torques=control_torques), samples=2)
+    assert [row.quantity for row in report.rows if not row.passed] == ["control torques"]

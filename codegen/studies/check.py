@@ -8,7 +8,9 @@ worst relative error over all samples; the check fails when any row exceeds its 
 - residual Jacobian dF/dz vs central differences of F (C);
 - step sensitivities d s1/d s0, d s1/d u vs central differences of the joint-space step map;
 - residual F, next state, initial state, energy, joint angles and rates, constraint residuals
-  vs SymPy (the expressions the code was generated from).
+  vs SymPy (the expressions the code was generated from);
+- a scene's [control] law (control_torques): the torque tau each actuated joint applies over
+  the step, and the step's x1, vs the SymPy law at the step the reference solves.
 
 The states are random joint-space states near the scene's initial one, mapped by the generated
 initial_state; the SymPy comparisons also use states pushed off the constraint manifold, where
@@ -20,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..runtime import NewtonOptions, Solver
+from ..runtime import NewtonError, NewtonOptions, Solver
 from ..scene.labels import scheme_label
 from ..symbolic.schemes import DiscreteScheme
 
@@ -101,6 +103,8 @@ class _SympyFunctions:
         self.residual = scheme.step_function(scheme.step.residual)
         self.next_state = scheme.step_function(scheme.step.next_state)
         self.composition = scheme.metadata.composition
+        torques = scheme.flows.applied_torques    # a control law's (None without one)
+        self.applied = None if torques is None else scheme.step_function(torques)
         self.initial_state = scheme.initial_function()
         maps = scheme.maps
         self.outputs = scheme.state_function(list(maps.joint_angles) + list(maps.joint_velocities)
@@ -187,6 +191,9 @@ def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
             expected = np.asarray(reference.next_state(*converged, *expected, *u_list,
                                                        *p_list, fraction * dt), float)
         record("next state", relative_error(x1, expected))
+        if reference.applied is not None and solver.has_entry_point("control_torques"):
+            record("control torques", _control_error(reference, solver, x0, u, p, dt,
+                                                     converged, expected, u_list))
         # Off the constraint manifold too, where the constraint residuals are O(1e-3).
         off = x0 + 1e-3 * rng.standard_normal(len(x0)) * np.maximum(1.0, np.abs(x0))
         for x in (x0, off):
@@ -208,6 +215,22 @@ def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
     quadrature = solver.manifest.get("quadrature")
     return CheckReport(scene=scene.name, method=scheme.metadata.method, quadrature=quadrature,
                        samples=samples, rows=rows)
+
+
+def _control_error(reference: _SympyFunctions, solver: Solver, x0, u, p, dt, converged,
+                   expected, u_list) -> float:
+    """The worse of control_torques' tau and x1 against the SymPy law at `converged` (the
+    reference's z of the step, None if it failed) and the reference's x1 `expected`; NaN
+    where either side has none (a step the C refuses, a reference Newton that failed)."""
+    try:
+        controlled = solver.control_torques(x0, u, dt, parameters=p)
+    except NewtonError:
+        return float("nan")
+    if converged is None or len(reference.composition) != 1:
+        return float("nan")
+    tau = np.asarray(reference.applied(*converged, *x0, *u_list, *p, dt), float).ravel()
+    return float(np.max([relative_error(controlled.tau, tau),        # NaN if either is
+                         relative_error(controlled.x1, expected)]))
 
 
 def _converged_unknowns(reference: _SympyFunctions, x0, dt, u, p, nz: int):
