@@ -1,10 +1,12 @@
 """Adversarial input to the spatial readers and commands: route points that coincide, numbers
-that are not finite, zero axes, outputs that would overwrite an input or a file a user wrote.
-Each is refused in one line (exit status 2 on the command line), with nothing written and no
-input changed, or runs to the right number. Fast: no compiler."""
+that are not finite, zero axes, rpy in degrees, a chain whose mass matrix overflows, outputs
+that would overwrite an input or a file a user wrote. Each is refused in one line (exit status
+2 on the command line), with nothing written and no input changed, or runs to the right number.
+Fast: no compiler."""
 from __future__ import annotations
 
 import hashlib
+import math
 
 import pytest
 
@@ -124,3 +126,57 @@ def test_a_tiny_axis_is_normalised_not_refused():
     """An axis of subnormal length is a direction all the same: normalised exactly."""
     scene = parse_spatial_scene(edited("axis = [0.0, 0.0, 1.0]", "axis = [0.0, 0.0, 1e-320]"))
     assert scene.links[0].joint.axis == (0.0, 0.0, 1.0)
+
+
+# -- the spatial scene reader: numbers in other units ----------------------------------------
+
+ELBOW = "joint = { xyz = [0.0, 0.02, 0.35], rpy = [0.3, 0.0, 0.1], axis = [0.0, 1.0, 0.2] }"
+
+SCENE_REFUSALS = {
+    # rpy in degrees (MJCF's default unit): 90 rad read as an orientation, exit 0.
+    "rpy in degrees": (
+        ELBOW.replace("rpy = [0.3, 0.0, 0.1]", "rpy = [0.0, 90.0, 0.0]"),
+        "links[1].joint.rpy[1]: must be within [-2 pi, 2 pi] rad (no orientation needs more "
+        "than a turn): degrees? 90.0 deg is 1.5708 rad, got 90.0"),
+    "rpy past a turn": (
+        ELBOW.replace("rpy = [0.3, 0.0, 0.1]", "rpy = [0.3, 0.0, -6.3]"),
+        "links[1].joint.rpy[2]: must be within [-2 pi, 2 pi] rad"),
+    # Finite numbers whose mass matrix overflows: read, then every step failed on NaN (exit 1).
+    "a joint 1e200 m away": (
+        ELBOW.replace("xyz = [0.0, 0.02, 0.35]", "xyz = [1e200, 0.02, 0.35]"),
+        "links: the chain's mass matrix or gravity torques at the initial angles are beyond "
+        "the range of a double (a joint's xyz, a com, a mass or an inertia far too large): "
+        "write the scene in SI units (m, kg, kg m^2)"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SCENE_REFUSALS))
+def test_spatial_scenes_in_other_units_are_refused(case):
+    text = SPATIAL.read_text()
+    assert text.count(ELBOW) == 1
+    edited, expected = SCENE_REFUSALS[case]
+    with pytest.raises(SceneError) as error:
+        parse_spatial_scene(text.replace(ELBOW, edited), "arm.toml")
+    assert str(error.value).startswith(f"arm.toml: {expected}"), str(error.value)
+    assert "\n" not in str(error.value)
+
+
+def test_angles_within_a_turn_still_read():
+    """rpy of +-2 pi exactly, and of +-pi (what `chaingen import` writes), are read as
+    written."""
+    text = SPATIAL.read_text()
+    for rpy in ((2 * math.pi, -2 * math.pi, 0.0), (math.pi, -math.pi / 2, -math.pi)):
+        edited = ELBOW.replace("rpy = [0.3, 0.0, 0.1]", f"rpy = [{', '.join(map(repr, rpy))}]")
+        scene = parse_spatial_scene(text.replace(ELBOW, edited), "arm.toml")
+        assert scene.links[1].joint.rpy == rpy
+
+
+def test_a_scene_in_degrees_on_the_command_line_exit_2_and_write_nothing(tmp_path):
+    edited, expected = SCENE_REFUSALS["rpy in degrees"]
+    (tmp_path / "arm.toml").write_text(SPATIAL.read_text().replace(ELBOW, edited))
+    before = snapshot(tmp_path)
+    result = chaingen_in_process("simulate", "arm.toml", "--out", "run.csv", cwd=tmp_path)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0] == f"chaingen: error: arm.toml: {expected}", lines[0]
+    assert snapshot(tmp_path) == before

@@ -411,10 +411,14 @@ def test_an_inertia_tensor_at_its_limits_is_accepted():
 
 def test_a_huge_inertia_tensor_is_checked_without_overflow():
     """The check scales the tensor first: moments near a double's limit are compared, not
-    summed to inf (and no overflow warning, which the tests turn into errors)."""
+    summed to inf (and no overflow warning, which the tests turn into errors). Such a tensor
+    is a rigid body's, but the chain's mass matrix overflows: that is the refusal."""
     old = "inertia = [0.002, 0.01, 0.011, 0.0, 0.0, 0.0]"
-    scene = parse_spatial_scene(edited(old, "inertia = [1e308, 1e308, 1.5e308, 0, 0, 0]"), SOURCE)
-    assert scene.links[1].inertia == (1e308, 1e308, 1.5e308, 0.0, 0.0, 0.0)
+    message = spatial_error(edited(old, "inertia = [1e308, 1e308, 1.5e308, 0, 0, 0]"))
+    assert message.startswith(f"{SOURCE}: links: the chain's mass matrix or gravity torques at "
+                              "the initial angles are beyond the range of a double"), message
+    scene = parse_spatial_scene(edited(old, "inertia = [1e307, 1e307, 1.5e307, 0, 0, 0]"), SOURCE)
+    assert scene.links[1].inertia == (1e307, 1e307, 1.5e307, 0.0, 0.0, 0.0)
     message = spatial_error(edited(old, "inertia = [1e308, 1e308, 1e308, 1e308, 0.0, 0.0]"))
     assert message.startswith(
         f"{SOURCE}: links[1].inertia: must be a physically valid inertia tensor (kg m^2 about "
@@ -669,6 +673,8 @@ def test_mutations_load_or_raise_a_scene_error_naming_a_key_path(seed, data):
 DOC_VARIANTS = [   # the edits of scenes/spatial_three_link.toml behind section 13.5's examples
     ("mass = 1.8", "mass = -1.8"),
     ("axis = [0.0, 1.0, 0.2]", "axis = [0.0, 0.0, 0.0]"),
+    ("rpy = [0.3, 0.0, 0.1]", "rpy = [0.0, 90.0, 0.0]"),
+    ("xyz = [0.0, 0.02, 0.35]", "xyz = [1e200, 0.02, 0.35]"),
     ("inertia = [0.00311114, 0.012999, 0.0134399, 0.0033765, 0.00296193, -0.000935878]",
      "inertia = [0.003, 0.013, 0.018, 0.0, 0.0, 0.0]"),
     ("[2, 0.15, 0.05, 0.04]", "[1, 0.15, 0.05, 0.04]"),

@@ -159,6 +159,7 @@ class SpatialSceneReader(SceneReader):
                      else self.control(control_table, n, actuated)),
             simulation=simulation,
         )
+        self.refuse_overflowing_dynamics(scene)     # first: the segments' limit scales with it
         self.refuse_zero_length_segments(scene)
         return scene
 
@@ -251,6 +252,7 @@ class SpatialSceneReader(SceneReader):
             elif key == "rpy":
                 rpy = self.vector(where, item, f"rad, joint {i}'s frame turned about the fixed "
                                                "x, y, z axes", "roll, pitch, yaw")
+                self.refuse_degrees(where, rpy)
             elif key == "axis":
                 axis = self.axis(where, item, f"axis of joint {i}, in its frame")
             else:
@@ -258,6 +260,16 @@ class SpatialSceneReader(SceneReader):
         if axis is None:
             self.fail(f"{path}.axis", f"missing: every joint needs its axis (joint {i})")
         return SpatialJoint(xyz=xyz or (0.0, 0.0, 0.0), rpy=rpy or (0.0, 0.0, 0.0), axis=axis)
+
+    def refuse_degrees(self, path: str, rpy: tuple[float, float, float]) -> None:
+        """Refuse an angle of rpy past a full turn: no orientation needs one (each angle within
+        [-pi, pi] writes every one), and 90 is a right angle in degrees (MJCF's default unit),
+        not in the radians meant here."""
+        for k, angle in enumerate(rpy):
+            if abs(angle) > 2.0 * math.pi:
+                self.fail(f"{path}[{k}]", f"must be within [-2 pi, 2 pi] rad (no orientation "
+                          f"needs more than a turn): degrees? {angle!r} deg is "
+                          f"{math.radians(angle):.6g} rad", angle)
 
     def axis(self, path: str, value: Any, meaning: str) -> tuple[float, float, float]:
         x, y, z = self.vector(path, value, meaning)
@@ -314,6 +326,18 @@ class SpatialSceneReader(SceneReader):
                                       "frame") for k, axis in ((1, "x"), (2, "y"), (3, "z")))
             points.append(RoutePoint(link=link, point=point))
         return tuple(points)
+
+    def refuse_overflowing_dynamics(self, scene: SpatialScene) -> None:
+        """Refuse a chain whose mass matrix or gravity torques at the initial angles are beyond
+        the range of a double (finite numbers, but a joint 1e200 m away, or a mass of 1e308 kg
+        at 10 m): every step of it would fail on inf or NaN."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            mass = dynamics.mass_matrix(scene, scene.initial_angles)
+            gravity = dynamics.gravity_torques(scene, scene.initial_angles)
+        if not (np.all(np.isfinite(mass)) and np.all(np.isfinite(gravity))):
+            self.fail("links", "the chain's mass matrix or gravity torques at the initial angles "
+                      "are beyond the range of a double (a joint's xyz, a com, a mass or an "
+                      "inertia far too large): write the scene in SI units (m, kg, kg m^2)")
 
     def refuse_zero_length_segments(self, scene: SpatialScene) -> None:
         """Refuse a spring segment of (numerically) zero length at the initial angles, where
