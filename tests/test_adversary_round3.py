@@ -35,7 +35,7 @@ def robot_urdf(second_joint: str = "", second_inertia: str = 'ixx="0.01"',
 ODD_URDFS = {
     # A zero axis: the importer divided by its norm and wrote NaN (internal error, exit 1).
     "zero axis": (robot_urdf('<axis xyz="0 0 0"/>'),
-                  "joint 'elbow' has no axis (<axis xyz> is (0.0, 0.0, 0.0))"),
+                  "joint 'elbow' has no axis (Pinocchio holds (0.0, 0.0, 0.0) of its <axis xyz>"),
     # A mimic joint was imported as an independent joint: a different robot, exit 0.
     "mimic joint": (robot_urdf('<axis xyz="0 1 0"/><mimic joint="shoulder" multiplier="2"/>'),
                     "joint 'elbow' on the chain to 'lower' is a mimic joint"),

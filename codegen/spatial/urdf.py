@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import hashlib
+import math
 import os
 import re
 import sys
@@ -40,6 +41,13 @@ from ..runtime.contract import MAX_SCENE_NAME_LENGTH
 from ..runtime.files import check_output_file, reported_write, write_text
 from ..scene.reader import NAME_PATTERN
 from .reader import parse_spatial_scene
+from .urdf_checks import (
+    check_axis,
+    check_limits,
+    check_no_branch,
+    check_revolute,
+    refuse_unseen_mimic,
+)
 from .values import SpatialJoint, SpatialLink, SpatialScene
 from .writer import scene_text
 
@@ -50,22 +58,6 @@ GRAVITY = (0.0, 0.0, -9.81)
 #: body, relative to the largest moment about the joint's origin of the parts: below it the
 #: inertia about the centre of mass is zero.
 INERTIA_ROUND_OFF = 1e-12
-
-#: Pinocchio's joint models of URDF's revolute and continuous joints (axis along x, y or z, or
-#: any other unit vector; bounded, or unbounded with (cos q, sin q) as its configuration).
-REVOLUTE_MODELS = frozenset({
-    "JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned",
-    "JointModelRUBX", "JointModelRUBY", "JointModelRUBZ",
-    "JointModelRevoluteUnboundedUnaligned"})
-
-#: What a refused joint is, in URDF's words, by Pinocchio's joint model.
-_JOINT_KINDS = {"JointModelPX": "prismatic", "JointModelPY": "prismatic",
-                "JointModelPZ": "prismatic", "JointModelPrismaticUnaligned": "prismatic",
-                "JointModelFreeFlyer": "floating", "JointModelPlanar": "planar",
-                "JointModelSpherical": "spherical", "JointModelSphericalZYX": "spherical",
-                "JointModelMimic": "a mimic joint (its angle follows another joint's, which "
-                                   "a scene's independent joints cannot say)"}
-
 
 @dataclass(frozen=True)
 class ImportedChain:
@@ -137,8 +129,9 @@ def import_chain(path: str | os.PathLike, tip: str | None = None,
     beyond = {index for index in range(len(model.frames))
               if _is_beyond(model, index, tip_frame)}
     for j in chain:
-        _check_revolute(model, j, shown, tip_name)
-    _check_no_branch(pin, model, chain, beyond, shown)
+        check_revolute(model, j, shown, tip_name)
+        check_limits(model, j, shown)
+    check_no_branch(pin, model, chain, beyond, shown)
     links = tuple(_link(pin, model, j, beyond, shown) for j in chain)
     body_names = tuple(_body_name(pin, model, j) for j in chain)
     scene = SpatialScene(
@@ -275,11 +268,12 @@ def _load_model(pin, path: Path):
     model, failure = None, ""
     with _stderr_captured() as complaints:
         try:
-            # mimic: a mimic joint becomes Pinocchio's JointModelMimic, which _check_revolute
+            # mimic: a mimic joint becomes Pinocchio's JointModelMimic, which check_revolute
             # refuses (without it, Pinocchio makes it an independent revolute joint).
             try:
                 model = pin.buildModelFromUrdf(str(path), mimic=True)
-            except TypeError:     # a Pinocchio without the keyword: mimic joints unseen
+            except TypeError:     # a Pinocchio without the keyword (before 3.4)
+                refuse_unseen_mimic(pin, path)
                 model = pin.buildModelFromUrdf(str(path))
         except (ValueError, RuntimeError) as error:
             failure = str(error).strip()
@@ -358,33 +352,6 @@ def _chain(model, last: int) -> list[int]:
     return chain[::-1]
 
 
-def _check_revolute(model, j: int, shown: str, tip: str) -> None:
-    kind = model.joints[j].shortname()
-    if kind in REVOLUTE_MODELS:
-        return
-    what = _JOINT_KINDS.get(kind, f"of Pinocchio's kind {kind}")
-    raise ChaingenError(f"{shown}: joint {model.names[j]!r} on the chain to {tip!r} is "
-                        f"{what}; chaingen imports revolute and continuous joints only "
-                        "(choose a --tip before it)")
-
-
-def _check_no_branch(pin, model, chain: list[int], beyond: set[int], shown: str) -> None:
-    """Refuse a moving joint that hangs off a link of the chain and is neither the chain's next
-    joint nor beyond the tip: the chain would be a tree."""
-    following = dict(zip(chain, chain[1:]))
-    for k in range(1, model.njoints):
-        parent = model.parents[k]
-        if parent not in chain or k == following.get(parent):
-            continue
-        joint_frame = next(index for index, frame in enumerate(model.frames)
-                           if frame.parentJoint == k and frame.type == pin.FrameType.JOINT)
-        if joint_frame in beyond:
-            continue
-        raise ChaingenError(f"{shown}: joint {model.names[k]!r} branches off the chain at "
-                            f"joint {model.names[parent]!r}: chaingen imports serial chains "
-                            "only (choose a --tip on the branch, or remove it)")
-
-
 def _body_name(pin, model, j: int) -> str:
     """The URDF link a moving joint carries (its first BODY frame)."""
     return next(frame.name for frame in model.frames
@@ -412,18 +379,24 @@ def _link(pin, model, j: int, beyond: set[int], shown: str) -> SpatialLink:
         mass, com, about_com = _less(inertia, removed)
     else:        # Pinocchio's numbers as they are
         mass, com, about_com = inertia.mass, np.array(inertia.lever), np.array(inertia.inertia)
-    if not mass > 0.0:
-        raise ChaingenError(f"{shown}: link {_body_name(pin, model, j)!r} (joint "
-                            f"{model.names[j]!r}) has no mass, with the fixed links merged "
-                            "into it up to the tip; chaingen needs a mass > 0 for every link")
+    link = f"link {_body_name(pin, model, j)!r} (joint {model.names[j]!r})"
     placement = model.jointPlacements[j]
+    for what, values in (("<inertial> (mass, origin or inertia)",
+                          (mass, *np.ravel(com), *np.ravel(about_com))),
+                         ("joint's <origin> (composed with the fixed joints' before it)",
+                          (*np.ravel(placement.translation), *np.ravel(placement.rotation)))):
+        if not all(math.isfinite(float(value)) for value in values):
+            raise ChaingenError(f"{shown}: {link}: its {what} is beyond the range of a double in "
+                                "Pinocchio's model (it holds inf or nan): write the URDF in SI "
+                                "units (m, kg, kg m^2)")
+    if not mass > 0.0:
+        raise ChaingenError(f"{shown}: {link} has no mass, with the fixed links merged "
+                            "into it up to the tip; chaingen needs a mass > 0 for every link")
     data = model.joints[j].createData()
     model.joints[j].calc(data, pin.neutral(model))
     subspace = np.asarray(data.S).ravel()         # (linear, angular) of a unit joint velocity
     axis = subspace[3:]
-    if not (np.all(np.isfinite(axis)) and np.linalg.norm(axis) > 0.0):
-        raise ChaingenError(f"{shown}: joint {model.names[j]!r} has no axis (<axis xyz> is "
-                            f"{_floats(axis)}): a revolute joint needs a nonzero axis")
+    check_axis(axis, model.names[j], shown)
     return SpatialLink(
         mass=float(mass), com=_floats(com),
         inertia=tuple(float(about_com[a, b]) for a, b in ((0, 0), (1, 1), (2, 2), (0, 1),
@@ -474,7 +447,10 @@ def _initial_angle(model, j: int) -> float:
     upper = float(model.upperPositionLimit[model.idx_qs[j]])
     if lower <= 0.0 <= upper:
         return 0.0
-    return 0.5 * (lower + upper)
+    middle = 0.5 * (lower + upper)
+    if not math.isfinite(middle):      # limits of one sign past half a double's range
+        middle = lower + 0.5 * (upper - lower)
+    return min(max(middle, lower), upper)     # subnormal limits: within them
 
 
 def _floats(values) -> tuple[float, float, float]:
