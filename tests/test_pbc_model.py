@@ -229,14 +229,26 @@ def test_a_spatial_control_table_reads_writes_back_and_takes_key_paths():
         spatial_parameters.number_path(SPATIAL, "control.damping[2]")
 
 
-def test_exporting_a_controlled_scene_says_the_mjcf_is_the_plant(tmp_path):
+@pytest.mark.parametrize("scene, links", [("four_link_pbc", 4), ("panda_pbc", 7),
+                                          ("three_link_mono", 3), ("spatial_three_link", 3)])
+def test_exporting_a_controlled_scene_says_the_mjcf_is_the_plant(scene, links, tmp_path):
     """MJCF has no counterpart of the [control] law: the export writes the plant and says so,
-    so that a MuJoCo run of it is not taken for the closed loop."""
-    import subprocess
-    import sys
+    on the command line and in a comment at the head of the file (which outlives the command's
+    output), so that a MuJoCo run of it is not taken for the closed loop; a scene without a
+    law gets neither. MuJoCo reads the file as before."""
+    from helpers import chaingen_in_process
     out = tmp_path / "arm.xml"
-    result = subprocess.run([sys.executable, "-m", "chaingen", "export", "four_link_pbc",
-                             "--mjcf", str(out)], capture_output=True, text=True, cwd=tmp_path)
+    result = chaingen_in_process("export", scene, "--mjcf", out, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    assert "the plant only: the scene's [control] law is not in the MJCF" in result.stdout
-    assert out.exists()
+    controlled = scene.endswith("_pbc")
+    said = "the plant only: the scene's [control] law is not in the MJCF" in result.stdout
+    assert said == controlled, result.stdout
+    head = out.read_text().splitlines()[1]
+    comment = ('  <!-- The plant only, no controller: the scene\'s [control] law (law = '
+               '"discrete": energy shaping to its target with damping injection, '
+               'docs/controllers.md) is not in this model. Its motors are the inputs: drive '
+               'data.ctrl with the law yourself. -->')
+    assert (head == comment) == controlled, head
+    assert ("<!--" in out.read_text()) == controlled
+    mujoco = pytest.importorskip("mujoco")
+    assert mujoco.MjModel.from_xml_path(str(out)).nq == links

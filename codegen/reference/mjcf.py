@@ -67,6 +67,18 @@ def tendon_xml(k: int, stiffness: float, rest_length: float, sites, width: float
             f"{path}\n    </spatial>")
 
 
+def plant_only_comment(scene, export: bool) -> str:
+    """The comment an exported model of a controlled scene (a [control] table) opens with: MJCF
+    has no counterpart of the law, so the file is the plant alone; empty otherwise."""
+    control = getattr(scene, "control", None)
+    if not export or control is None:
+        return ""
+    return ("  <!-- The plant only, no controller: the scene's [control] law (law = "
+            f"{quoteattr(control.law)}: energy shaping to its target with damping injection, "
+            "docs/controllers.md) is not in this model. Its motors are the inputs: drive "
+            "data.ctrl with the law yourself. -->\n")
+
+
 def body_name(i: int) -> str:
     """Name of the body of link i (1-based)."""
     return f"link{i}"
@@ -177,6 +189,7 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
             f"qvel={quoteattr(vector_text(*scene.initial_velocities))}/>\n  </keyframe>\n")
     return (
         f"<mujoco model={quoteattr(scene.name)}>\n"
+        f"{plant_only_comment(scene, export)}"
         f"  <compiler angle=\"radian\"/>\n"
         f"  <option gravity={quoteattr(vector_text(0.0, -scene.gravity, 0.0))} "
         f"integrator={quoteattr(integrator)} timestep={quoteattr(number_text(dt))}>\n"

@@ -41,6 +41,7 @@ from .mjcf import (
     body_name,
     joint_name,
     number_text,
+    plant_only_comment,
     tendon_xml,
     vector_text,
 )
@@ -168,6 +169,7 @@ def spatial_mjcf_from_scene(scene, *, dt: float, integrator: str = "RK4",
             f"qvel={quoteattr(vector_text(*scene.initial_velocities))}/>\n  </keyframe>\n")
     return (
         f"<mujoco model={quoteattr(scene.name)}>\n"
+        f"{plant_only_comment(scene, export)}"
         f"  <compiler angle=\"radian\" eulerseq=\"XYZ\"/>\n"
         f"  <option gravity={quoteattr(vector_text(*scene.gravity))} "
         f"integrator={quoteattr(integrator)} timestep={quoteattr(number_text(dt))}>\n"
