@@ -266,9 +266,12 @@ def write_run(directory, name: str, energy: str | None, n: int = 2, scene: str =
     # A controlled run's axis said |H - H0 - W + D| while its summary and metadata said H_d.
     (["H_d = T + V + V_s: the closed loop's storage"], "|H_d - H_d0 - W + D| [J]"),
     ([None], "|H - H0 - W + D| [J]"),
-    ([None, "H_d = T + V + V_s"], "|H - H0 - W + D|, |H_d - H_d0 - W + D| [J]"),
+    # Overlaid, one line each: as one line the label ran past its panel, over the others'.
+    ([None, "H_d = T + V + V_s"], "|H - H0 - W + D|,\n|H_d - H_d0 - W + D| [J]"),
 ])
 def test_plot_names_the_energy_the_run_recorded(energies, label, tmp_path, monkeypatch):
+    """...and every panel's y label, as drawn, lies within its panel's height and within the
+    figure."""
     from chaingen.views import plots
 
     figures = []
@@ -276,7 +279,15 @@ def test_plot_names_the_energy_the_run_recorded(energies, label, tmp_path, monke
     runs = [plots.load_run(write_run(tmp_path, f"run{index}.csv", energy))
             for index, energy in enumerate(energies)]
     plots.plot_runs(runs, tmp_path / "figure.png")
-    assert figures[0].axes[1].get_ylabel() == label
+    figure = figures[0]
+    assert figure.axes[1].get_ylabel() == label
+    figure.canvas.draw()
+    renderer = figure.canvas.get_renderer()
+    for axis in figure.axes:
+        panel = axis.get_window_extent(renderer)
+        drawn = axis.yaxis.label.get_window_extent(renderer)
+        assert panel.y0 <= drawn.y0 and drawn.y1 <= panel.y1, (axis.get_ylabel(), drawn, panel)
+        assert drawn.x0 >= 0.0, (axis.get_ylabel(), drawn)
 
 
 def test_plot_refuses_an_energy_key_that_is_not_a_string(tmp_path):

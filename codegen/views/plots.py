@@ -327,10 +327,11 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
         angles.legend(handles=handles, fontsize=7, loc="upper right", ncol=2)
     angles.set_ylabel("joint angle phi_i [rad]")
     angles.grid(True, alpha=0.3)
-    # Named as the run's summary names it: H, or a controlled run's H_d (both, overlaid).
+    # Named as the run's summary names it: H, or a controlled run's H_d (both, overlaid: one
+    # line each, as one line they ran past the panel's height into the panels beside it).
     balance = " - W + D" if any(run.balanced for run in runs) else ""
-    energy_label = ", ".join(f"|{storage} - {storage}0{balance}|" for storage in
-                             sorted({run.storage for run in runs})) + " [J]"
+    energy_label = ",\n".join(f"|{storage} - {storage}0{balance}|" for storage in
+                              sorted({run.storage for run in runs})) + " [J]"
     _error_axis(energy, runs, [run.abs_balance_error for run in runs], energy_label,
                 "energy error 0 at every sample")
     _error_axis(constraint, runs, [run.constraint_error for run in runs],
