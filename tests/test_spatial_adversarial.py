@@ -180,3 +180,63 @@ def test_a_scene_in_degrees_on_the_command_line_exit_2_and_write_nothing(tmp_pat
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert lines[0] == f"chaingen: error: arm.toml: {expected}", lines[0]
     assert snapshot(tmp_path) == before
+
+
+# -- a mass matrix that is singular: read, then the first step failed ---------------------------
+
+TIP = ("com = [0.01, 0.12, 0.015]\n"
+       "inertia = [0.00569524, 0.00119696, 0.00548279, 0.00111923, -0.000353708, 0.00150473]")
+COAXIAL = """\
+[[links]]
+mass = 1.0
+com = [0.0, 0.0, 0.3]
+inertia = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+joint = { xyz = [0.0, 0.0, 0.0], rpy = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 1.0] }
+
+[[links]]
+mass = 1.0
+com = [0.2, 0.0, 0.0]
+inertia = [0.01, 0.01, 0.01, 0.0, 0.0, 0.0]
+joint = { xyz = [0.0, 0.0, 0.5], rpy = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 2.0] }
+"""
+
+SINGULAR = {
+    # The tip a point mass on its joint's axis [1.0, 0.3, 0.2]: joint 3 moves no mass (M's
+    # column 3 is 0 but for round-off).
+    "a point mass on its axis": (
+        SPATIAL.read_text().replace(TIP, "com = [0.5, 0.15, 0.1]\n"
+                                         "inertia = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]"),
+        "links[2]: joint 3 moves no mass: link 3 has no inertia about its axis (a point mass "
+        "on it, or a rod along it), so the mass matrix is singular; give link 3 an inertia "
+        "about the axis or move its com off it"),
+    # Two joints on one axis, a point mass on it between them: each moves link 2, together.
+    "two joints on one axis": (
+        COAXIAL,
+        "links: the mass matrix at the initial angles is singular (smallest eigenvalue "),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SINGULAR))
+def test_a_singular_mass_matrix_is_refused(case):
+    text, expected = SINGULAR[case]
+    assert text != SPATIAL.read_text()
+    message = error_of(text)
+    assert message.startswith(f"arm.toml: {expected}"), message
+
+
+def test_a_singular_mass_matrix_on_the_command_line_exit_2_and_write_nothing(tmp_path):
+    """Before: the scene was read and simulate failed at its first step, 'the Newton Jacobian
+    is singular (no usable pivot)', which named nothing of the scene."""
+    text, expected = SINGULAR["a point mass on its axis"]
+    (tmp_path / "arm.toml").write_text(text)
+    before = snapshot(tmp_path)
+    result = chaingen_in_process("simulate", "arm.toml", "--out", "run.csv", cwd=tmp_path)
+    assert one_line_exit_2(result) == f"chaingen: error: arm.toml: {expected}"
+    assert snapshot(tmp_path) == before
+
+
+def test_light_links_are_not_singular():
+    """A tip a thousand million times lighter than the shipped one, off its axis, still reads."""
+    light = SPATIAL.read_text().replace("mass = 1.1", "mass = 1.1e-9").replace(
+        TIP, "com = [0.01, 0.12, 0.015]\ninertia = [5e-12, 1e-12, 5e-12, 0.0, 0.0, 0.0]")
+    assert parse_spatial_scene(light, "arm.toml").links[2].mass == 1.1e-9

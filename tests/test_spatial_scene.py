@@ -670,7 +670,10 @@ def test_mutations_load_or_raise_a_scene_error_naming_a_key_path(seed, data):
 
 # -- docs/scene-format.md, section 13 -----------------------------------------------------------
 
-DOC_VARIANTS = [   # the edits of scenes/spatial_three_link.toml behind section 13.5's examples
+DOC_VARIANTS = [   # the edits of scenes/spatial_three_link.toml behind section 13's examples
+    ("com = [0.01, 0.12, 0.015]\ninertia = [0.00569524, 0.00119696, 0.00548279, 0.00111923, "
+     "-0.000353708, 0.00150473]",
+     "com = [0.5, 0.15, 0.1]\ninertia = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]"),
     ("mass = 1.8", "mass = -1.8"),
     ("axis = [0.0, 1.0, 0.2]", "axis = [0.0, 0.0, 0.0]"),
     ("rpy = [0.3, 0.0, 0.1]", "rpy = [0.0, 90.0, 0.0]"),

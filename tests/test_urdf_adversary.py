@@ -70,6 +70,13 @@ REFUSED = {
         two_link_urdf('<axis xyz="0 1e-300 0"/>' + LIMIT.format(lower=-1, upper=1)),
         "joint 'elbow': <axis xyz> too short for Pinocchio to normalise (it holds (0.0, "
         "1e-300, 0.0), of length 1e-300)"),
+    # A point mass on the elbow's axis: imported, then simulate failed at its first step
+    # ("internal error: LinAlgError: Singular matrix" or "the Newton Jacobian is singular").
+    "a point mass on its joint's axis": (
+        two_link_urdf(ixx="0", iyy="0", izz="0", com_xyz="0 0.1 0"),
+        "link 'lower' (joint 'elbow'): a scene cannot take it: links[1]: joint 2 moves no "
+        "mass: link 2 has no inertia about its axis (a point mass on it, or a rod along it), "
+        "so the mass matrix is singular"),
 }
 
 

@@ -41,6 +41,10 @@ from .values import (
 #: Gravity when a spatial scene does not set it: 9.81 m/s^2 along the world's -z (URDF's up is z).
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 
+#: A mass matrix is singular when an entry of its diagonal is at most this times the largest,
+#: or an eigenvalue of it scaled to a unit diagonal is at most this.
+SINGULAR_RELATIVE_TOLERANCE = 1e-12
+
 #: A principal moment of inertia may miss its rules (>= 0, at most the sum of the other two)
 #: by this times the tensor's largest entry: the round-off of a tensor written in decimals.
 INERTIA_RELATIVE_TOLERANCE = 1e-12
@@ -338,6 +342,46 @@ class SpatialSceneReader(SceneReader):
             self.fail("links", "the chain's mass matrix or gravity torques at the initial angles "
                       "are beyond the range of a double (a joint's xyz, a com, a mass or an "
                       "inertia far too large): write the scene in SI units (m, kg, kg m^2)")
+        self.refuse_singular_mass_matrix(scene, mass)
+
+    def refuse_singular_mass_matrix(self, scene: SpatialScene, mass: np.ndarray) -> None:
+        """Refuse a chain whose mass matrix at the initial angles is singular (within
+        SINGULAR_RELATIVE_TOLERANCE): no step can solve for its accelerations. Its diagonal
+        entry k is the inertia about joint k's axis of the links it carries: where it is zero
+        against their inertia about joint k's origin (sum of m |c - o|^2 + trace I), their mass
+        lies on the axis, joint k moves none, and it is named; else the matrix scaled to a
+        unit diagonal has a zero eigenvalue (joints that move the same masses the same way)."""
+        poses = dynamics.link_poses(scene, scene.initial_angles)
+        with np.errstate(over="ignore", invalid="ignore"):
+            coms = [dynamics.point_position(poses, i + 1, link.com)
+                    for i, link in enumerate(scene.links)]
+            for k in range(scene.n):
+                origin = poses[k + 1][1]
+                about_origin = sum(link.mass * float(np.dot(com - origin, com - origin))
+                                   + sum(link.inertia[:3])
+                                   for link, com in zip(scene.links[k:], coms[k:]))
+                if not (math.isfinite(about_origin)
+                        and mass[k, k] <= SINGULAR_RELATIVE_TOLERANCE * about_origin):
+                    continue
+                carried, remedy = ((f"link {k + 1} has", f"give link {k + 1} an inertia "
+                                    "about the axis or move its com off it")
+                                   if k + 1 == scene.n else
+                                   (f"links {k + 1} to {scene.n} have", "give one of them an "
+                                    "inertia about the axis or move a com off it"))
+                self.fail(f"links[{k}]", f"joint {k + 1} moves no mass: {carried} no inertia "
+                          "about its axis (a point mass on it, or a rod along it), so the mass "
+                          f"matrix is singular; {remedy}")
+        diagonal = np.diag(mass)
+        smallest = 0.0
+        if np.all(diagonal > 0.0):
+            root = np.sqrt(diagonal)      # divided one side at a time: no product overflows
+            smallest = float(np.linalg.eigvalsh(mass / root[:, None] / root[None, :])[0])
+        if smallest <= SINGULAR_RELATIVE_TOLERANCE:
+            self.fail("links", f"the mass matrix at the initial angles is singular (smallest "
+                      f"eigenvalue {smallest:.3g} of it scaled to a unit diagonal): joints that "
+                      "move the same masses the same way, e.g. two joints on one axis with only "
+                      "a point mass on it between them; give that link an inertia or move them "
+                      "apart")
 
     def refuse_zero_length_segments(self, scene: SpatialScene) -> None:
         """Refuse a spring segment of (numerically) zero length at the initial angles, where
