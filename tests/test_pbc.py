@@ -342,3 +342,70 @@ def test_a_stepper_takes_no_adaptive_steps_of_any_law(loaded_laws):
     stepper = loaded_laws["sampled"][0].stepper(phi0, omega0, 0.05)
     stepper.step(np.zeros(4))
     assert np.all(np.isfinite(stepper.phi))
+
+
+def _law(solver, x):
+    """The sampled law's torque at the state x: control_torques with u = 0 over a step short
+    enough never to split (the law reads the step's start alone, not its length)."""
+    solver.reset()
+    return solver.control_torques(x, None, 1e-6).tau
+
+
+def _held_pieces(solver, x, torque, dt, options, pieces):
+    """The end of a step of the sampled law holding `torque` over dt, split as the runtime
+    splits it (a piece that would split, control_torques' NewtonError, into two halves): each
+    piece an unsplit step whose inputs carry torque - law(its start). Each piece's (length,
+    applied torque) into `pieces`."""
+    inputs = torque - _law(solver, x)
+    solver.reset()
+    try:
+        step = solver.control_torques(x, inputs, dt, options=options)
+    except NewtonError:
+        middle = _held_pieces(solver, x, torque, dt / 2, options, pieces)
+        return _held_pieces(solver, middle, torque, dt / 2, options, pieces)
+    pieces.append((dt, step.tau))
+    return step.x1
+
+
+@pytest.mark.parametrize("dt, options", [(0.3, {}), (0.1, {"max_iterations": 5})])
+def test_a_split_step_of_the_sampled_law_holds_the_start_s_torque(loaded_laws, dt, options):
+    """The sampled law is held over the step dt, the controller's sample period. A step that
+    Newton fails on whole is split into halves; each half used to sample the law at its own
+    start, so the split step held it over dt/2 and less (at dt = 0.3 s the first step's later
+    pieces applied torques up to 192 N m from the start's, and it ended 2.4 rad and 37 rad/s
+    from the held step; at dt = 0.1 s, max_iterations = 5, 0.47 rad), without a word. Now the
+    halves hold the start's torque: the run's first step is the pieces' whose torque is the law
+    at the start (to round-off), and that law differs from the one sampled at the middle."""
+    solver = loaded_laws["sampled"][0]
+    phi0, omega0 = _held_start()
+    solver.reset()
+    run = solver.simulate(phi0, omega0, dt=dt, n_steps=1, options=options)
+    assert run.split_steps == 1
+    x0 = solver.initial_state(phi0, omega0)
+    torque, pieces = _law(solver, x0), []
+    x1 = _held_pieces(solver, x0, torque, dt, options, pieces)
+    assert len(pieces) >= 2 and sum(length for length, _ in pieces) == pytest.approx(dt)
+    for _, applied in pieces:
+        np.testing.assert_allclose(applied, torque, rtol=0, atol=1e-12 * np.abs(torque).max())
+    phi, omega, *_ = solver.outputs(x1)
+    np.testing.assert_allclose(run.phi[-1], phi, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.omega[-1], omega, rtol=0, atol=1e-8)
+    middle = _held_pieces(solver, x0, torque, pieces[0][0], options, [])
+    assert np.abs(_law(solver, middle) - torque).max() > 1.0
+
+
+def test_the_discrete_law_keeps_its_balance_across_split_steps(solvers):
+    """The discrete law is a law of both ends of its step: a split step is two (or more)
+    steps of the discrete law, each of which keeps the closed loop's balance, so the split step
+    keeps it too (docs/controllers.md): at dt = 0.1 s with max_iterations = 4, 12 of 50 steps
+    of four_link_pbc_partial split, the balance at round-off, H_d never rising."""
+    scene = SCENES["four_link_pbc_partial"]
+    result = solvers["four_link_pbc_partial"].simulate(
+        scene.initial_angles, scene.initial_velocities, dt=0.1, n_steps=50,
+        options={"max_iterations": 4}, parameters=_gains(scene, 1.0))
+    assert result.split_steps >= 5
+    size = np.abs(result.energy).max()
+    balance = np.diff(result.energy - result.input_work + result.dissipated)
+    assert np.abs(balance).max() <= 1e-13 * max(size, 1.0) * 10, np.abs(balance).max()
+    assert np.diff(result.energy).max() <= 1e-12 * max(size, 1.0)
+    assert not np.any(result.input_work)

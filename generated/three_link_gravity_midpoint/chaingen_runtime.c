@@ -114,9 +114,10 @@ typedef struct {
     double *state[2], *candidate, *previous_x1, *energy_x, *previous_z;
     /* The derived parameters q = Q(p), and the p they belong to. */
     double *q, *q_of;
-    /* Mid-points of split steps (MAX_SPLIT x NX); the adaptive steps' states of one attempt
-     * (start, one step, the two halves' middle and end). */
-    double *split_state, *adaptive_state;
+    /* Mid-points of split steps (MAX_SPLIT x NX) and, for a held law (held_control), the
+     * second halves' inputs (MAX_SPLIT x NU); the adaptive steps' states of one attempt (start,
+     * one step, the two halves' middle and end). */
+    double *split_state, *split_inputs, *adaptive_state;
     /* The sensitivity solve's right-hand sides (NZ x NCHAIN_SENS) and ds1/dz (NCHAIN x NZ). */
     double *sensitivity_rhs, *s1_z;
     /* The composed step: the states between its stages, the stages' warm starts (stage_z:
@@ -184,6 +185,7 @@ static void cg_carve(const chaingen_model *table, const chaingen_workspace *work
     c->q = cg_take(&d, model->nq > 0 ? model->nq : 1, 1);
     c->q_of = cg_take(&d, model->np, 1);
     c->split_state = cg_take(&d, CHAINGEN_MAX_SPLIT * nx, 1);
+    c->split_inputs = cg_take(&d, CHAINGEN_MAX_SPLIT * model->nu, 1);
     c->adaptive_state = cg_take(&d, 4 * nx, 1);
     c->sensitivity_rhs = cg_take(&d, nz * nsens, sensitivities);
     c->s1_z = cg_take(&d, nchain * nz, sensitivities);
@@ -1356,13 +1358,38 @@ static int cg_shorter_may_pass(const chaingen_model *table, int status)
            || (model->energy_check && status == CHAINGEN_ENERGY_JUMP);
 }
 
+/* The torques a held law's step applies, applied_torques at x0 with inputs u: u plus the law
+ * of x0 (held_control: the law reads the step's start alone, not z nor dt), into tau. z is
+ * given as zeros (c->dz, free between solves). */
+static int cg_held_torques(const chaingen_model *table, const cg_solver *c, const double *x0,
+                           const double *u, double dt, double *tau)
+{
+    const chaingen_model *const model = CG_MODEL(table);
+    int status;
+    memset(c->dz, 0, sizeof(double) * (size_t)model->nz);
+    cg_step_arguments(model, c, c->dz, x0, u, &dt);
+    c->res[0] = tau;
+    status = cg_evaluate(model->applied_torques, c);
+    if (status == CHAINGEN_OK && !cg_all_finite(tau, model->nu)) {
+        status = CHAINGEN_NONFINITE;
+    }
+    return status;
+}
+
 /* One step, climbing the ladder of solve_step; when Newton fails on the whole step, or its
  * solution fails the segment test (a spurious root of a step too long for the motion turns a
  * segment through 90 degrees; a segment that really collapses fails every half too), or the
  * energy check (a spurious root that jumps in energy), two half steps, each climbing the same
  * ladder, at most MAX_SPLIT halvings deep. "es" conserves energy on any sequence of steps: the
  * halves keep its energy balance. The energy flows are the halves' sum; iterations counts every
- * linear solve. */
+ * linear solve.
+ *
+ * A held law (held_control: the torque u + law(x0) of the step's start, held over the step)
+ * keeps the whole step's torque in its halves: the second half, which would sample the law at
+ * its own start, the middle, takes the inputs u + law(x0) - law(middle) instead of u, so that
+ * its torque is the whole step's (to round-off), and so on in every deeper half. Its flows'
+ * input work then counts that difference's work too (it is the work of the torque the half
+ * applies beyond the law it samples). */
 static int cg_advance(const chaingen_model *table, const cg_solver *c, const double *x0,
                       const double *u, const double *p, double dt, double *x1, double *flows,
                       const chaingen_options *options, int *iterations, int depth)
@@ -1377,11 +1404,30 @@ static int cg_advance(const chaingen_model *table, const cg_solver *c, const dou
     if (cg_shorter_may_pass(model, status) && depth < CHAINGEN_MAX_SPLIT) {
         double *middle = c->split_state + depth * model->nx;
         double halves[2][2] = {{0.0, 0.0}, {0.0, 0.0}};
+        const int held = model->held_control && model->nu > 0 && model->applied_torques;
+        double *second = held ? c->split_inputs + depth * model->nu : NULL;
+        const double *second_u = u;
         ++c->s->step_splits;
+        if (held) {
+            /* The whole step's torque, before the first half (whose solves reuse dz). */
+            status = cg_held_torques(model, c, x0, u, dt, second);
+            if (status != CHAINGEN_OK) {
+                return status;
+            }
+        }
         status = cg_advance(model, c, x0, u, p, 0.5 * dt, middle, halves[0], options, iterations,
                             depth + 1);
+        if (status == CHAINGEN_OK && held) {
+            int i;
+            double *sampled = c->rest;   /* N >= NU entries of scratch */
+            status = cg_held_torques(model, c, middle, u, dt, sampled);
+            for (i = 0; status == CHAINGEN_OK && i < model->nu; ++i) {
+                second[i] = u[i] + (second[i] - sampled[i]);
+            }
+            second_u = second;
+        }
         if (status == CHAINGEN_OK) {
-            status = cg_advance(model, c, middle, u, p, 0.5 * dt, x1, halves[1], options,
+            status = cg_advance(model, c, middle, second_u, p, 0.5 * dt, x1, halves[1], options,
                                 iterations, depth + 1);
         }
         if (model->flows && status == CHAINGEN_OK && flows) {

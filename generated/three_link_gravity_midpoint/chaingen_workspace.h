@@ -76,7 +76,7 @@ typedef struct {
  *    H's nonzeros and 9N more, 15N derived, the reduced N x N matrix and 6N of scratch;
  *  - state[2], candidate, previous_x1, energy_x (NX each), previous_z (HISTORY x NZ);
  *  - q (NQ, at least 1) and q_of (NP): the derived parameters and the p they belong to;
- *  - split_state (MAX_SPLIT x NX), adaptive_state (4 x NX);
+ *  - split_state (MAX_SPLIT x NX), split_inputs (MAX_SPLIT x NU), adaptive_state (4 x NX);
  *  - with SENSITIVITIES: the right-hand sides (NZ x NCHAIN_SENS) and S_z (NCHAIN x NZ);
  *  - with NSTAGE > 0: stage_state (2 x NX), composed_x1 (NX), stage_z (NSTAGE x HISTORY x NZ),
  *    and with SENSITIVITIES the stage's and the accumulated sensitivities (NCHAIN x NCHAIN_SENS
@@ -93,7 +93,7 @@ typedef struct {
      + ((ARM_NH) > 0 ? (ARM_NH) + 9 * (N) + 15 * (N) + (N) * (N) + 6 * (N) : (NZ) * (NZ))          \
      + 5 * (NX) + CHAINGEN_WARM_START_HISTORY * (NZ)                                               \
      + ((NQ) > 0 ? (NQ) : 1) + (NP)                                                                \
-     + CHAINGEN_MAX_SPLIT * (NX) + 4 * (NX)                                                        \
+     + CHAINGEN_MAX_SPLIT * ((NX) + (NU)) + 4 * (NX)                                               \
      + ((SENSITIVITIES) ? (NZ) * CHAINGEN_NCHAIN_SENS(N, NX, NU, NP, CHAIN_STATE)                  \
                               + CHAINGEN_NCHAIN(N, NX, CHAIN_STATE) * (NZ) : 0)                    \
      + ((NSTAGE) > 0 ? 3 * (NX) + (NSTAGE) * CHAINGEN_WARM_START_HISTORY * (NZ) : 0)               \

@@ -165,7 +165,9 @@ extern "C" {
  * halves, each climbing the same ladder, at most 4 halvings deep (16 substeps). "es" conserves
  * energy on any sequence of steps, so a split step keeps its energy balance. The counters of
  * simulate report how often the last two rungs were needed. The step sensitivities never split
- * (their Jacobians are those of one step).
+ * (their Jacobians are those of one step). A law held over the step (control.law = "sampled")
+ * holds the whole step's torque over every half: a later half takes the inputs
+ * u + law(x0) - law(x_half), so its torque is the one sampled at the step's start.
  *
  * Energy check (vi and midpoint; energy_tol > 0): the scheme keeps the energy balance
  * H_1 - H_0 = W - D only up to its error, small against the kinetic energy T at the step's ends.

@@ -84,7 +84,9 @@ typedef struct {
     int held_control;       /* the step's control law is held from its start (a scene's
                              * control.law = "sampled"): its hold period is the step, so
                              * adaptive steps (rtol or atol > 0), which would make it the
-                             * adaptive step's instead of dt, are BAD_ARGUMENT */
+                             * adaptive step's instead of dt, are BAD_ARGUMENT, and a split
+                             * step's halves hold the whole step's torque (applied_torques
+                             * then reads x0, u and q alone: u + law(x0)) */
     double start_margin;    /* a start state's segment margins must be at least this */
     const double *p_lower;  /* per parameter: its lower bound, */
     const int *p_inclusive; /* and whether p_i may equal it */

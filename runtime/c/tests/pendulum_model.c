@@ -95,10 +95,12 @@ double pendulum_balance_defect(double phi0, double phi1, double k)
 
 /* ---- Argument positions ---------------------------------------------------------------------- */
 
-/* (z, x0, [u], [q], dt): u, q and dt of a step function's arguments. */
+/* (z, x0, [u], [q], dt): u, q and dt of a step function's arguments. The torque: u, and with
+ * held_gain the held law's -K phi0 added. */
 static double step_u(const double **arg)
 {
-    return config.nu ? (arg[2] ? arg[2][0] : 0.0) : 0.0;
+    const double u = config.nu ? (arg[2] ? arg[2][0] : 0.0) : 0.0;
+    return u - config.variant.held_gain * arg[1][0];
 }
 
 static double step_k(const double **arg)
@@ -304,7 +306,8 @@ static int f_next_state(const double **arg, double **res, long long int *iw, dou
     return 0;
 }
 
-/* (z, x0, [u], [q], dt) -> tau = u + dt domega + phi0^2, the control variant's applied torque. */
+/* (z, x0, [u], [q], dt) -> tau = u + dt domega + phi0^2, the control variant's applied torque;
+ * with held_gain the step's torque u - K phi0. */
 static int f_applied_torques(const double **arg, double **res, long long int *iw, double *w,
                              int mem)
 {
@@ -316,7 +319,8 @@ static int f_applied_torques(const double **arg, double **res, long long int *iw
     }
     if (res[0]) {
         res[0][0] = pendulum_knob.nan_torques ? NAN
-                                              : step_u(arg) + dt * z[1] + x0[0] * x0[0];
+                    : config.variant.held_gain != 0.0 ? step_u(arg)
+                    : step_u(arg) + dt * z[1] + x0[0] * x0[0];
     }
     return 0;
 }

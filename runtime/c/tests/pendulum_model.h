@@ -75,6 +75,10 @@ typedef struct {
     int control;         /* applied_torques present: tau = u + dt domega + phi0^2 (a stand-in
                           * for a control law solved in the step: it reads z, x0, u and dt) */
     int held_control;    /* the model's held_control: its law held over the step */
+    double held_gain;    /* K != 0: the step's torque is u - K phi0, a law of the step's start
+                          * held over it (as a scene's sampled law), and applied_torques (with
+                          * control) returns it, whatever z and dt; the sensitivities do not
+                          * see the law */
     int composition;     /* PENDULUM_PLAIN, _YOSHIDA4, _SUZUKI4, _KAHAN_LI6 */
     int error_entries;   /* 1 (angles) or 2 (angles and rates); 0: 2 */
 } pendulum_variant;

@@ -2019,6 +2019,74 @@ static void test_held_control(void)
     end();
 }
 
+/* A split step of a held law (held_control) holds the whole step's torque, u - K phi0 at the
+ * step's start, over every half: the same as half steps whose inputs carry the difference from
+ * the law each would sample at its own start, u - K phi0 + K phi_start (flows their sum). The
+ * law without held_control splits as before: each half samples its own start. */
+static void test_held_split(void)
+{
+    const double gain = 4.0, u0 = 0.4, dt = 0.02, x0[2] = {1.0, 0.5};
+    double x1[2], flows[2], expected[2], start[2], total[2], half_flows[2], sampled[2];
+    double tau[1], t1[2];
+    int depth, k, held;
+    pendulum_variant v = full_variant();
+    begin("held_split");
+    v.control = 1;
+    v.sensitivities = 0;
+    v.held_gain = gain;
+    for (held = 0; held <= 1; ++held) {
+        v.held_control = held;
+        for (depth = 1; depth <= 2; ++depth) {
+            const int pieces = 1 << depth;
+            const double piece = dt / pieces;
+            /* The expected pieces, unsplit (no knobs): a held law's inputs carry the
+             * difference from the law at each piece's start; without it, the plain u. */
+            use(v);
+            memcpy(start, x0, sizeof start);
+            total[0] = total[1] = 0.0;
+            for (k = 0; k < pieces; ++k) {
+                const double u = held ? u0 - gain * x0[0] + gain * start[0] : u0;
+                STATUS(step(start, u, piece, expected, half_flows, NULL, NULL), CHAINGEN_OK);
+                EXPECT(store->scalars.step_splits == 0, "an expected piece split");
+                total[0] += half_flows[0];
+                total[1] += half_flows[1];
+                memcpy(start, expected, sizeof start);
+            }
+            /* Newton crawls on steps longer than one piece: the step splits depth deep. */
+            use(v);
+            pendulum_knob.jacobian_scale = 1.0 / 1.9;
+            pendulum_knob.above_dt = 1.5 * piece;
+            STATUS(step(x0, u0, dt, x1, flows, NULL, NULL), CHAINGEN_OK);
+            EXPECT(store->scalars.step_splits == pieces - 1, "held %d, depth %d: %ld splits",
+                   held, depth, store->scalars.step_splits);
+            EXPECT(close_to(x1[0], expected[0], 1e-10) && close_to(x1[1], expected[1], 1e-10),
+                   "held %d, depth %d: split step (%.15g, %.15g), pieces (%.15g, %.15g)", held,
+                   depth, x1[0], x1[1], expected[0], expected[1]);
+            EXPECT(close_to(flows[0], total[0], 1e-12) && close_to(flows[1], total[1], 1e-12),
+                   "held %d, depth %d: flows (%.15g, %.15g), the pieces' (%.15g, %.15g)", held,
+                   depth, flows[0], flows[1], total[0], total[1]);
+            if (held) {
+                sampled[depth - 1] = x1[0];
+            }
+        }
+    }
+    /* The hold moves the end (by 9e-7 rad) beyond the tolerance above: the law sampled at the
+     * middle is not the held one. */
+    v.held_control = 0;
+    use(v);
+    pendulum_knob.jacobian_scale = 1.0 / 1.9;
+    pendulum_knob.above_dt = 1.5 * dt / 2;
+    STATUS(step(x0, u0, dt, t1, NULL, NULL, NULL), CHAINGEN_OK);
+    EXPECT(fabs(t1[0] - sampled[0]) > 1e-8, "held and sampled halves agree: %.3g",
+           fabs(t1[0] - sampled[0]));
+    /* applied_torques of the held law reads x0 and u alone. */
+    v.held_control = 1;
+    use(v);
+    STATUS(control_torques(x0, u0, dt, tau, t1, NULL, NULL), CHAINGEN_OK);
+    EXPECT(tau[0] == u0 - gain * x0[0], "tau %.17g", tau[0]);
+    end();
+}
+
 static void test_control_torques(void)
 {
     enum { STEPS = 6 };
@@ -2168,6 +2236,7 @@ static const test_group groups[] = {
     {"simulate_controlled", test_simulate_controlled},
     {"control_torques", test_control_torques},
     {"held_control", test_held_control},
+    {"held_split", test_held_split},
 };
 
 int main(int argc, char **argv)
