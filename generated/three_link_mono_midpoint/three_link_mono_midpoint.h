@@ -270,7 +270,9 @@ int three_link_mono_midpoint_residual_jacobian(const double *z, const double *x0
 /* One step of length dt > 0 from x0 to x1 (x1 may not alias x0), with the inputs u[NU] held over
  * the step.
  * The scheme's step, of order 2.
- * options may be NULL (defaults). iterations (may be NULL) receives the Newton iterations spent. flows (may be NULL) receives the step's energy flows (layout above;
+ * options may be NULL (defaults); their rtol and atol must be 0: adaptive steps are simulate()'s,
+ * and step(), step_sensitivities() and control_torques() return THREE_LINK_MONO_MIDPOINT_BAD_ARGUMENT for any
+ * other value rather than take a plain step of dt. iterations (may be NULL) receives the Newton iterations spent. flows (may be NULL) receives the step's energy flows (layout above;
  * zeros for a scene without them). On failure x1 is untouched. An x0 with a spring segment
  * initial_state refuses: THREE_LINK_MONO_MIDPOINT_SEGMENT_COLLAPSED. */
 THREE_LINK_MONO_MIDPOINT_API

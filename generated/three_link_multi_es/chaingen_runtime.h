@@ -133,7 +133,8 @@ CHAINGEN_LINKAGE void chaingen_default_options(const chaingen_model *model,
 /* The entry points. Their meaning is that of the package's header (templates/solver.h.j2):
  * nu and np must be the model's (BAD_ARGUMENT otherwise); u and p may be NULL only when their
  * size is 0 (simulate and simulate_observed: u NULL is zero torques). A NULL workspace (a view
- * whose scalars are NULL) is BAD_ARGUMENT. */
+ * whose scalars are NULL) is BAD_ARGUMENT, and so are options with rtol or atol other than 0 in
+ * the entry points of one fixed step (step, step_sensitivities, control_torques). */
 CHAINGEN_LINKAGE int chaingen_initial_state(const chaingen_model *model, const double *phi,
                                             const double *phidot, const double *p, int np,
                                             double *x, const chaingen_workspace *workspace);

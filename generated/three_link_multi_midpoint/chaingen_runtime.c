@@ -1525,6 +1525,14 @@ static int cg_bad_values(const chaingen_model *model, const double *x0, const do
     return (x0 && !cg_all_finite(x0, model->nx)) || (u && !cg_all_finite(u, model->nu));
 }
 
+/* Options an entry point of one fixed step (step, step_sensitivities, control_torques) refuses:
+ * rtol or atol other than 0. Adaptive steps are simulate's; these entry points take the dt they
+ * are given, and would otherwise take it without a word that the tolerances went unused. */
+static int cg_adaptive_options(const chaingen_options *options)
+{
+    return options && !(options->rtol == 0.0 && options->atol == 0.0);
+}
+
 static int cg_begin_step(const chaingen_model *model, const chaingen_workspace *workspace,
                          cg_solver *c, const double *x0, const double *u, int nu,
                          const double *p, int np, double dt)
@@ -1557,7 +1565,7 @@ CHAINGEN_LINKAGE int chaingen_step(const chaingen_model *table, const double *x0
     const chaingen_model *const model = CG_MODEL(table);
     cg_solver solver, *c = &solver;
     int spent = 0, status;
-    if (!x1) {
+    if (!x1 || cg_adaptive_options(options)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     status = cg_begin_step(model, workspace, c, x0, u, nu, p, np, dt);
@@ -1593,7 +1601,7 @@ CHAINGEN_LINKAGE int chaingen_control_torques(const chaingen_model *table, const
     if (model && (!model->applied_torques || model->nstage > 0)) {
         return CHAINGEN_UNAVAILABLE;
     }
-    if (!x0 || !tau || !x1) {
+    if (!x0 || !tau || !x1 || cg_adaptive_options(options)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     status = cg_begin_step(model, workspace, c, x0, u, nu, p, np, dt);
@@ -1879,7 +1887,8 @@ CHAINGEN_LINKAGE int chaingen_step_sensitivities(const chaingen_model *table, co
     if (model && !model->sensitivities) {
         return CHAINGEN_UNAVAILABLE;
     }
-    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)) {
+    if (cg_bad_view(model, workspace) || cg_bad_sizes(model, u, nu, 0, p, np)
+        || cg_adaptive_options(options)) {
         return CHAINGEN_BAD_ARGUMENT;
     }
     cg_carve(model, workspace, &solver);

@@ -2087,6 +2087,67 @@ static void test_held_split(void)
     end();
 }
 
+/* The entry points of one fixed step (step, step_sensitivities, control_torques) take the dt they
+ * are given: rtol or atol other than 0 (adaptive steps are simulate's) is BAD_ARGUMENT before any
+ * work, outputs untouched, where it was a plain step that said nothing; with both 0, or options
+ * NULL, they step. */
+static void test_fixed_step_tolerances(void)
+{
+    const double p[1] = {PENDULUM_STIFFNESS}, u[1] = {0.3}, x0[2] = {1.0, 0.5};
+    const double values[] = {1e-8, 1.0, -1e-8, NAN, INFINITY};
+    double x1[2], tau[1], ds_ds[4], ds_du[2], ds_dp[2];
+    chaingen_options options;
+    int k, which, composed;
+    pendulum_variant v = full_variant();
+    begin("fixed_step_tolerances");
+    v.control = 1;
+    for (composed = 0; composed <= 1; ++composed) {
+        v.composition = composed ? PENDULUM_YOSHIDA4 : PENDULUM_PLAIN;
+        use(v);
+        for (which = 0; which < 2; ++which) {
+            for (k = 0; k < (int)(sizeof values / sizeof values[0]); ++k) {
+                long calls;
+                chaingen_default_options(&model, &options);
+                if (which == 0) {
+                    options.rtol = values[k];
+                } else {
+                    options.atol = values[k];
+                }
+                x1[0] = x1[1] = tau[0] = ds_ds[0] = 7.0;
+                calls = pendulum_knob.calls[PENDULUM_F_RESIDUAL]
+                        + pendulum_knob.calls[PENDULUM_F_RESIDUAL_JACOBIAN];
+                STATUS(chaingen_step(&model, x0, u, 1, p, 1, 0.01, x1, NULL, &options, &ws,
+                                     NULL), CHAINGEN_BAD_ARGUMENT);
+                STATUS(chaingen_step_sensitivities(&model, x0, u, 1, p, 1, 0.01, x1, ds_ds,
+                                                   ds_du, ds_dp, &options, &ws, NULL),
+                       CHAINGEN_BAD_ARGUMENT);
+                STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, tau, x1, &options,
+                                                &ws, NULL),
+                       composed ? CHAINGEN_UNAVAILABLE : CHAINGEN_BAD_ARGUMENT);
+                EXPECT(x1[0] == 7.0 && x1[1] == 7.0 && tau[0] == 7.0 && ds_ds[0] == 7.0,
+                       "composed %d, %s = %g: outputs written by a refused call", composed,
+                       which ? "atol" : "rtol", values[k]);
+                EXPECT(pendulum_knob.calls[PENDULUM_F_RESIDUAL]
+                           + pendulum_knob.calls[PENDULUM_F_RESIDUAL_JACOBIAN] == calls,
+                       "composed %d, %s = %g: Newton ran", composed, which ? "atol" : "rtol",
+                       values[k]);
+            }
+        }
+        chaingen_default_options(&model, &options);
+        STATUS(chaingen_step(&model, x0, u, 1, p, 1, 0.01, x1, NULL, &options, &ws, NULL),
+               CHAINGEN_OK);
+        STATUS(chaingen_step(&model, x0, u, 1, p, 1, 0.01, x1, NULL, NULL, &ws, NULL),
+               CHAINGEN_OK);
+        STATUS(chaingen_step_sensitivities(&model, x0, u, 1, p, 1, 0.01, x1, ds_ds, ds_du, ds_dp,
+                                           &options, &ws, NULL), CHAINGEN_OK);
+        if (!composed) {
+            STATUS(chaingen_control_torques(&model, x0, u, 1, p, 1, 0.01, tau, x1, &options,
+                                            &ws, NULL), CHAINGEN_OK);
+        }
+    }
+    end();
+}
+
 static void test_control_torques(void)
 {
     enum { STEPS = 6 };
@@ -2237,6 +2298,7 @@ static const test_group groups[] = {
     {"control_torques", test_control_torques},
     {"held_control", test_held_control},
     {"held_split", test_held_split},
+    {"fixed_step_tolerances", test_fixed_step_tolerances},
 };
 
 int main(int argc, char **argv)
