@@ -12,7 +12,7 @@ Fast and heavy tests run with CC pointing at no compiler, so one that builds by 
 instead of passing slowly.
 
 Builds go to a per-session cache directory (CHAINGEN_CACHE_DIR), so the tests neither read nor
-fill the user's cache, and subprocesses of CLI tests share it.
+fill the user's cache, and subprocesses of CLI tests share it; pytest-xdist's workers share one.
 """
 from __future__ import annotations
 
@@ -43,8 +43,17 @@ def pytest_configure(config):
 
 @pytest.fixture(scope="session", autouse=True)
 def isolated_build_cache(tmp_path_factory):
+    """The session's build cache. Under pytest-xdist the workers share one (in the run's
+    common temporary directory): the cache is made for concurrent use (builders of one library
+    take turns, runtime/build.py), so a package that tests on two workers need is generated
+    and compiled once, not once per worker."""
     previous = os.environ.get("CHAINGEN_CACHE_DIR")
-    os.environ["CHAINGEN_CACHE_DIR"] = str(tmp_path_factory.mktemp("chaingen-cache"))
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        cache = tmp_path_factory.getbasetemp().parent / "chaingen-cache"
+        cache.mkdir(exist_ok=True)
+    else:
+        cache = tmp_path_factory.mktemp("chaingen-cache")
+    os.environ["CHAINGEN_CACHE_DIR"] = str(cache)
     yield
     if previous is None:
         os.environ.pop("CHAINGEN_CACHE_DIR", None)

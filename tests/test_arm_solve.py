@@ -128,6 +128,7 @@ def packages(name: str, arm_solve, **build):
 @pytest.mark.parametrize("name, order", [("scaling-8", 2), ("four_link_actuated", 2),
                                          ("five_link_biarticular", 2),
                                          ("four_link_actuated", 4)])
+@pytest.mark.slow
 def test_the_factored_solve_steps_as_dense_lu(arm_solve, name, order):
     """The same root: trajectories agree to Newton's tolerance, the same iterations, energy
     and constraint errors at the same round-off; and the public residual_jacobian, formed from
@@ -192,6 +193,7 @@ def test_step_sensitivities_by_the_factors_equal_dense_lus(arm_solve, order):
 
 @pytest.mark.compile
 @pytest.mark.parametrize("name", ["four_link_pbc", "four_link_pbc_partial"])
+@pytest.mark.slow
 def test_a_controlled_step_by_the_factors_is_dense_lus(arm_solve, name):
     """A control law's torque couples its joint's arms to all outboard ones, so H is dense;
     the factors take it as they take a banded H. The same root as dense LU: trajectories to
@@ -223,6 +225,7 @@ def test_a_controlled_step_by_the_factors_is_dense_lus(arm_solve, name):
 
 
 @pytest.mark.tools
+@pytest.mark.slow
 def test_a_factored_package_is_clean_under_valgrind_and_the_sanitizers(arm_solve, tmp_path):
     """COMs off the links' axes (general 2 x 2 maps A_k), multi-articular springs: the example
     program and a call of step_sensitivities (the factored solve with many right-hand sides)

@@ -514,6 +514,7 @@ def test_cheapest_run_holds_both_errors():
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_stiff_part_quick_writes_its_section_in_place(tmp_path):
     """The stiff chain's part in its quick form (three links), run alone into an existing
     report: its table has a row for every run of ours and of the peers, with both errors, and

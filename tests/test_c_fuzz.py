@@ -115,6 +115,7 @@ def fuzz(package, corners: list[Case], examples: int = FUZZ_EXAMPLES) -> None:
     check()
 
 
+@pytest.mark.slow
 def test_control_torques_of_a_controlled_package_under_the_sanitizers(controlled_package):
     """The same fuzz on a package with a control law (four_link_pbc, es, its gains run-time
     parameters): control_torques refuses bad numbers as step does, and is sanitizer clean."""

@@ -106,6 +106,7 @@ def test_the_suite_is_clean_under_valgrind(tmp_path):
 
 @pytest.mark.tools
 @pytest.mark.parametrize("cc", COMPILERS)
+@pytest.mark.slow
 def test_the_suite_is_clean_under_the_sanitizers(tmp_path, cc):
     require_tools(cc)
     binary = build(tmp_path, cc, [*SANITIZE, *EXACT])

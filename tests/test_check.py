@@ -154,6 +154,7 @@ def test_check_of_a_composed_step_compares_every_stage(method):
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_check_with_full_newton_at_its_floor_on_a_long_vi_chain():
     """vi on 18 links: the check's step map takes the step with tolerances below the updates'
     round-off; full Newton must see its floor there. It ran out of iterations and split the step

@@ -167,6 +167,7 @@ def test_composed_es_keeps_the_energy_balance_with_torques_and_damping(order):
     ("four_link_actuated", "midpoint", 4), ("four_link_actuated", "midpoint", 6),
     ("three_link_multi", "es", 4), ("four_link_actuated", "es", 4),
     ("three_link_multi", "es", 6), ("four_link_actuated", "es", 6)])
+@pytest.mark.slow
 def test_composed_sensitivities_match_central_differences(name, method, order):
     """d s1/d s0 and d s1/d u of the composed step, by the chain rule through the stages,
     against central differences of the composed step (to 1e-6)."""

@@ -29,6 +29,7 @@ def test_the_python_loop_example_holds_its_target(capsys):
     assert printed.strip() in DOC.read_text().replace("`", "")
 
 
+@pytest.mark.slow
 def test_the_balance_errors_against_k_are_what_the_runs_give():
     """The table: 10 s of four_link_actuated's free fall (no torques, the scene's dt) with es
     and K = 1, 3, 5, 7, with the default exact gradient and with the quadrature alone. K = 1

@@ -145,6 +145,7 @@ def test_long_chain_energy_equals_the_independent_kinematics(method):
 
 @pytest.mark.compile
 @pytest.mark.parametrize("method", METHODS)
+@pytest.mark.slow
 def test_a_twenty_link_chain_agrees_with_mujoco(method):
     """The scaling chain of 20 links (a spring on every joint, two multi-articular springs) at
     dt = 1e-4: the joint angles at t = 1 s within 1e-5 rad of MuJoCo RK4 at the same dt."""
@@ -275,6 +276,7 @@ def test_the_energy_check_carries_the_twenty_link_chain_through_50_s(method):
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_vi_splits_a_step_without_a_root_at_once():
     """vi on the scaling chain of 50 links at dt = 0.01 s, 400 steps: from t = 1.8 s on, many
     steps have no root at dt (their root, followed from dt/2 by continuation, ends in a fold

@@ -26,6 +26,7 @@ def wrapped(difference):
 
 @pytest.mark.parametrize("method,quadrature", [("es", 3), ("vi", 3), ("midpoint", 3)])
 @pytest.mark.parametrize("name", REFERENCE_SCENES + OWN_SCENES)
+@pytest.mark.slow
 def test_joint_angles_agree_with_mujoco(name, method, quadrature):
     scene = load(name)
     every = round(SAMPLE_TIMES[0] / DT)

@@ -82,6 +82,7 @@ def parameterised(name: str, method: str):
 @pytest.mark.compile
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", SCENES)
+@pytest.mark.slow
 def test_parameters_equal_baked_numbers(name, method):
     scene = load(name)
     values = changed_values(scene, paths_of(name))

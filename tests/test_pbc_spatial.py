@@ -32,6 +32,7 @@ def panda_es():
 
 @pytest.mark.parametrize("dt", [1e-3, 1e-2, 0.1])
 @pytest.mark.parametrize("scale", [1.0, 100.0])
+@pytest.mark.slow
 def test_the_panda_keeps_the_closed_loop_balance_on_every_step(panda_es, dt, scale):
     """H_d(k+1) - H_d(k) + dissipated at round-off on every step of the 7-joint arm with
     three springs, at dt from 1 ms to 0.1 s and gains x1 and x100; H_d never rises."""

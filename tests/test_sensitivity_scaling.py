@@ -105,6 +105,7 @@ def sensitivity_bytes(method: str, order: int, n: int) -> int:
 @pytest.mark.parametrize(("method", "order", "sizes", "limit"),
                          [("es", 2, (20, 40), 2.6), ("vi", 2, (20, 40), 2.6),
                           ("midpoint", 2, (20, 40), 2.6), ("es", 4, (10, 20), 2.9)])
+@pytest.mark.slow
 def test_the_sensitivity_code_grows_linearly_with_the_chain(method, order, sizes, limit):
     """The model C the sensitivities add on the scaling chain: doubling n from 20 to 40 at
     most 2.6x (measured: midpoint 2.37x, as the Newton Jacobian by directions grows there,

@@ -175,6 +175,7 @@ def drawn_cases(draw):
           phases=(Phase.explicit, Phase.reuse, Phase.generate),
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(case=drawn_cases())
+@pytest.mark.slow
 def test_drawn_chains_agree_with_mujoco_at_one_second(method, case):
     scene, torques = case
     assert angle_difference(scene, method, torques, drawn=True) <= TOLERANCE
@@ -183,6 +184,7 @@ def test_drawn_chains_agree_with_mujoco_at_one_second(method, case):
 @pytest.mark.compile
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", ["spatial_three_link", "panda_springs"])
+@pytest.mark.slow
 def test_shipped_scenes_agree_with_mujoco_at_one_second(method, name):
     """The scene's own run: its initial state, damping and springs, the motors idle (zero
     torque on the actuated joints)."""

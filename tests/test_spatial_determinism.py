@@ -151,6 +151,7 @@ int main(void)
 
 @pytest.mark.tools
 @pytest.mark.parametrize("method, order", SCHEMES)
+@pytest.mark.slow
 def test_the_package_under_valgrind_gives_the_native_bits(tmp_path, method, order):
     """The package's simulate, compiled with its own flags into a program that prints every
     sample in hexadecimal: under valgrind's memcheck (no errors) the same bits as natively,

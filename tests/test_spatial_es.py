@@ -118,6 +118,7 @@ def run(model, q, v, dt, steps, inputs=None):
 
 @pytest.mark.heavy
 @pytest.mark.parametrize("n, seed", [(3, 41), (5, 42)])
+@pytest.mark.slow
 def test_energy_and_constraints_to_round_off_over_1000_steps(n, seed):
     """A conservative random chain (gravity, springs routed over one to three joints, skew
     axes, full inertia tensors) at dt = 0.01 s: |H_k - H_0| <= 1e-12 of the energy's size and
@@ -169,6 +170,7 @@ def actuated_damped(seed, n):
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_converges_at_order_2_to_dop853():
     """Random 3-link chain, springs, gravity, damping on every joint, torques on two: the
     compiled es's angle error at t = 1 s against DOP853 on M qddot = tau - d qdot - C qdot - g
@@ -381,6 +383,7 @@ def test_turns_keep_the_constraints_and_the_twists_span_their_null_space(seed, n
 @pytest.mark.heavy  # SymPy on up to six links: tens of seconds, too slow for the fast tier
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6))
+@pytest.mark.slow
 def test_newton_matrix_is_the_mass_matrix_at_rest_and_near_dF_dw(seed, n):
     """Newton's matrix A (spatial_null_space.newton_matrix, the composite rigid bodies with the
     mid-point and end configurations, and the damping): at w = 0 it is 2/dt times the
@@ -503,6 +506,7 @@ def test_sensitivities_and_generated_functions_pass_the_check():
 
 @pytest.mark.tools
 @pytest.mark.parametrize("actuated", [(), (1, 3)])
+@pytest.mark.slow
 def test_spatial_es_example_is_clean_under_valgrind_and_the_sanitizers(tmp_path, actuated):
     """The es package of a spatial chain as a user gets it (free motion, and an actuated,
     damped chain): its example program, compiled with the strict flags, runs clean under

@@ -155,6 +155,7 @@ def test_one_step_is_symmetric_and_keeps_the_balance_that_the_rule_alone_misses(
 
 @pytest.mark.compile
 @pytest.mark.parametrize("name", ["spatial_three_link", "panda_springs"])
+@pytest.mark.slow
 def test_conservative_energy_to_round_off_and_the_balance_step_by_step(name):
     """200 steps of 0.01 s from the scene's start. No torques, no damping: |H - H_0| <=
     1e-12 H_0 (measured 9.3e-14 and 5.1e-14; the chains turn at up to 42 and 47 rad/s). The
@@ -179,6 +180,7 @@ def test_conservative_energy_to_round_off_and_the_balance_step_by_step(name):
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_composed_step_converges_at_order_6_to_dop853_and_meets_vi_and_midpoint():
     """The chain of spatial vi's order test (springs a tenth of random_scene's): the error at
     t = 1 s against DOP853 falls by 2^6 per halving of dt, in the angles and in the rates
@@ -217,6 +219,7 @@ def test_composed_step_converges_at_order_6_to_dop853_and_meets_vi_and_midpoint(
 
 @pytest.mark.compile
 @pytest.mark.parametrize("name", ["spatial_three_link", "panda_springs"])
+@pytest.mark.slow
 def test_shipped_scenes_agree_with_mujoco_at_forty_times_its_step(name):
     """test_spatial_agreement's comparison (MuJoCo's RK4 at dt = 2.5e-4 s, angles at t = 1 s
     within 1e-4 rad), the composed step at dt = 0.01 s (measured 8.0e-8 and 6.9e-10 rad), and
@@ -254,6 +257,7 @@ def test_shipped_scenes_agree_with_mujoco_at_forty_times_its_step(name):
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 # Deferred: test_spatial_agreement skips at import without MuJoCo, and only this test needs it.
 @given(case=st.deferred(lambda: __import__("test_spatial_agreement").drawn_cases()))
+@pytest.mark.slow
 def test_drawn_chains_agree_with_mujoco_at_eight_times_its_step(case):
     """test_spatial_agreement's drawn chains (3 to 7 links, skew axes, turned joint origins,
     full inertias, routed springs, tilted gravity, damping, torques on drawn joints) against
@@ -283,6 +287,7 @@ def test_drawn_chains_agree_with_mujoco_at_eight_times_its_step(case):
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_sensitivities_and_generated_functions_pass_the_check():
     """chaingen check's comparisons on spatial_three_link (joint 2 damped, joint 3 actuated):
     the residual Jacobian (through one node's, NodeSpace) and the composed step's
@@ -291,6 +296,7 @@ def test_sensitivities_and_generated_functions_pass_the_check():
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_a_run_with_parameters_is_the_run_with_the_numbers_compiled_in():
     """Every run-time number a parameter (the Jacobian then goes by forward directions in the
     angles' and the momenta's blocks instead of through one node's): 40 steps with other
@@ -315,6 +321,7 @@ def test_a_run_with_parameters_is_the_run_with_the_numbers_compiled_in():
 
 
 @pytest.mark.tools
+@pytest.mark.slow
 def test_spatial_es_order_6_example_is_clean_under_valgrind_and_the_sanitizers(tmp_path):
     """The order-6 es package of an actuated, damped spatial chain as a user gets it: its
     example program, compiled with the strict flags, runs clean under memcheck and under

@@ -56,6 +56,7 @@ def drawn(seed: int, count: int = 6):
 
 @pytest.mark.parametrize("values", [{}, {"springs[0].stiffness": 1234.5,
                                          "springs[0].rest_length": 0.61}])
+@pytest.mark.slow
 def test_the_generated_holding_torques_are_the_numpy_statics(values):
     solver, _ = solvers()
     multi, _ = STUDY.arm_scenes()

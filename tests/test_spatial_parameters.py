@@ -138,6 +138,7 @@ def drawn_values():
 
 @pytest.mark.compile
 @pytest.mark.parametrize("method, examples", [("midpoint", 3), ("vi", 1), ("es", 1)])
+@pytest.mark.slow
 def test_a_run_with_parameters_is_the_run_with_the_numbers_compiled_in(method, examples):
     """Drawn values of gravity, a mass, a damping, a stiffness and a rest length: the
     parameterised solver's 40 steps equal those of the solver built from the scene with the

@@ -97,6 +97,7 @@ def test_the_command_line_runs_a_spatial_sweep_and_refuses_its_geometry(tmp_path
 @given(values=st.lists(st.tuples(st.floats(20.0, 400.0), st.floats(0.0, 0.4),
                                  st.floats(-12.0, -6.0), st.floats(0.3, 3.0),
                                  st.floats(-1.0, 1.0)), min_size=2, max_size=2))
+@pytest.mark.slow
 def test_a_sweeps_rows_are_the_single_runs_with_the_same_values(values):
     """Drawn stiffness, rest length, gravity, mass and initial angle, zipped into runs: each
     row's final state and summaries are those of the run of a solver built from the scene with

@@ -186,6 +186,7 @@ STRICT = {"update_rtol": 1e-15, "update_atol": 1e-15, "residual_tol": 1e-13}
 
 @pytest.mark.compile
 @pytest.mark.parametrize("n, seed", [(3, 11), (5, 12)])
+@pytest.mark.slow
 def test_compiled_run_converges_at_order_2_to_dop853(n, seed):
     """A random chain with routed springs, gravity, damping on every joint and constant
     torques on two: build_solver(scene, "vi") simulates, and the angle error at t = 1 s
@@ -277,6 +278,7 @@ def momentum_jacobian(scene):
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_step_map_is_symplectic_in_q_and_p():
     """The step's Jacobian in (q, w) from the step sensitivities, turned into (q, p) with
     p = M(q) w: J^T Omega J = Omega to round-off (a conservative chain with springs and
@@ -355,6 +357,7 @@ def test_energy_balance_with_damping_and_torques():
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_sensitivities_and_generated_functions_pass_the_check():
     """chaingen check's comparisons on an actuated, damped spatial scene: the residual
     Jacobian and the step sensitivities against central differences, every generated function
@@ -363,6 +366,7 @@ def test_sensitivities_and_generated_functions_pass_the_check():
 
 
 @pytest.mark.compile
+@pytest.mark.slow
 def test_composed_steps_of_order_4_and_6_converge_to_dop853():
     """The spatial vi step composed to order 4 and 6 (chaingen.symbolic.composition): the
     error at t = 1 s against DOP853 falls by 2^4 and 2^6 per halving of dt. The springs are
@@ -388,6 +392,7 @@ def test_composed_steps_of_order_4_and_6_converge_to_dop853():
 
 @pytest.mark.tools
 @pytest.mark.parametrize("actuated", [(), (1, 3)])
+@pytest.mark.slow
 def test_spatial_vi_example_is_clean_under_valgrind_and_the_sanitizers(tmp_path, actuated):
     """The vi package of a spatial chain as a user gets it (free motion, and an actuated,
     damped chain): its example program, compiled with the strict flags, runs clean under

@@ -107,6 +107,7 @@ def cmake_builds(request, tmp_path_factory):
     return {"compiler": compiler, **builds}
 
 
+@pytest.mark.slow
 def test_cmake_installs_header_and_libraries(cmake_builds):
     for linkage, library in (("static", f"lib{PREFIX}.a"), ("shared", f"lib{PREFIX}.so")):
         prefix = cmake_builds[linkage]["prefix"]
@@ -226,6 +227,7 @@ def valgrind_clean(result: subprocess.CompletedProcess) -> None:
 
 @pytest.mark.parametrize("scene", ["three_link_mono", "four_link_actuated"])
 @pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
+@pytest.mark.slow
 def test_every_scheme_example_is_clean_under_valgrind(tmp_path, scene, method):
     """Each scheme's package, unactuated and actuated (with damping), generated afresh: its
     example program under memcheck, no error (no uninitialised workspace field read)."""
@@ -244,6 +246,7 @@ def test_every_scheme_example_is_clean_under_valgrind(tmp_path, scene, method):
 
 
 @pytest.mark.parametrize("method, order", [("es", 4), ("es", 6), ("vi", 6), ("midpoint", 6)])
+@pytest.mark.slow
 def test_composed_examples_are_clean_under_valgrind_and_the_sanitizers(tmp_path, method, order):
     """A composed step (docs/model.md 14), actuated with damping: with the strict flags, the
     example program (its stages) and a call of the chained step sensitivities (es: chained in
@@ -428,6 +431,7 @@ def test_example_accepts_good_arguments(plain_example, arguments):
 
 @pytest.mark.parametrize("method, order", [("es", 2), ("es", 4), ("es", 6), ("vi", 2),
                                            ("midpoint", 4)])
+@pytest.mark.slow
 def test_adaptive_runs_are_clean_under_valgrind_and_the_sanitizers(tmp_path, method, order):
     """simulate with adaptive steps (rtol, atol) on an actuated, damped scene: with the strict
     flags the run completes, refuses at least one step (a first try at the whole interval), and

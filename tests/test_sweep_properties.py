@@ -161,6 +161,7 @@ def check_row(spec, row, data, index: int) -> None:
 @settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(drawn=sweep_specs())
+@pytest.mark.slow
 def test_every_sweep_row_is_the_single_run_of_its_numbers(drawn):
     import xarray as xr
 
