@@ -20,6 +20,11 @@ from test_urdf_import import random_chain_urdf, reference_agreement
 from helpers import chaingen, require_module
 
 LIMIT = '<limit lower="{lower}" upper="{upper}" effort="1" velocity="1"/>'
+_LINK = ('<link name="{name}"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" '
+         'izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>')
+_JOINT = ('<joint name="{name}" type="revolute"><parent link="{parent}"/><child link="{child}"/>'
+          '<origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>' + LIMIT.format(lower=-1, upper=1)
+          + '</joint>')
 
 
 def two_link_urdf(elbow: str = '<axis xyz="0 1 0"/>' + LIMIT.format(lower=-1, upper=1),
@@ -77,6 +82,20 @@ REFUSED = {
         "link 'lower' (joint 'elbow'): a scene cannot take it: links[1]: joint 2 moves no "
         "mass: link 2 has no inertia about its axis (a point mass on it, or a rod along it), "
         "so the mass matrix is singular"),
+    # Joints that close a loop: Pinocchio 4.1 crashed the process on the first (segmentation
+    # fault, exit 139: chaingen import too), and on a loop of another shape said only "Model
+    # does not have any body named 'b'"; the second it refused as no valid tree.
+    "a link the child of two joints": (
+        two_link_urdf().replace("</robot>", _JOINT.format(name="back", parent="lower",
+                                                           child="upper") + "</robot>"),
+        "link 'upper' is the child of 2 joints ('shoulder', 'back'): a closed loop; chaingen "
+        "imports serial chains only"),
+    "joints in a cycle, no root": (
+        '<robot name="cycle">' + _LINK.format(name="a") + _LINK.format(name="b")
+        + _JOINT.format(name="ab", parent="a", child="b")
+        + _JOINT.format(name="ba", parent="b", child="a") + "</robot>",
+        "every link is the child of a joint, so the joints close a loop and no link is the "
+        "root; chaingen imports serial chains only"),
 }
 
 

@@ -66,7 +66,7 @@ def robot_urdf(relative: str) -> Path:
 
 def truncated_urdf(source: Path, tip: str | None, out: Path) -> Path:
     """A copy of `source` without the links beyond `tip` and the joints to them (for the
-    reference model only: the importer itself reads no XML)."""
+    reference model only: the importer reads the XML only for loops of joints)."""
     tree = ElementTree.parse(source)
     robot = tree.getroot()
     children: dict[str, list[str]] = {}

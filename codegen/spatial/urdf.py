@@ -46,6 +46,7 @@ from .urdf_checks import (
     check_limits,
     check_no_branch,
     check_revolute,
+    loop_reason,
     refuse_unseen_mimic,
 )
 from .values import SpatialJoint, SpatialLink, SpatialScene
@@ -265,6 +266,9 @@ def _load_model(pin, path: Path):
         raise ChaingenError(f"{path}: no such file")
     if not path.is_file():
         raise ChaingenError(f"{path}: not a file (give a URDF file)")
+    loop = loop_reason(path)     # before Pinocchio, which crashes on a loop without a root
+    if loop:
+        raise ChaingenError(f"{path}: {loop}; chaingen imports serial chains only")
     model, failure = None, ""
     with _stderr_captured() as complaints:
         try:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 
@@ -103,6 +104,32 @@ def refuse_unseen_mimic(pin, path: Path) -> None:
         raise ChaingenError(f"{path}: it has a <mimic> joint, and this Pinocchio "
                             f"({getattr(pin, '__version__', 'unknown version')}) cannot read one "
                             "(it would be an independent joint): install pin >= 3.4")
+
+
+def loop_reason(path: Path) -> str | None:
+    """What makes the joints of the URDF at `path` other than a tree (a link that is the child
+    of two joints, or joints that close a loop, so no link is the root), or None. Looked for
+    before Pinocchio reads the file: on a link that is the child of two joints, Pinocchio 4.1
+    either says only that it has no body of some name or (a joint back to a link nearer the
+    base) crashes the process with a segmentation fault."""
+    try:
+        root = ElementTree.parse(path).getroot()
+    except (OSError, ElementTree.ParseError):
+        return None
+    parents: dict[str, list[str]] = {}
+    links = {link.get("name") for link in root.findall("link")}
+    for joint in root.findall("joint"):
+        child = joint.find("child")
+        if child is not None and child.get("link"):
+            parents.setdefault(child.get("link"), []).append(joint.get("name", "?"))
+    for link, joints in parents.items():
+        if len(joints) > 1:
+            return (f"link {link!r} is the child of {len(joints)} joints "
+                    f"({', '.join(map(repr, joints))}): a closed loop")
+    if links and links <= set(parents):
+        return ("every link is the child of a joint, so the joints close a loop and no link "
+                "is the root")
+    return None
 
 
 def _triple(values) -> tuple[float, float, float]:
