@@ -96,6 +96,12 @@ REFUSED = {
         + _JOINT.format(name="ba", parent="b", child="a") + "</robot>",
         "every link is the child of a joint, so the joints close a loop and no link is the "
         "root; chaingen imports serial chains only"),
+    # A joint from a link the file does not have is no loop: the parser's own words name it.
+    "a joint from a missing link": (
+        two_link_urdf().replace("</robot>", _JOINT.format(name="stray", parent="ghost",
+                                                           child="lower") + "</robot>"),
+        "not a URDF file Pinocchio can read: Failed to build tree: parent link [ghost] of "
+        "joint [stray] not found"),
 }
 
 

@@ -119,9 +119,10 @@ def loop_reason(path: Path) -> str | None:
     parents: dict[str, list[str]] = {}
     links = {link.get("name") for link in root.findall("link")}
     for joint in root.findall("joint"):
-        child = joint.find("child")
-        if child is not None and child.get("link"):
-            parents.setdefault(child.get("link"), []).append(joint.get("name", "?"))
+        ends = [joint.find(end) for end in ("parent", "child")]
+        names = [end.get("link") if end is not None else None for end in ends]
+        if all(name in links for name in names):   # else Pinocchio names the missing link
+            parents.setdefault(names[1], []).append(joint.get("name", "?"))
     for link, joints in parents.items():
         if len(joints) > 1:
             return (f"link {link!r} is the child of {len(joints)} joints "
