@@ -10,6 +10,7 @@ import shutil
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -194,6 +195,27 @@ def test_the_overlay_draws_every_joint_distinctly(tmp_path, monkeypatch):
     labels = [text.get_text() for text in angles.get_legend().get_texts()]
     assert [label for label in labels if label.startswith("phi")] == [
         f"phi{i}" for i in range(1, 6)]
+
+
+def test_an_overlays_legend_tells_every_run_apart():
+    """Runs whose labels coincide (two scenes with one scheme and dt: the legend said
+    'es K=3, dt = 0.01 s' twice) are named by their scene, and runs of one scene by their
+    file (and the title names their scheme once); runs whose labels differ keep them."""
+    from chaingen.views.plots import TrajectoryRun, named_parameters, title_of
+
+    def run(path, scene, method="es", dt=0.01):
+        return TrajectoryRun(path=Path(path), columns=("t",), rows=np.zeros((1, 1)), n=1,
+                             scene=scene, method=method, quadrature=3, dt=dt)
+
+    scenes = named_parameters([run("a.csv", "three_link_mono"), run("b.csv", "three_link_multi")])
+    assert [r.legend for r in scenes] == ["three_link_mono: es K=3, dt = 0.01 s",
+                                          "three_link_multi: es K=3, dt = 0.01 s"]
+    files = named_parameters([run("x/a.csv", "mono"), run("y/a.csv", "mono")])
+    assert [r.legend for r in files] == ["x/a.csv: es K=3, dt = 0.01 s",
+                                         "y/a.csv: es K=3, dt = 0.01 s"]
+    assert title_of(scenes) == "three_link_mono, three_link_multi: es K=3, dt = 0.01 s"
+    plain = named_parameters([run("a.csv", "mono"), run("b.csv", "multi", dt=0.05)])
+    assert [r.legend for r in plain] == ["es K=3, dt = 0.01 s", "es K=3, dt = 0.05 s"]
 
 
 # -- the progress bar through the compile ---------------------------------------------------------

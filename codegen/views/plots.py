@@ -58,6 +58,9 @@ class TrajectoryRun:
     #: The run-time parameters' values (metadata: path -> value), and those the label names.
     parameters: dict = dataclasses.field(default_factory=dict)
     named: tuple[str, ...] = ()
+    #: What an overlay's legend names first to tell this run from another of the same label:
+    #: its scene, or its file ("" where the label alone does).
+    prefix: str = ""
 
     def column(self, name: str) -> np.ndarray:
         return self.rows[:, self.columns.index(name)]
@@ -107,14 +110,27 @@ class TrajectoryRun:
                   if path in self.parameters]
         return ", ".join(parts)
 
+    @property
+    def legend(self) -> str:
+        """The label, after the prefix that tells it from an overlay's other runs."""
+        return f"{self.prefix}: {self.label}" if self.prefix else self.label
+
 
 def named_parameters(runs: list[TrajectoryRun]) -> list[TrajectoryRun]:
     """`runs` labelled with the run-time parameters whose values differ between them (an
-    overlay of runs of one solver with other masses, lengths, ...)."""
+    overlay of runs of one solver with other masses, lengths, ...); where labels still
+    coincide (two scenes with the same scheme and dt, or two files of one run), the legend
+    names the scene, or else the file, of every run."""
     paths = sorted({path for run in runs for path in run.parameters})
     differing = tuple(path for path in paths
                       if len({run.parameters.get(path) for run in runs}) > 1)
-    return [dataclasses.replace(run, named=differing) for run in runs]
+    runs = [dataclasses.replace(run, named=differing) for run in runs]
+    if len({run.label for run in runs}) == len(runs):
+        return runs
+    scenes = [run.scene or run.path.stem for run in runs]
+    if len(set(zip(scenes, (run.label for run in runs)))) == len(runs):
+        return [dataclasses.replace(run, prefix=scene) for run, scene in zip(runs, scenes)]
+    return [dataclasses.replace(run, prefix=str(run.path)) for run in runs]
 
 
 def load_run(path) -> TrajectoryRun:
@@ -256,10 +272,10 @@ def _error_axis(axis, runs, values, ylabel: str, empty_note: str) -> None:
     for run, value, style in zip(runs, values, _styles(len(runs))):
         if not np.any(value > 0):
             if len(runs) > 1:   # a legend entry still says why the run has no curve
-                axis.plot([], [], label=f"{run.label}: 0 at every sample", **style)
+                axis.plot([], [], label=f"{run.legend}: 0 at every sample", **style)
             continue
         shown = np.where(value > 0, value, np.nan) if log else value
-        axis.plot(run.t, shown, label=run.label, **style)
+        axis.plot(run.t, shown, label=run.legend, **style)
         drawn = True
     if log:
         axis.set_yscale("log")
@@ -284,7 +300,7 @@ def title_of(runs: list[TrajectoryRun]) -> str:
         return f"{names[0]}: {runs[0].label}"
     dts = {run.dt for run in runs}
     if len(dts) == 1 and None not in dts:
-        methods = [run.label.rsplit(", dt = ", 1)[0] for run in runs]
+        methods = list(dict.fromkeys(run.label.rsplit(", dt = ", 1)[0] for run in runs))
         return f"{scenes}: {' vs '.join(methods)}, dt = {dts.pop():g} s"
     return f"{scenes}: {len(runs)} runs compared"
 
@@ -319,7 +335,7 @@ def plot_runs(runs: list[TrajectoryRun], out: Path) -> Path:
         angles.legend(fontsize=8, loc="upper right", ncol=min(4, runs[0].n))
     else:
         from matplotlib.lines import Line2D
-        handles = [Line2D([], [], **style, label=run.label)
+        handles = [Line2D([], [], **style, label=run.legend)
                    for run, style in zip(runs, _styles(len(runs)))]
         handles += [Line2D([], [], color="0.3", linestyle=joint_line_style(joint),
                            label=ANGLE_COLUMN.format(i=joint + 1))
