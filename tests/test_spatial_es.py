@@ -568,3 +568,29 @@ def test_a_root_that_turns_a_link_half_round_is_refused_and_split():
     run = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.05, n_steps=40)
     assert run.split_steps >= 1
     assert np.max(np.abs(run.balance_error)) <= 1e-12 * np.max(np.abs(run.energy))
+
+
+def test_k_plays_no_role_in_the_spatial_es_below_order_6():
+    """The spatial es takes the springs' exact discrete gradient by the chain rule up to order
+    4 (no quadrature: its manifest says null), so its solver spec, label and cache key carry no
+    K there (they said K = 3: an order study given such a solver refused it as 'quadrature
+    None, not 3', and K = 3 and 5 were two builds of one package); at order 6 the Galerkin
+    step's Lobatto rule takes K, and the planar es averages its springs by K points."""
+    from chaingen.generate.key import solver_key
+    from chaingen.scene import load_reference_scene
+    from chaingen.scene.labels import scheme_label
+    from chaingen.scene.shipped import scene_file
+    from chaingen.scene.solver_spec import SolverSpec
+    from chaingen.spatial import load_spatial_scene
+
+    spatial = load_spatial_scene(scene_file("spatial_three_link"))
+    assert spatial.springs
+    for order in (2, 4):
+        spec = SolverSpec(spatial, "es", 3, order=order, sensitivities=False)
+        assert spec.quadrature_used is None
+        assert "K" not in scheme_label("es", spec.quadrature_used, order)
+        assert (solver_key(spatial, "es", 3, sensitivities=False, order=order)
+                == solver_key(spatial, "es", 5, sensitivities=False, order=order))
+    assert SolverSpec(spatial, "es", 3, order=6, sensitivities=False).quadrature_used == 3
+    planar = load_reference_scene("three_link_mono")
+    assert SolverSpec(planar, "es", 3, sensitivities=False).quadrature_used == 3

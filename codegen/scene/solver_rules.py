@@ -176,14 +176,18 @@ def orders_taken(method: str) -> tuple[int, ...]:
 def quadrature_used(scene, method: str, quadrature: int, order: int = 2) -> int | None:
     """The quadrature a scheme of `scene` runs with, None where K plays no role.
 
-    Only "es" uses K: up to order 4 it averages the spring gradient over the step by
-    Gauss-Legendre quadrature (docs/model.md, section 4), so without springs there is nothing
-    to average; at order 6 its Galerkin step integrates every term by the (K + 1)-point
-    Gauss-Lobatto rule (section 16).
+    Only "es" uses K: up to order 4 the planar one averages the spring gradient over the step
+    by Gauss-Legendre quadrature (docs/model.md, section 4), so without springs there is
+    nothing to average, and the spatial one takes none; at order 6 its Galerkin step
+    integrates every term by the (K + 1)-point Gauss-Lobatto rule (section 16).
     """
     if method != "es":
         return None
-    return quadrature if scene.springs or order >= GALERKIN_ORDER else None
+    if order >= GALERKIN_ORDER:
+        return quadrature
+    # The spatial es below order 6 takes the springs' exact discrete gradient by the chain
+    # rule (section 4.8): no quadrature, and its manifest says so.
+    return quadrature if scene.springs and scene.spring_quadrature else None
 
 
 def gradient_used(scene, method: str, gradient: str, order: int = 2) -> str | None:

@@ -6,6 +6,7 @@ A Scene is what the reader (chaingen.scene.reader) makes of a scene file; everyt
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 # The rules of a request (methods, K, orders) are chaingen.scene.solver_rules'; named here too
 # for the simulation defaults below and for the modules that import them from here.
@@ -134,6 +135,8 @@ class Scene:
     simulation: Simulation
     actuated_joints: tuple[int, ...] = ()  # 1-based joints driven by an input torque, ascending
     control: Control | None = None         # a [control] table: the actuated joints' control law
+    #: es below order 6 averages the springs' gradient over K Gauss-Legendre points (model.md 4).
+    spring_quadrature: ClassVar[bool] = True
 
     @property
     def n(self) -> int:

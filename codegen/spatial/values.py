@@ -14,6 +14,7 @@ default method.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from ..scene.values import Control, Simulation
 
@@ -97,6 +98,9 @@ class SpatialScene:
     actuated: tuple[int, ...] = ()            # 1-based joints with a torque input, ascending
     control: Control | None = None            # a [control] table (chaingen.scene.values.Control)
     simulation: Simulation = SPATIAL_SIMULATION_DEFAULTS   # run settings ([simulation])
+    #: es below order 6 takes the springs' exact discrete gradient by the chain rule (model.md
+    #: 4.8): no quadrature (chaingen.scene.solver_rules.quadrature_used).
+    spring_quadrature: ClassVar[bool] = False
 
     @property
     def n(self) -> int:
