@@ -574,8 +574,9 @@ def test_k_plays_no_role_in_the_spatial_es_below_order_6():
     """The spatial es takes the springs' exact discrete gradient by the chain rule up to order
     4 (no quadrature: its manifest says null), so its solver spec, label and cache key carry no
     K there (they said K = 3: an order study given such a solver refused it as 'quadrature
-    None, not 3', and K = 3 and 5 were two builds of one package); at order 6 the Galerkin
-    step's Lobatto rule takes K, and the planar es averages its springs by K points."""
+    None, not 3', and K = 3 and 5 were two builds of one package), and its gradient is the
+    chain rule's whatever is asked (the manifest's); at order 6 the Galerkin step's Lobatto
+    rule takes K, and the planar es averages its springs by K points."""
     from chaingen.generate.key import solver_key
     from chaingen.scene import load_reference_scene
     from chaingen.scene.labels import scheme_label
@@ -591,6 +592,26 @@ def test_k_plays_no_role_in_the_spatial_es_below_order_6():
         assert "K" not in scheme_label("es", spec.quadrature_used, order)
         assert (solver_key(spatial, "es", 3, sensitivities=False, order=order)
                 == solver_key(spatial, "es", 5, sensitivities=False, order=order))
+        for asked in ("exact", "quadrature", "chain"):
+            assert SolverSpec(spatial, "es", 3, order=order, sensitivities=False,
+                              gradient=asked).gradient_used == "chain"
     assert SolverSpec(spatial, "es", 3, order=6, sensitivities=False).quadrature_used == 3
     planar = load_reference_scene("three_link_mono")
     assert SolverSpec(planar, "es", 3, sensitivities=False).quadrature_used == 3
+    assert SolverSpec(planar, "es", 3, sensitivities=False).gradient_used == "exact"
+
+
+@pytest.mark.compile
+def test_an_order_study_takes_a_built_spatial_es_solver():
+    """Given the spatial es solver build_solver makes (manifest: quadrature null, gradient
+    "chain"), the order study runs on it; it refused it as 'quadrature None, not 3' while the
+    spec said K = 3 (and would have as 'gradient chain, not exact' after that)."""
+    from chaingen.scene.shipped import scene_file
+    from chaingen.simulation import build_solver
+    from chaingen.spatial import load_spatial_scene
+    from chaingen.studies.order import order_study
+
+    scene = load_spatial_scene(scene_file("spatial_three_link"))
+    solver = build_solver(scene, "es", sensitivities=False)
+    study = order_study(scene, "es", 3, solver=solver, t_end=0.2)
+    assert study.quadrature is None and study.gradient == "chain"

@@ -193,7 +193,8 @@ def quadrature_used(scene, method: str, quadrature: int, order: int = 2) -> int 
 def gradient_used(scene, method: str, gradient: str, order: int = 2) -> str | None:
     """The discrete gradient a scheme of `scene` runs with, None where the choice plays no
     role: only es's own step (up to order 4, composed) has one, and only for springs (gravity's
-    gradient is constant: every average of it is exact)."""
+    gradient is constant: every average of it is exact). The spatial es has one: the chain
+    rule's exact gradient (model.md 4.8), whichever is asked for."""
     if method != "es" or order >= GALERKIN_ORDER or not scene.springs:
         return None
-    return gradient
+    return gradient if scene.spring_quadrature else "chain"
