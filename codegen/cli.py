@@ -125,7 +125,7 @@ def parser() -> argparse.ArgumentParser:
     animate.add_argument("--t-end", type=number,
                          help="animate up to this time in s (default: the whole run)")
     animate.add_argument("--fps", type=number,
-                         help="frames per second (default 25, in real time)")
+                         help="frames per second, 0.01 to 100 (default 25, in real time)")
     animate.add_argument("--every", type=positive_int, metavar="N",
                          help="draw every N-th sample (default: real time at --fps)")
     animate.add_argument("--size", type=dimension, default=480, metavar="PIXELS",

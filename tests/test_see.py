@@ -222,6 +222,20 @@ def test_frame_plan_plays_in_real_time_by_default():
         frame_plan(t, every=0)
 
 
+def test_frame_plan_of_an_every_beyond_the_samples_is_the_first_sample_at_a_gif_rate():
+    """--every 99999999999 on 101 samples (an internal OverflowError before: the GIF frame of
+    1 / (every dt) fps lasted more than a 16-bit count of hundredths), or beyond int64 (an
+    IndexError): one frame, the first sample, at a rate a GIF can hold."""
+    t = np.arange(0, 1.0 + 1e-9, 0.01)
+    for every in (99_999_999_999, 10 ** 20):
+        plan = frame_plan(t, every=every)
+        assert plan.indices.tolist() == [0] and plan.every == every
+        assert 0.01 <= plan.fps and 1000.0 / plan.fps / 10 <= 65535
+    # The slowest --fps on samples far apart: a frame every 100 s, every sample.
+    slow = frame_plan(np.arange(0, 1000.0, 100.0), fps=0.01)
+    assert slow.every == 1 and slow.fps == pytest.approx(0.01)
+
+
 @pytest.mark.compile
 def test_animation_of_a_short_run_is_a_gif_of_the_expected_frames(runs, tmp_path):
     scene = load("three_link_multi")
@@ -333,7 +347,10 @@ def test_animate_straight_from_a_scene(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["plot", "missing.csv"], "missing.csv: no such trajectory file"),
     (["animate", "SCENE", "-o", "x.webm"], "give a .gif or .mp4"),
-    (["animate", "SCENE", "--fps", "0", "-o", "x.gif"], "--fps: must be in (0, 100]"),
+    (["animate", "SCENE", "--fps", "0", "-o", "x.gif"], "--fps: must be from 0.01"),
+    # A frame every 1e300 s: every sample 1e302 apart would not index (IndexError before).
+    (["animate", "SCENE", "--fps", "1e-300", "-o", "x.gif"],
+     "--fps: must be from 0.01 (a frame every 100 s) to 100, got 1e-300"),
 ])
 def test_bad_plot_and_animate_input_exits_2_without_traceback(tmp_path, args, message):
     args = [str(scene_path("three_link_gravity")) if arg == "SCENE" else arg for arg in args]

@@ -34,6 +34,9 @@ from .figure import matplotlib_figure
 from .plots import TrajectoryRun
 
 DEFAULT_FPS = 25.0
+#: The slowest frame rate: a frame every 100 s (a GIF frame lasts at most 655.35 s, its
+#: duration a 16-bit count of hundredths).
+MIN_FPS = 0.01
 #: GIF frame durations are whole hundredths of a second.
 GIF_TICK_MS = 10
 #: Frame size in pixels (square); even, as MP4's yuv420p needs.
@@ -101,10 +104,12 @@ def frame_plan(t: np.ndarray, *, fps: float | None = None, every: int | None = N
     if every is None:
         every = max(1, round(1.0 / ((fps or DEFAULT_FPS) * sample_dt)))
     if fps is None:
-        fps = min(DEFAULT_FPS * 2, 1.0 / (every * sample_dt))
+        fps = max(MIN_FPS, min(DEFAULT_FPS * 2, 1.0 / (every * sample_dt)))
     if gif:   # a GIF frame lasts a whole number of hundredths
         fps = 1000.0 / (GIF_TICK_MS * max(2, round(1000.0 / (fps * GIF_TICK_MS))))
-    indices = np.arange(0, t.size, every)
+    # An every beyond the samples draws the first one alone; one past int64 (--every 10**20,
+    # or --fps 0.01 on samples 1e-30 s apart) would not index them.
+    indices = np.arange(0, t.size, min(every, t.size))
     if indices.size > MAX_FRAMES:
         raise PlotError(f"animate: {indices.size} frames (every {every} of {t.size} samples) is "
                         f"more than {MAX_FRAMES}; give a larger --every or a shorter --t-end")
@@ -205,8 +210,9 @@ def stretch_limit(scene: Scene, phis: np.ndarray) -> float:
 
 
 def check_fps(fps: float | None) -> None:
-    if fps is not None and not (math.isfinite(fps) and 0 < fps <= 100):
-        raise PlotError(f"--fps: must be in (0, 100], got {fps}")
+    if fps is not None and not (math.isfinite(fps) and MIN_FPS <= fps <= 100):
+        raise PlotError(f"--fps: must be from {MIN_FPS:g} (a frame every "
+                        f"{1 / MIN_FPS:g} s) to 100, got {fps:g}")
 
 
 def check_matches(scene: Scene, run: TrajectoryRun) -> None:
