@@ -19,7 +19,7 @@ from typing import Any, NoReturn
 from ..errors import SceneError, UnsupportedSceneError
 from ..runtime import contract
 from ..runtime.contract import ADAPTIVE_TOLERANCES
-from . import kinematics
+from . import kinematics, overflow
 from .control_table import read_control
 from .display import kind as _kind
 from .display import printable as _printable
@@ -306,7 +306,13 @@ class SceneReader:
             actuated_joints=actuated,
             control=control,
         )
-        self.refuse_zero_length_segments(scene)
+        # Numbers whose products overflow (overflow.py): the chain's first, as the segments'
+        # zero-length limit scales with it; the energies need the segments.
+        for check in (overflow.dynamics_overflow, self.refuse_zero_length_segments,
+                      overflow.energy_overflow):
+            refused = check(scene)
+            if refused is not None:
+                self.fail(*refused)
         return scene
 
     def base(self, value: Any) -> float:

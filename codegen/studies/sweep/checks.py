@@ -3,8 +3,9 @@
 A run is a scene with some numbers replaced, and the scene reader (`with_values`) is the judge
 of whether that scene is valid, with its own messages. Calling the reader for each of 10^6 runs
 takes minutes, so the runs are first screened column by column with numpy: each number's own
-range (contract.NUMBER_BOUNDS: a mass > 0, a rest length >= 0, ...), and, when the varied
-numbers move a spring's fastenings, its segments' lengths at the initial angles. The screen is
+range (contract.NUMBER_BOUNDS: a mass > 0, a rest length >= 0, ...) and magnitude (beyond
+LARGE, where the reader's overflow checks apply), and, when the varied numbers move a spring's
+fastenings, its segments' lengths at the initial angles. The screen is
 generous (a run near a limit is suspect too); the reader then judges the suspects in run order
 and the first it refuses is the error. A run the screen passes is one the reader accepts: the
 screen's rules are the reader's (tests/test_sweep_properties.py compares them on drawn values).
@@ -26,6 +27,10 @@ from ...spatial.values import SpatialScene
 
 #: Runs screened at once (bounded memory).
 BLOCK = 65_536
+#: A varied number beyond this magnitude makes its run a suspect: the reader refuses a chain
+#: whose mass matrix, gravity torques or energies at the start overflow a double (a com of
+#: 1e200 m, a rest length of 1e300 m), which takes products of such numbers.
+LARGE = 1e30
 
 
 def _geometric(path: str) -> bool:
@@ -41,7 +46,7 @@ def suspects(scene: Scene | SpatialScene, columns: dict[str, np.ndarray], first:
     bad = np.zeros(count, dtype=bool)
     block = {path: column[first:first + count] for path, column in columns.items()}
     for path, values in block.items():
-        bad |= ~np.isfinite(values)
+        bad |= ~(np.abs(values) <= LARGE)      # also inf and NaN
         bound = lower_bound(path)     # the scene format's, stated once (the reader's too)
         if bound is not None:
             bad |= ~(values >= bound.value if bound.inclusive else values > bound.value)

@@ -1,0 +1,77 @@
+"""Finite but extreme numbers in a planar scene: the reader refuses what no step can take (a
+mass matrix, a spring's or the initial kinetic energy beyond the range of a double) in one line
+at its key path, as the spatial reader does (docs/scene-format.md, sections 5, 6 and 8); what
+it takes, the run either simulates or stops with its reason (exit 1), never an internal error."""
+from __future__ import annotations
+
+import pytest
+
+from chaingen.errors import SceneError
+from chaingen.scene import parse_scene
+
+from helpers import chaingen_in_process, scene_path
+
+BASE = scene_path("three_link_mono").read_text()
+DYNAMICS = ("links: the chain's mass matrix or gravity torques at the initial angles are "
+            "beyond the range of a double")
+
+
+def edited(*replacements: tuple[str, str]) -> str:
+    text = BASE
+    for old, new in replacements:
+        assert old in text
+        text = text.replace(old, new, 1)
+    return text
+
+
+@pytest.mark.parametrize("replacements, message", [
+    # es squared the com when generating: an internal OverflowError, exit 1 (measured).
+    ([("com = 0.5", "com = 1e200")], DYNAMICS),
+    # A com whose square overflows, on a mass that would bring m com^2 back into range.
+    ([("mass = 1.0", "mass = 1e-300"), ("com = 0.5", "com = 1e155")], DYNAMICS),
+    # The segments' zero-length limit scaled with the links and called s_2 zero (got 0.0).
+    ([("length = 1.0", "length = 1e200")], DYNAMICS),
+    ([("mass = 1.0", "mass = 1e308"), ("com = 0.5", "com = 1e10")], DYNAMICS),
+    ([("inertia = 1.0", "inertia = 1.7e308")] * 3, DYNAMICS),
+    ([("gravity = 1.0", "gravity = 1.7e308"), ("mass = 1.0", "mass = 10.0")], DYNAMICS),
+    # Each method failed at step 1 (NaN, or a missed energy balance), exit 1.
+    ([("rest_length = 0.2", "rest_length = 1e300")],
+     "springs[0]: its energy 1/2 k (s - S_0)^2 at the initial angles is beyond the range of "
+     "a double"),
+    ([("stiffness = 1.0", "stiffness = 1e300"), ("rest_length = 0.2", "rest_length = 1e5")],
+     "springs[0]: its energy"),
+    ([("velocities = [0.0, 0.0, 0.0]", "velocities = [1e160, 0.0, 0.0]")],
+     "initial.velocities: the kinetic energy of the initial state is beyond the range of a "
+     "double: write the rates in rad/s, got [1e+160, 0.0, 0.0]"),
+])
+def test_the_reader_refuses_numbers_whose_dynamics_overflow(replacements, message):
+    with pytest.raises(SceneError) as refused:
+        parse_scene(edited(*replacements), "arm.toml", "arm")
+    assert str(refused.value).startswith(f"arm.toml: {message}")
+    assert "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize("replacements", [
+    [("mass = 1.0", "mass = 1e300")],              # m R^2 within range: the run judges
+    [("mass = 1.0", "mass = 1e-300")] * 3,
+    [("length = 1.0", "length = 1e-300")],
+    [("stiffness = 1.0", "stiffness = 1e300")],
+    [("gravity = 1.0", "gravity = 1e300")],
+    [("velocities = [0.0, 0.0, 0.0]", "velocities = [1e150, 0.0, 0.0]")],
+])
+def test_extreme_numbers_within_the_range_of_a_double_are_read(replacements):
+    parse_scene(edited(*replacements), "arm.toml", "arm")
+
+
+def test_simulate_refuses_an_overflowing_com_in_one_line_exit_2(tmp_path):
+    """com = 1e200 with es: an internal OverflowError (exit 1) in the code generation before."""
+    scene = tmp_path / "arm.toml"
+    scene.write_text(edited(("com = 0.5", "com = 1e200")))
+    result = chaingen_in_process("simulate", scene, "--method", "es", "--t-end", "0.1",
+                                 "--out", "run.csv", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip().splitlines() == [f"chaingen: error: {scene}: {DYNAMICS} (a "
+                                                  "length, a com, a mass or an inertia far too "
+                                                  "large, or gravity): write the scene in SI "
+                                                  "units (m, kg, kg m^2)"]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["arm.toml"]
