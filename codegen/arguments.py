@@ -4,11 +4,12 @@ and the scene a command is given, planar or spatial, told apart here once."""
 from __future__ import annotations
 
 import argparse
-import math
+import functools
 import os
 from pathlib import Path
 
 from .runtime import contract
+from .runtime.interface import option_refusal
 from .scene import Scene
 from .scene.solver_rules import (
     GALERKIN_MIN_QUADRATURE,
@@ -123,7 +124,8 @@ def add_newton_options(parser: argparse.ArgumentParser, *, adaptive: bool = True
             group.add_argument(flag, type=adaptive_tolerance, metavar="X",
                                help=field.comment or None)
         else:
-            group.add_argument(flag, type=tolerance, metavar="X", help=field.comment or None)
+            group.add_argument(flag, type=functools.partial(tolerance, field=field),
+                               metavar="X", help=field.comment or None)
 
 
 #: reuse_jacobian on the command line: the contract's mode names, e.g. per-step.
@@ -140,10 +142,13 @@ def adaptive_tolerance(text: str) -> float:
     return value
 
 
-def tolerance(text: str) -> float:
+def tolerance(text: str, field: contract.OptionField) -> float:
+    """A double of the Newton options, in its field's range (the Python runtime's rule:
+    --residual-tol and --update-atol > 0, the others >= 0; finite)."""
     value = number(text)
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be >= 0 and finite, got {text!r}")
+    refused = option_refusal(field, value)
+    if refused:
+        raise argparse.ArgumentTypeError(f"{refused}, got {text!r}")
     return value
 
 

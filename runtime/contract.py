@@ -206,14 +206,18 @@ JACOBIAN_MODES = (
 @dataclass(frozen=True)
 class OptionField:
     """A field of the options struct: C type ("int" or "double"), its default, what a reader
-    of the header needs to know beside the default, and whether it is a switch (0 or 1; a bool
-    in Python)."""
+    of the header needs to know beside the default, whether it is a switch (0 or 1; a bool
+    in Python), and the least value it takes (`lower`; a double must also be finite): a value
+    below it makes every step fail (0 iterations, a residual never <= 0, an update weight
+    1 / (update_atol + update_rtol |z|) infinite where z = 0), so the Python runtime and the
+    command line refuse it as bad input."""
 
     name: str
     c_type: str
     default: int | float
     comment: str = ""
     switch: bool = False
+    lower: LowerBound | None = None
 
     @property
     def python_type(self) -> type:
@@ -226,15 +230,16 @@ class OptionField:
 DEFAULT_ENERGY_TOL = 0.01
 
 NEWTON_OPTIONS = (
-    OptionField("max_iterations", "int", 20, "bounds the work of one step"),
-    OptionField("update_rtol", "double", 1e-10),
-    OptionField("update_atol", "double", 1e-13),
-    OptionField("residual_tol", "double", 1e-8, "units of F"),
+    OptionField("max_iterations", "int", 20, "bounds the work of one step",
+                lower=LowerBound(1, True)),
+    OptionField("update_rtol", "double", 1e-10, lower=LowerBound(0.0, True)),
+    OptionField("update_atol", "double", 1e-13, lower=LowerBound(0.0, False)),
+    OptionField("residual_tol", "double", 1e-8, "units of F", lower=LowerBound(0.0, False)),
     OptionField("warm_start", "int", 1, "continue from the previous solutions", switch=True),
     OptionField("reuse_jacobian", "int", JACOBIAN_EVERY_ITERATE, "one of the JACOBIAN_* modes"),
     OptionField("energy_tol", "double", DEFAULT_ENERGY_TOL,
                 "vi, midpoint, spatial es: a step with |H_1 - H_0 - W + D| > energy_tol "
-                "(T_0 + T_1) is refused and split; 0: no check"),
+                "(T_0 + T_1) is refused and split; 0: no check", lower=LowerBound(0.0, True)),
     OptionField("rtol", "double", 0.0, "adaptive steps: relative local error, 0 or >= 1e-14; 0 "
                                        "with atol 0: fixed steps of dt"),
     OptionField("atol", "double", 0.0, "adaptive steps: absolute local error (rad, rad/s), 0 "

@@ -159,10 +159,24 @@ def _newton_options_class():
     return options
 
 
+def option_refusal(field, value) -> str | None:
+    """What an options field must be ("must be > 0 and finite") if `value` (of the field's
+    Python type) is out of its range (its `lower` bound; a double must be finite), else None:
+    the one rule of the Python runtime and the command line."""
+    if field.name in contract.ADAPTIVE_TOLERANCES:
+        return None       # their own rule: contract.is_adaptive_tolerance
+    bound, double = field.lower, field.c_type == "double"
+    if (double and not np.isfinite(value)) or (bound is not None and not bound.admits(value)):
+        rule = " and ".join(([bound.rule] if bound else []) + (["finite"] if double else []))
+        return f"must be {rule}"
+    return None
+
+
 def _option_value(field, value):
     """The value of an options field as its Python type: a switch True, False, 1 or 0, an int
-    field an integer, a double a real number; anything else (a string, 2.5 iterations) is
-    refused rather than converted."""
+    field an integer (not a bool), a double a real number; anything else (a string, 2.5
+    iterations, True iterations) is refused rather than converted, and so is a value out of
+    the field's range (option_refusal: 0 iterations, a NaN or negative tolerance)."""
     name = f"NewtonOptions.{field.name}"
     if field.switch:
         if isinstance(value, (bool, np.bool_)) or (
@@ -171,13 +185,19 @@ def _option_value(field, value):
         raise TypeError(f"{name}: must be True or False (or 1, 0), got {value!r}")
     if field.python_type is int:
         try:
+            if isinstance(value, (bool, np.bool_)):
+                raise TypeError
             value = operator.index(value)
         except TypeError:
             raise TypeError(f"{name}: must be an integer, got {value!r}") from None
         if not -2 ** 31 <= value < 2 ** 31:     # a C int would wrap it silently
             raise ValueError(f"{name}: must fit a C int, got {value!r}")
-        return value
-    return real_number(value, name)
+    else:
+        value = real_number(value, name)
+    refused = option_refusal(field, value)
+    if refused:
+        raise ValueError(f"{name}: {refused}, got {value!r}")
+    return value
 
 
 def _check_options(options) -> None:

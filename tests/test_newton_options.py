@@ -187,7 +187,8 @@ def test_simplified_newton_stops_at_the_round_off_floor():
     scene = load("three_link_mono")
     result = solver.simulate(scene.initial_angles, scene.initial_velocities, dt=0.01,
                              n_steps=5000,
-                             options=NewtonOptions(warm_start=False, reuse_jacobian=True))
+                             options=NewtonOptions(warm_start=False,
+                                                   reuse_jacobian=JACOBIAN_ACROSS_STEPS))
     assert result.max_newton_iterations < 20
     assert np.abs(result.energy_error).max() < 1e-10
 

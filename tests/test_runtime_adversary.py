@@ -286,6 +286,49 @@ def test_newton_options_keep_their_types():
     assert options.max_iterations == 7 and type(options.residual_tol) is float
 
 
+OUT_OF_RANGE = [("max_iterations", 0, ">= 1"), ("max_iterations", -1, ">= 1"),
+                ("residual_tol", 0.0, "> 0 and finite"), ("residual_tol", np.nan, "> 0 and finite"),
+                ("residual_tol", np.inf, "> 0 and finite"), ("update_atol", 0.0, "> 0 and finite"),
+                ("update_rtol", -1e-10, ">= 0 and finite"), ("update_rtol", np.inf,
+                                                              ">= 0 and finite"),
+                ("energy_tol", -1.0, ">= 0 and finite"), ("energy_tol", np.nan, ">= 0 and finite")]
+
+
+@pytest.mark.parametrize("name, value, rule", OUT_OF_RANGE)
+def test_newton_options_out_of_their_range_are_refused_as_bad_input(name, value, rule, tmp_path):
+    """Each of these made every step fail (a run failed at step 1, exit 1): no iteration at
+    all (max_iterations 0 or -1: 'did not converge' after 0 iterations), a residual never <= 0,
+    an update weight 1 / (update_atol + update_rtol |z|) infinite where an unknown is 0
+    (update_atol 0: 'NaN or Inf in the residual or the Newton iterate' after 10 iterations on
+    three_link_mono, es), 45 iterations on residual_tol NaN; a negative or NaN energy_tol came
+    back as C's 'bad argument'. The command line took tolerances of 0 too."""
+    message = rf"^NewtonOptions\.{name}: must be {rule}, got "
+    with pytest.raises(ValueError, match=message):
+        NewtonOptions(**{name: value})
+    with pytest.raises(ValueError, match=message):
+        fake_solver().newton_options({name: value})
+    if not np.isfinite(value) and name != "max_iterations":
+        return
+    from helpers import ROOT, chaingen_in_process
+    result = chaingen_in_process("simulate", ROOT / "scenes" / "three_link_mono.toml",
+                                 f"--{name.replace('_', '-')}={value}", "--out",
+                                 tmp_path / "run.csv", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert f"must be {rule}" in result.stderr, result.stderr
+    assert not (tmp_path / "run.csv").exists()
+
+
+def test_an_integer_newton_option_takes_no_bool():
+    """max_iterations=True ran as 1 iteration a rung (a run failed on it), and
+    reuse_jacobian=True as simplified Newton (mode 1), without a word."""
+    for name in ("max_iterations", "reuse_jacobian"):
+        for value in (True, np.True_, False):
+            with pytest.raises(TypeError, match=rf"^NewtonOptions\.{name}: must be an integer"):
+                NewtonOptions(**{name: value})
+    assert NewtonOptions(reuse_jacobian=np.int64(1)).as_c().reuse_jacobian == 1
+    assert NewtonOptions(update_rtol=0, energy_tol=0).as_c().update_rtol == 0.0
+
+
 @pytest.mark.compile
 def test_a_stepper_and_a_controller_refuse_values_that_are_no_real_numbers():
     from chaingen import build_solver
