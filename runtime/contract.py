@@ -205,12 +205,7 @@ JACOBIAN_MODES = (
 
 @dataclass(frozen=True)
 class OptionField:
-    """A field of the options struct: C type ("int" or "double"), its default, what a reader
-    of the header needs to know beside the default, whether it is a switch (0 or 1; a bool
-    in Python), and the least value it takes (`lower`; a double must also be finite): a value
-    below it makes every step fail (0 iterations, a residual never <= 0, an update weight
-    1 / (update_atol + update_rtol |z|) infinite where z = 0), so the Python runtime and the
-    command line refuse it as bad input."""
+    """An options field: C type, default, header comment, switch (0/1), least value."""
 
     name: str
     c_type: str
