@@ -105,40 +105,49 @@ def plot_sweep(out: str | Path, metric: str, path: str | Path | None = None) -> 
     n = sum(1 for column in runs.columns if re.fullmatch(r"phi\d+", column))
     check_metric(metric, n, axes, (out / "trajectories.zarr").exists())
     values = _metric(out, runs, metric)
+    title = f"{record.get('method', '')}: {metric} over {len(runs)} runs"
+    # A failed run's metrics are those of the steps it completed (max_energy_error 0 for one
+    # that failed at step 1): drawn among the others they would read as a result.
+    failed = (runs["status"] != "ok").to_numpy() if "status" in runs.columns else None
+    if failed is not None and failed.any() and metric not in axes:
+        values = np.where(failed, np.nan, values)
+        title += f", {int(failed.sum())} failed (not drawn)"
     figure = matplotlib_figure((7.5, 5.5), 120, "the sweep plot")
     axis = figure.add_subplot()
-    title = f"{record.get('method', '')}: {metric} over {len(runs)} runs"
     if len(axes) == 1:
-        x = runs[axes[0]].to_numpy(dtype=float)
+        x, x_label = _logged(runs[axes[0]].to_numpy(dtype=float), label(axes[0]),
+                             axis.set_xscale, spacing.get(axes[0]) == "log")
+        values, metric_label = _logged(values, metric, axis.set_yscale, False)
         order = np.argsort(x)
         axis.plot(x[order], values[order], marker="o", markersize=3)
-        axis.set_xlabel(label(axes[0]))
-        axis.set_ylabel(metric)
-        _scale(axis.set_xscale, x, spacing.get(axes[0]))
-        if np.all(values[np.isfinite(values)] > 0) and _spans(values, 2):
-            axis.set_yscale("log")
+        axis.set_xlabel(x_label)
+        axis.set_ylabel(metric_label)
     else:
         from matplotlib.colors import LogNorm
 
+        values, metric_label = _logged(values, metric, None, False)
         finite = values[np.isfinite(values)]
-        norm = LogNorm() if finite.size and np.all(finite > 0) and _spans(finite, 2) else None
+        norm = (LogNorm() if metric_label == metric and finite.size and np.all(finite > 0)
+                and _spans(finite, 2) else None)     # log10 values themselves: linear
         if record.get("spec", {}).get("mode") == "sample":
             # Scattered points, not a grid: each run a dot coloured by its metric.
             x = runs[axes[0]].to_numpy(dtype=float)
             y = runs[axes[1]].to_numpy(dtype=float)
-            image = axis.scatter(x, y, c=values, s=12, norm=norm)
         else:
             frame = pd.DataFrame({"x": runs[axes[0]], "y": runs[axes[1]], "value": values})
             grid = frame.groupby(["y", "x"])["value"].mean().unstack("x")
             x = grid.columns.to_numpy(dtype=float)
             y = grid.index.to_numpy(dtype=float)
+        x, x_label = _logged(x, label(axes[0]), axis.set_xscale, spacing.get(axes[0]) == "log")
+        y, y_label = _logged(y, label(axes[1]), axis.set_yscale, spacing.get(axes[1]) == "log")
+        if record.get("spec", {}).get("mode") == "sample":
+            image = axis.scatter(x, y, c=values, s=12, norm=norm)
+        else:
             image = axis.pcolormesh(x, y, grid.to_numpy(dtype=float), shading="nearest",
                                     norm=norm)
-        figure.colorbar(image, ax=axis, label=metric)
-        axis.set_xlabel(label(axes[0]))
-        axis.set_ylabel(label(axes[1]))
-        _scale(axis.set_xscale, x, spacing.get(axes[0]))
-        _scale(axis.set_yscale, y, spacing.get(axes[1]))
+        figure.colorbar(image, ax=axis, label=metric_label)
+        axis.set_xlabel(x_label)
+        axis.set_ylabel(y_label)
         if len(axes) > 2:
             title += f" (mean over {', '.join(axes[2:])})"
     axis.set_title(title, fontsize=9)
@@ -147,12 +156,27 @@ def plot_sweep(out: str | Path, metric: str, path: str | Path | None = None) -> 
     return save_png(figure, target)
 
 
-def _scale(set_scale, values: np.ndarray, spacing: str | None) -> None:
-    """A log axis for an axis swept with log spacing, or for positive values over 2 decades."""
-    if spacing == "log" or (np.all(values > 0) and _spans(values, 2)):
+#: Matplotlib's log axes draw values within these bounds; beyond them (1e300 kg, 1e-300 N/m)
+#: its tick locator overflows or the axis falls back to 1..10 and the figure is empty.
+LOG_AXIS_LIMITS = (1e-200, 1e200)
+
+
+def _logged(values: np.ndarray, label: str, set_scale, log_spacing: bool):
+    """(values, label) as drawn: on a log axis (set_scale("log"); None for a colour bar) for an
+    axis swept with log spacing or positive values over 2 decades, and as log10 of the values
+    on a linear axis, labelled so, where they reach beyond LOG_AXIS_LIMITS."""
+    finite = values[np.isfinite(values)]
+    if not (finite.size and np.all(finite > 0) and (log_spacing or _spans(finite, 2))):
+        return values, label
+    if finite.min() < LOG_AXIS_LIMITS[0] or finite.max() > LOG_AXIS_LIMITS[1]:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.log10(values), f"log10 {label}"
+    if set_scale is not None:
         set_scale("log")
+    return values, label
 
 
 def _spans(values: np.ndarray, decades: float) -> bool:
     finite = values[np.isfinite(values) & (values > 0)]
-    return finite.size > 1 and np.log10(finite.max() / finite.min()) > decades
+    # The logarithms' difference: the ratio of 1e300 to 1e-300 overflows.
+    return finite.size > 1 and np.log10(finite.max()) - np.log10(finite.min()) > decades
