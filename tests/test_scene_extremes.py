@@ -75,3 +75,35 @@ def test_simulate_refuses_an_overflowing_com_in_one_line_exit_2(tmp_path):
                                                   "large, or gravity): write the scene in SI "
                                                   "units (m, kg, kg m^2)"]
     assert sorted(path.name for path in tmp_path.iterdir()) == ["arm.toml"]
+
+
+# -- spatial: the same energies (its mass matrix and gravity torques were checked before) ------
+
+SPATIAL = scene_path("spatial_three_link").read_text()
+
+
+@pytest.mark.parametrize("old, new, message", [
+    # Both failed at step 1 with 'missed the energy balance' (midpoint, es), exit 1.
+    ("rest_length = 0.2", "rest_length = 1e300",
+     "springs[0]: its energy 1/2 k (L - L_0)^2 at the initial angles is beyond the range of a "
+     "double"),
+    # Both failed at step 1 on NaN, exit 1.
+    ("velocities = [0.0, 0.2, 0.0]", "velocities = [0.0, 1e160, 0.0]",
+     "initial.velocities: the kinetic energy of the initial state is beyond the range of a "
+     "double: write the rates in rad/s, got [0.0, 1e+160, 0.0]"),
+])
+def test_the_spatial_reader_refuses_energies_that_overflow(old, new, message):
+    from chaingen.spatial import parse_spatial_scene
+
+    assert old in SPATIAL
+    with pytest.raises(SceneError) as refused:
+        parse_spatial_scene(SPATIAL.replace(old, new, 1), "arm.toml")
+    assert str(refused.value).startswith(f"arm.toml: {message}")
+
+
+def test_the_spatial_reader_reads_large_numbers_within_range():
+    from chaingen.spatial import parse_spatial_scene
+
+    for old, new in (("stiffness = 300.0", "stiffness = 1e300"), ("mass = 2.5", "mass = 1e300"),
+                     ("velocities = [0.0, 0.2, 0.0]", "velocities = [0.0, 1e150, 0.0]")):
+        parse_spatial_scene(SPATIAL.replace(old, new, 1), "arm.toml")

@@ -165,6 +165,7 @@ class SpatialSceneReader(SceneReader):
         )
         self.refuse_overflowing_dynamics(scene)     # first: the segments' limit scales with it
         self.refuse_zero_length_segments(scene)
+        self.refuse_overflowing_energies(scene)
         return scene
 
     def refuse_planar(self, document: dict[str, Any]) -> None:
@@ -343,6 +344,26 @@ class SpatialSceneReader(SceneReader):
                       "are beyond the range of a double (a joint's xyz, a com, a mass or an "
                       "inertia far too large): write the scene in SI units (m, kg, kg m^2)")
         self.refuse_singular_mass_matrix(scene, mass)
+
+    def refuse_overflowing_energies(self, scene: SpatialScene) -> None:
+        """Refuse a spring whose energy 1/2 k (L - L_0)^2 at the initial angles, or an initial
+        state whose kinetic energy, is beyond the range of a double (a rest length of 1e300 m,
+        a rate of 1e160 rad/s), as the planar reader does (scene.overflow)."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            lengths = dynamics.spring_lengths(scene, scene.initial_angles)
+            for index, (spring, length) in enumerate(zip(scene.springs, lengths)):
+                stretch = length - spring.rest_length
+                if not math.isfinite(0.5 * spring.stiffness * (stretch * stretch)):
+                    self.fail(f"springs[{index}]", "its energy 1/2 k (L - L_0)^2 at the "
+                              "initial angles is beyond the range of a double (a stiffness or "
+                              "a rest length far too large): write the scene in SI units "
+                              "(N/m, m)")
+            kinetic = dynamics.kinetic_energy(scene, scene.initial_angles,
+                                              scene.initial_velocities)
+        if not math.isfinite(kinetic):
+            self.fail("initial.velocities", "the kinetic energy of the initial state is beyond "
+                      "the range of a double: write the rates in rad/s",
+                      list(scene.initial_velocities))
 
     def refuse_singular_mass_matrix(self, scene: SpatialScene, mass: np.ndarray) -> None:
         """Refuse a chain whose mass matrix at the initial angles is singular (within
