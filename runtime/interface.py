@@ -76,6 +76,34 @@ def real_number(value, name: str) -> float:
     return float(array)
 
 
+def step_length(dt, what: str) -> float:
+    """dt of a step function: required, after u as in C (step(x0, u, dt)), > 0 and finite."""
+    if dt is None:
+        raise TypeError(f"{what}() needs dt; the arguments are in C's order: {what}(x0, u, dt) "
+                        f"(u=None for an unactuated scene), e.g. {what}(x0, dt=0.01)")
+    return positive_step(dt)
+
+
+def positive_step(dt) -> float:
+    """dt as a float, > 0 and finite (C refuses any other as a 'bad argument', which named
+    nothing; no entry point integrates backwards), else a one-line ValueError naming it."""
+    dt = real_number(dt, "dt")
+    if not 0.0 < dt < np.inf:
+        raise ValueError(f"dt: must be > 0 and finite, got {dt!r}")
+    return dt
+
+
+def finite(array: np.ndarray, name: str) -> np.ndarray:
+    """`array` if every entry is finite, else a one-line ValueError naming `name` and the
+    first entry that is not (C refuses a NaN or Inf in a state, posture or input as a 'bad
+    argument', or, in simulate's torques, failed the step that reached it)."""
+    if not np.isfinite(array).all():
+        where = np.unravel_index(int(np.argmin(np.isfinite(array))), array.shape)
+        index = ", ".join(map(str, where))
+        raise ValueError(f"{name}: must be finite, got {float(array[where])!r} at [{index}]")
+    return array
+
+
 _C_SCALARS = {"int": ctypes.c_int, "long": ctypes.c_long, "double": ctypes.c_double,
               "size_t": ctypes.c_size_t, "volatile int": ctypes.c_int,
               "volatile long": ctypes.c_long}

@@ -39,8 +39,10 @@ from .interface import (
     NewtonOptions,
     StatsStruct,
     ctypes_type,
+    finite,
+    positive_step,
     real_array,
-    real_number,
+    step_length,
 )
 from .parameters import parameter_bounds as _parameter_bounds
 from .parameters import parameter_vector
@@ -61,16 +63,9 @@ def _pointer(array: np.ndarray):
     return array.ctypes.data_as(_double_p)
 
 
-def _step_length(dt, what: str) -> float:
-    """dt of a step function: required, after u as in C (step(x0, u, dt)), a finite number."""
-    if dt is None:
-        raise TypeError(f"{what}() needs dt; the arguments are in C's order: {what}(x0, u, dt) "
-                        f"(u=None for an unactuated scene), e.g. {what}(x0, dt=0.01)")
-    return real_number(dt, "dt")
-
-
 def _vector(values, size: int, name: str) -> np.ndarray:
-    return real_array(values, name, (size,))
+    """`size` finite real numbers (a state, posture, rates or inputs)."""
+    return finite(real_array(values, name, (size,)), name)
 
 
 class Solver:
@@ -251,9 +246,9 @@ class Solver:
     def residual(self, z, x0, u=None, dt: float | None = None, *,
                  parameters=None) -> np.ndarray:
         """F(z; x0, u, dt): the arguments in C's order."""
-        dt = _step_length(dt, "residual")
+        dt = step_length(dt, "residual")
         out = np.empty(self.nz)
-        self._check(self._leased("residual", z=_pointer(_vector(z, self.nz, "z")),
+        self._check(self._leased("residual", z=_pointer(real_array(z, "z", (self.nz,))),
                                p=self._p(parameters),
                                x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
                                dt=dt, residual=_pointer(out)),
@@ -263,9 +258,9 @@ class Solver:
     def residual_jacobian(self, z, x0, u=None, dt: float | None = None, *,
                           parameters=None) -> tuple[np.ndarray, np.ndarray]:
         """(F, dF/dz) at z; the arguments in C's order."""
-        dt = _step_length(dt, "residual_jacobian")
+        dt = step_length(dt, "residual_jacobian")
         residual, jacobian = np.empty(self.nz), np.empty(self.nz * self.nz)
-        self._check(self._leased("residual_jacobian", z=_pointer(_vector(z, self.nz, "z")),
+        self._check(self._leased("residual_jacobian", z=_pointer(real_array(z, "z", (self.nz,))),
                                p=self._p(parameters),
                                x0=_pointer(_vector(x0, self.nx, "x0")), u=self._inputs(u),
                                dt=dt, residual=_pointer(residual),
@@ -309,7 +304,7 @@ class Solver:
         """One step from the state x0 with inputs u (actuated scenes; None: zeros), the
         arguments in C's order. Raises NewtonError if it fails. For a control loop in joint
         space, `stepper` costs less a step."""
-        dt = _step_length(dt, "step")
+        dt = step_length(dt, "step")
         x1, iterations, flows = np.empty(self.nx), ctypes.c_int(0), np.zeros(2)
         c_options = self._fixed_step_options(options, "step")
         status = self._leased("step", x0=_pointer(_vector(x0, self.nx, "x0")),
@@ -330,7 +325,7 @@ class Solver:
         Raises NewtonError if the step fails, and also where step would split it into halves
         (status NOT_CONVERGED: no single torque over dt); ValueError for a package without a
         control law."""
-        dt = _step_length(dt, "control_torques")
+        dt = step_length(dt, "control_torques")
         if not self.has_entry_point("control_torques"):
             raise ValueError(f"{self.prefix} has no control law: no control_torques (its C "
                              "function returns UNAVAILABLE)")
@@ -350,7 +345,7 @@ class Solver:
                            parameters=None) -> Sensitivities:
         """A step and d s_{k+1}/d s_k, d s_{k+1}/d u_k, d s_{k+1}/d p in s = (phi, omega)
         (implicit function theorem on the converged Newton system; d/dp with s_k held)."""
-        dt = _step_length(dt, "step_sensitivities")
+        dt = step_length(dt, "step_sensitivities")
         if not self.has_sensitivities:
             raise ValueError(f"{self.prefix} was generated without step sensitivities")
         ns, n_p = 2 * self.n, len(self.parameters)
@@ -400,15 +395,16 @@ class Solver:
             if isinstance(n_steps, bool) or isinstance(every, bool) or isinstance(hold, bool):
                 raise TypeError("a bool is no count")
             n_steps, every = operator.index(n_steps), operator.index(every)
+            hold = operator.index(hold)
         except TypeError:
             raise ValueError(f"n_steps, every and hold must be integers, got {n_steps!r}, "
                              f"{every!r}, {hold!r}") from None
         if not (0 <= n_steps < 2 ** 63 and 1 <= every < 2 ** 63):
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
                              f"{n_steps}, {every}")
-        dt = real_number(dt, "dt")
+        dt = positive_step(dt)
         sampled = -(-n_steps // every)      # the steps 0, every, 2 every, ... before n_steps
-        held = sampled if self.nu and (controller is not None or torques is None) else 0
+        held = sampled if self.nu else 0      # given torques: a copy of their sampled rows
         needed = 8 * ((n_steps // every + 1) * self.nsample + held * self.nu)
         if needed > MAX_SAMPLE_BYTES:
             raise ValueError(f"simulate: {n_steps} steps sampled every {every} would hold "
@@ -421,7 +417,7 @@ class Solver:
                 raise ValueError(f"{self.prefix} has no actuated joints: nothing to control")
             if torques is not None:
                 raise ValueError("give torques or a controller, not both")
-            if not (isinstance(hold, int) and 1 <= hold < 2 ** 63):
+            if not 1 <= hold < 2 ** 63:
                 raise ValueError(f"hold must be an integer >= 1 (steps per controller call), "
                                  f"got {hold!r}")
             recorded = np.zeros((sampled, self.nu))     # C writes the sampled steps' inputs
@@ -433,7 +429,8 @@ class Solver:
             if given.shape != (n_steps, self.nu):
                 raise ValueError(f"torques must have shape ({n_steps}, {self.nu}) (steps, "
                                  f"actuated joints), got {given.shape}")
-            inputs, recorded = _pointer(given), given[::every]
+            # A copy: the result's own, whatever the caller does with its array after the run.
+            inputs, recorded = _pointer(finite(given, "torques")), given[::every].copy()
         elif torques is not None:
             raise ValueError(f"{self.prefix} has no actuated joints; torques must be None")
         self._p(parameters)    # checks them

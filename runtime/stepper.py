@@ -20,9 +20,10 @@ import numpy as np
 
 from . import contract
 from .errors import NewtonError
-from .interface import real_array, real_number
+from .interface import finite, real_array, real_number
 
 _DOUBLE = np.dtype(np.float64)     # of a u taken as it is
+_BAD_ARGUMENT = contract.STATUS_CODES["BAD_ARGUMENT"]
 
 
 def _address(buffer) -> ctypes.c_void_p:
@@ -176,7 +177,8 @@ class Stepper:
 
     def _reset(self, phi, omega, t: float) -> None:
         solver = self.solver
-        phi, omega = real_array(phi, "phi", (solver.n,)), real_array(omega, "omega", (solver.n,))
+        phi = finite(real_array(phi, "phi", (solver.n,)), "phi")
+        omega = finite(real_array(omega, "omega", (solver.n,)), "omega")
         x = solver.initial_state(phi, omega, self._p_values if solver.parameters else None)
         solver._call("workspace_init", workspace=self._workspace)
         # _current: which of the two states is the chain's; the step from state c writes
@@ -210,6 +212,8 @@ class Stepper:
             status = self._step_function(*self._step_arguments[current])
             if status:
                 solver = self.solver
+                if status == _BAD_ARGUMENT:     # C's word for a NaN or Inf in u
+                    finite(self._u, "u")
                 raise NewtonError(f"step at t = {self.t:.6g} s failed after "
                                   f"{self._iterations.value} Newton iterations: "
                                   f"{solver.status_message(status)}", status=status)

@@ -286,6 +286,55 @@ def test_newton_options_keep_their_types():
     assert options.max_iterations == 7 and type(options.residual_tol) is float
 
 
+@pytest.mark.parametrize("dt", [-0.01, 0.0, -0.0, np.nan, np.inf, -np.inf, 1e-320 * 0])
+def test_a_dt_that_is_not_positive_and_finite_is_refused_naming_it(dt):
+    """C refuses such a dt as a 'bad argument': simulate said 'step 1 (t = -0 s -> -0.01 s)
+    failed after 0 Newton iterations: bad argument' (a NewtonError, a failed run), step
+    'step failed after 0 Newton iterations: bad argument'; no entry point integrates
+    backwards. A Stepper already refused it so."""
+    solver, x0 = fake_solver(), np.zeros(6)
+    for call in (lambda: solver.step(x0, dt=dt), lambda: solver.residual(x0, x0, dt=dt),
+                 lambda: solver.residual_jacobian(x0, x0, dt=dt),
+                 lambda: solver.step_sensitivities(x0, dt=dt),
+                 lambda: solver.control_torques(x0, dt=dt),
+                 lambda: solver.simulate(np.zeros(3), np.zeros(3), dt=dt, n_steps=3)):
+        with pytest.raises(ValueError, match=r"^dt: must be > 0 and finite, got ") as refused:
+            call()
+        assert "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_nan_or_inf_in_a_state_posture_or_input_is_refused_naming_it(bad):
+    """C refuses them as a 'bad argument' (simulate from a NaN angle: 'three_link_mono_es_
+    initial_state: bad argument', naming no argument), and simulate's torques were not looked
+    at: a NaN in row 1 failed step 2 after 11 Newton iterations with 'NaN or Inf in the
+    residual or the Newton iterate' (four_link_actuated, vi, measured)."""
+    solver, good, x0 = fake_solver(), np.zeros(3), np.zeros(6)
+    spoilt = np.array([0.1, bad, 0.3])
+    state = np.zeros(6)
+    state[4] = bad
+    calls = {
+        "phi": [lambda: solver.initial_state(spoilt, good), lambda: solver.holding_torques(spoilt)],
+        "phidot": [lambda: solver.initial_state(good, spoilt)],
+        "phi0": [lambda: solver.simulate(spoilt, good, dt=DT, n_steps=3)],
+        "omega0": [lambda: solver.simulate(good, spoilt, dt=DT, n_steps=3)],
+        "x": [lambda: solver.outputs(state)],
+        "x0": [lambda: solver.step(state, dt=DT), lambda: solver.residual(x0, state, dt=DT),
+               lambda: solver.step_sensitivities(state, dt=DT)],
+        "u": [lambda: solver.step(x0, [0.0, bad], DT),
+              lambda: solver.step_sensitivities(x0, [bad, 0.0], DT)],
+        "torques": [lambda: solver.simulate(good, good, dt=DT, n_steps=2,
+                                            torques=[[0.0, 0.0], [0.0, bad]])],
+    }
+    for name, refused in calls.items():
+        for call in refused:
+            with pytest.raises(ValueError, match=rf"^{name}: must be finite, got {bad!r} at "
+                                                 rf"\[[0-9, ]+\]$"):
+                call()
+    with pytest.raises(ValueError, match=r"^torques: must be finite, got .* at \[1, 1\]$"):
+        solver.simulate(good, good, dt=DT, n_steps=2, torques=[[0.0, 0.0], [0.0, bad]])
+
+
 OUT_OF_RANGE = [("max_iterations", 0, ">= 1"), ("max_iterations", -1, ">= 1"),
                 ("residual_tol", 0.0, "> 0 and finite"), ("residual_tol", np.nan, "> 0 and finite"),
                 ("residual_tol", np.inf, "> 0 and finite"), ("update_atol", 0.0, "> 0 and finite"),
@@ -362,3 +411,46 @@ def test_a_stepper_and_a_controller_refuse_values_that_are_no_real_numbers():
                         controller=lambda t, phi, omega: [0.0, 1j, 0.0])
     with pytest.raises(TypeError, match="^omega0: must be real numbers"):
         solver.simulate(phi0, omega0 * 1j, dt=DT, n_steps=5)
+
+
+@pytest.mark.compile
+def test_a_result_holds_its_own_torques_and_a_stepper_names_a_nan():
+    """result.torques was a view of the torques given to simulate (the same array with every
+    = 1, a strided view of it otherwise): changing that array after the run changed the
+    result the caller held. A Stepper given a NaN torque or angle said 'bad argument'
+    (or, from reset, named phidot for omega); hold as a numpy integer was refused."""
+    from chaingen import build_solver
+    from chaingen.studies.bench.control import control_scene
+
+    scene = control_scene()
+    solver = build_solver(scene, "es", 3, sensitivities=False)
+    phi0, omega0 = np.array(scene.initial_angles), np.array(scene.initial_velocities)
+    for every in (1, 2):
+        given = np.arange(15.0).reshape(5, 3) / 100
+        result = solver.simulate(phi0, omega0, dt=DT, n_steps=5, every=every, torques=given)
+        kept = result.torques.copy()
+        np.testing.assert_array_equal(kept, given[::every])
+        given[:] = 7.0
+        assert not np.shares_memory(result.torques, given)
+        np.testing.assert_array_equal(result.torques, kept)
+        replay = solver.simulate(phi0, omega0, dt=DT, n_steps=5, every=every,
+                                 torques=np.arange(15.0).reshape(5, 3) / 100)
+        np.testing.assert_array_equal(replay.samples, result.samples)
+    stepper = solver.stepper(phi0, omega0, DT)
+    before = stepper.phi.copy()
+    with pytest.raises(ValueError, match=r"^u: must be finite, got nan at \[1\]$"):
+        stepper.step(np.array([0.0, np.nan, 0.0]))
+    np.testing.assert_array_equal(stepper.phi, before)
+    assert stepper.t == 0.0
+    with pytest.raises(ValueError, match=r"^omega: must be finite, got inf at \[2\]$"):
+        stepper.reset(phi0, [0.0, 0.0, np.inf])
+    with pytest.raises(ValueError, match=r"^phi: must be finite, got nan at \[0\]$"):
+        solver.stepper([np.nan, 0.0, 0.0], omega0, DT)
+    stepper.step(np.zeros(3))
+    assert stepper.t == DT
+    held = solver.simulate(phi0, omega0, dt=DT, n_steps=4, hold=np.int64(2),
+                           controller=lambda t, phi, omega: -phi)
+    twice = solver.simulate(phi0, omega0, dt=DT, n_steps=4, hold=2,
+                            controller=lambda t, phi, omega: -phi)
+    np.testing.assert_array_equal(held.samples, twice.samples)
+    np.testing.assert_array_equal(held.torques[1], held.torques[0])
