@@ -19,7 +19,14 @@ from .arguments import (
     positive_int,
     seed,
 )
-from .errors import ChaingenError, NewtonError, SceneError, SettingsError, UnsupportedSceneError
+from .errors import (
+    ChaingenError,
+    NewtonError,
+    RunFailedError,
+    SceneError,
+    SettingsError,
+    UnsupportedSceneError,
+)
 from .runtime.files import check_output_directory, check_output_file, reported_write
 from .scene.shipped import scene_file
 from .spatial import SpatialScene
@@ -260,7 +267,13 @@ def command_check(args) -> int:
                             gradient=args.gradient, source=str(args.scene))
     scheme = build_scheme(settings.solver_spec(scene, parameters=args.parameters))
     solver = Solver.from_files(render_package(scheme, sensitivities=True).files)
-    report = check_solver(scheme, solver, samples=args.samples, seed=args.seed, dt=settings.dt)
+    try:
+        report = check_solver(scheme, solver, samples=args.samples, seed=args.seed,
+                              dt=settings.dt)
+    except NewtonError as error:   # a step the check compares failed: say which dt, and why
+        raise RunFailedError(f"check: a step of dt = {settings.dt:g} s from a random state "
+                             f"near the scene's initial one failed, so nothing was compared: "
+                             f"{error}; check at a dt the scene runs with (--dt)") from None
     print(report.table())
     return 0 if report.passed else EXIT_FAILED
 

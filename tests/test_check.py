@@ -257,3 +257,21 @@ def test_check_catches_a_wrong_control_law():
 
     report = check_solver(scheme, Perturbed(good, control_torques=control_torques), samples=2)
     assert [row.quantity for row in report.rows if not row.passed] == ["control torques"]
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("method", ["es", "vi"])
+def test_check_at_a_dt_no_step_takes_says_so_in_one_line(tmp_path, method):
+    """--dt 1e300: the step fails at the first random state (es on NaN, vi on a spring segment).
+    Before: numpy's RuntimeWarning over two lines (es), then 'step failed after 2 Newton
+    iterations: ...' without the check or the dt it was at."""
+    result = subprocess.run([sys.executable, "-m", "chaingen", "check",
+                             str(scene_path("three_link_mono")), "--method", method,
+                             "--dt", "1e300", "--samples", "1"],
+                            capture_output=True, text=True, cwd=tmp_path)
+    assert result.returncode == 1, result.stderr
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith("chaingen: error: check: a step of dt = 1e+300 s from a random state "
+                           "near the scene's initial one failed, so nothing was compared: "
+                           "step failed after ")
+    assert line.endswith("; check at a dt the scene runs with (--dt)")
