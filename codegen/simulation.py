@@ -6,12 +6,16 @@ reading scenes and checking settings stay quick.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from .errors import SettingsError
 from .progress import Progress
 from .runtime import NewtonOptions, SimulationResult, Solver
+from .runtime.interface import real_number
 from .runtime.solver import MAX_SAMPLE_BYTES  # samples are held in memory before they are written
 from .scene import Scene, SolverSpec
 from .scene.solver_rules import REQUEST_KEYS, request_refusal
@@ -81,10 +85,21 @@ def run_settings(scene: Scene | SpatialScene, *, method=None, quadrature=None, d
         where = (refused.option if given[refused.key] is not None
                  else f"{scene_source}simulation.{refused.key}")
         raise SettingsError(f"{where}: {refused.message}")
+    checked = {}
     for name in ("dt", "t_end"):
-        value = getattr(settings, name)
+        flag = f"--{name.replace('_', '-')}"
+        try:    # a bool, a string: no number of seconds (dt=True ran steps of 1 s)
+            value = real_number(getattr(settings, name), flag)
+        except TypeError as error:
+            raise SettingsError(str(error)) from None
         if not (math.isfinite(value) and value > 0):
-            raise SettingsError(f"--{name.replace('_', '-')}: must be > 0 and finite, got {value}")
+            raise SettingsError(f"{flag}: must be > 0 and finite, got {value}")
+        checked[name] = value
+    every = settings.every
+    if isinstance(every, (bool, np.bool_)) or not isinstance(every, (int, np.integer)) \
+            or every < 1:     # 0 was a ZeroDivisionError below; 2.5 and True passed
+        raise SettingsError(f"--every: must be an integer >= 1, got {every!r}")
+    settings = dataclasses.replace(settings, every=int(every), **checked)
     steps = settings.t_end / settings.dt
     if steps > MAX_STEPS:   # named where the values came from: options, or the scene's table
         where = ("--dt/--t-end" if dt is not None or t_end is not None
@@ -98,8 +113,6 @@ def run_settings(scene: Scene | SpatialScene, *, method=None, quadrature=None, d
             f"--every: {settings.n_steps} steps sampled every {settings.every} would hold "
             f"{samples / 2 ** 30:.1f} GiB of samples (limit {MAX_SAMPLE_BYTES / 2 ** 30:.0f} GiB); "
             "sample less often with a larger --every")
-    if settings.every < 1:
-        raise SettingsError(f"--every: must be >= 1, got {settings.every}")
     return settings
 
 

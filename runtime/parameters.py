@@ -45,6 +45,14 @@ def _labelled(values) -> bool:
             getattr(getattr(values, "dtype", None), "names", None) is not None)
 
 
+def no_values(values) -> bool:
+    """Whether `values` is an empty sequence or mapping (a scalar has no length)."""
+    try:
+        return len(values) == 0
+    except TypeError:
+        return False
+
+
 def parameter_vector(given, paths: tuple, defaults: np.ndarray, bounds, prefix: str):
     """The parameter vector p of a package `prefix` whose parameters are `paths`: `defaults`
     with the values `given` (None, a mapping by path, or all of them in the order of `paths`),

@@ -44,8 +44,8 @@ from .interface import (
     real_array,
     step_length,
 )
+from .parameters import no_values, parameter_vector
 from .parameters import parameter_bounds as _parameter_bounds
-from .parameters import parameter_vector
 from .results import ControlledStep, Sensitivities, SimulationResult, StepResult, storage_of
 from .runs import StopSignal, run_watched
 from .stepper import Stepper
@@ -227,7 +227,7 @@ class Solver:
     def _p(self, parameters):
         """The p argument: a pointer for a package with parameters, else None (none)."""
         if not self.parameters:
-            if parameters is not None and len(parameters):
+            if parameters is not None and not no_values(parameters):
                 raise ValueError(f"{self.prefix} takes no parameters")
             return None
         return _pointer(self.parameter_values(parameters))

@@ -79,6 +79,9 @@ class Stepper:
         self._states = (np.empty(solver.nx), np.empty(solver.nx))
         self._flows = np.zeros(2)
         self._scalars = np.zeros(2)
+        # A package without run-time parameters refuses any given, as simulate does (a
+        # Stepper ran with the scene's own numbers, whatever it was given).
+        solver._p(parameters)
         self._p_values = (solver.parameter_values(parameters) if solver.parameters
                           else np.zeros(0))
         self._workspace = ctypes.create_string_buffer(solver._workspace_size)

@@ -6,6 +6,7 @@ are refused wherever the runtime turns a user's values into C doubles, and the N
 switches take only a bool, 1 or 0."""
 from __future__ import annotations
 
+import re
 import threading
 import types
 
@@ -335,6 +336,39 @@ def test_a_nan_or_inf_in_a_state_posture_or_input_is_refused_naming_it(bad):
         solver.simulate(good, good, dt=DT, n_steps=2, torques=[[0.0, 0.0], [0.0, bad]])
 
 
+def test_a_package_without_parameters_refuses_any_given_in_one_line():
+    """A scalar got 'object of type 'float' has no len()' (naming nothing)."""
+    solver = fake_solver()
+    solver.parameters = ()
+    for given in (0.0, np.float64(2.0), [1.0], {"links[1].mass": 2.0}, np.array(1.0)):
+        with pytest.raises(ValueError, match="^fake takes no parameters$"):
+            solver.initial_state(np.zeros(3), np.zeros(3), given)
+    for nothing in (None, [], {}, (), np.zeros(0)):
+        assert solver._p(nothing) is None
+
+
+@pytest.mark.parametrize("override, message", [
+    ({"every": 0}, "--every: must be an integer >= 1, got 0"),
+    ({"every": 2.5}, "--every: must be an integer >= 1, got 2.5"),
+    ({"every": True}, "--every: must be an integer >= 1, got True"),
+    ({"dt": True}, "--dt: must be a real number, got bool True"),
+    ({"t_end": "1"}, "--t-end: must be a real number, got str '1'"),
+    ({"dt": -0.01}, "--dt: must be > 0 and finite, got -0.01"),
+])
+def test_run_settings_refuses_counts_and_times_that_are_none(override, message):
+    """every = 0 was an internal ZeroDivisionError, every = 2.5 and True and dt = True (a
+    step of 1 s) passed; a string t_end was 'must be real number, not str', naming nothing."""
+    import chaingen
+    from chaingen.errors import SettingsError
+
+    with pytest.raises(SettingsError, match=f"^{re.escape(message)}$"):
+        chaingen.run_settings(load("three_link_mono"), **{"t_end": 1.0, **override})
+    settings = chaingen.run_settings(load("three_link_mono"), dt=np.float64(0.01), t_end=1,
+                                     every=np.int64(10))
+    assert (type(settings.dt), type(settings.t_end), type(settings.every)) == (float, float, int)
+    assert settings.n_steps == 100
+
+
 OUT_OF_RANGE = [("max_iterations", 0, ">= 1"), ("max_iterations", -1, ">= 1"),
                 ("residual_tol", 0.0, "> 0 and finite"), ("residual_tol", np.nan, "> 0 and finite"),
                 ("residual_tol", np.inf, "> 0 and finite"), ("update_atol", 0.0, "> 0 and finite"),
@@ -448,6 +482,14 @@ def test_a_result_holds_its_own_torques_and_a_stepper_names_a_nan():
         solver.stepper([np.nan, 0.0, 0.0], omega0, DT)
     stepper.step(np.zeros(3))
     assert stepper.t == DT
+    # A package without run-time parameters: a Stepper ran with the scene's own numbers
+    # whatever it was given (simulate refused them).
+    for given in ({"links[1].mass": 5.0}, [5.0]):
+        with pytest.raises(ValueError, match="takes no parameters$"):
+            solver.stepper(phi0, omega0, DT, parameters=given)
+        with pytest.raises(ValueError, match="takes no parameters$"):
+            solver.simulate(phi0, omega0, dt=DT, n_steps=1, parameters=given)
+    assert solver.stepper(phi0, omega0, DT, parameters={}).t == 0.0
     held = solver.simulate(phi0, omega0, dt=DT, n_steps=4, hold=np.int64(2),
                            controller=lambda t, phi, omega: -phi)
     twice = solver.simulate(phi0, omega0, dt=DT, n_steps=4, hold=2,
