@@ -107,3 +107,31 @@ def test_the_spatial_reader_reads_large_numbers_within_range():
     for old, new in (("stiffness = 300.0", "stiffness = 1e300"), ("mass = 2.5", "mass = 1e300"),
                      ("velocities = [0.0, 0.2, 0.0]", "velocities = [0.0, 1e150, 0.0]")):
         parse_spatial_scene(SPATIAL.replace(old, new, 1), "arm.toml")
+
+
+# -- es: a COM so near its joint that com^2 + com_normal^2 leaves a double's range ------------
+
+@pytest.mark.parametrize("com, squared", [("5e-301", "0"), ("1e-160", "1e-320")])
+def test_es_refuses_a_com_whose_square_leaves_the_range_of_a_double(com, squared):
+    """com = 5e-301: c^2 = 0 was refused as 'com = com_normal = 0' (it is not); com = 1e-160:
+    J / c^2 = inf went into the generated constants, and the run stopped at the initial state
+    on 'a spring segment came within 1e-06 ... of zero length' (exit 1)."""
+    from chaingen.errors import UnsupportedSceneError
+    from chaingen.symbolic.com_model import coordinates
+
+    scene = parse_scene(edited(("com = 0.5", f"com = {com}")), "arm.toml", "arm")
+    with pytest.raises(UnsupportedSceneError) as refused:
+        coordinates(scene)
+    assert str(refused.value) == (
+        f"links[0].com: COM coordinates divide by com^2 + com_normal^2, which is {squared} in "
+        f"a double for link 1 (com = {com}, com_normal = 0 m, inertia 1 kg m^2: J / (com^2 + "
+        "com_normal^2) is beyond the range of a double); move the COM off the proximal joint, "
+        "or use vi or midpoint")
+
+
+def test_es_takes_a_com_whose_square_is_a_double():
+    from chaingen.symbolic.com_model import coordinates
+
+    coordinates(parse_scene(edited(("com = 0.5", "com = 1e-150")), "arm.toml", "arm"))
+    with pytest.raises(Exception, match="com = com_normal = 0"):
+        coordinates(parse_scene(edited(("com = 0.5", "com = 0.0")), "arm.toml", "arm"))

@@ -7,6 +7,8 @@ enter an expression, so the generated code holds only what the scene needs.
 """
 from __future__ import annotations
 
+import math
+import sys
 from dataclasses import dataclass
 
 import sympy as sp
@@ -164,10 +166,23 @@ def coordinates(scene: Scene) -> tuple[ImmutableMatrix, ImmutableMatrix]:
     UnsupportedSceneError for a link whose COM is at its proximal joint."""
     n = scene.n
     for i, link in enumerate(scene.links):
-        if link.com ** 2 + link.com_normal ** 2 == 0:
+        if link.com == 0 and link.com_normal == 0:
             raise UnsupportedSceneError(
                 f"links[{i}].com: COM coordinates need the COM away from the proximal joint "
                 f"(com^2 + com_normal^2 > 0), link {i + 1} has com = com_normal = 0")
+        numbers = (link.com, link.com_normal, link.inertia)
+        if all(isinstance(value, (int, float)) for value in numbers):   # not parameters
+            # The model divides by c^2 = com^2 + com_normal^2 (the inertia's term J / c^2):
+            # a COM 5e-301 m from its joint has c^2 = 0 in a double, one 1e-160 m off J / c^2
+            # = inf (before: 'com = com_normal = 0', or inf in the generated constants).
+            c2 = link.com * link.com + link.com_normal * link.com_normal
+            if not (c2 >= sys.float_info.min and math.isfinite(link.inertia / c2)):
+                raise UnsupportedSceneError(
+                    f"links[{i}].com: COM coordinates divide by com^2 + com_normal^2, which "
+                    f"is {c2:.3g} in a double for link {i + 1} (com = {link.com:g}, com_normal "
+                    f"= {link.com_normal:g} m, inertia {link.inertia:g} kg m^2: J / (com^2 + "
+                    "com_normal^2) is beyond the range of a double); move the COM off the "
+                    "proximal joint, or use vi or midpoint")
     xs = sp.symbols(f"x1:{n + 1}", real=True)
     ys = sp.symbols(f"y1:{n + 1}", real=True)
     vxs = sp.symbols(f"vx1:{n + 1}", real=True)
