@@ -149,7 +149,7 @@ class SimulationResult:
         (the input of the step that starts there). Needs pandas (the sweep extra)."""
         import pandas as pd
 
-        frame = pd.DataFrame(self.samples, columns=list(self.columns))
+        frame = pd.DataFrame(self.samples, columns=list(self.columns), copy=True)
         sampled = self._sampled_torques()
         if sampled is not None:
             for index, joint in enumerate(self.actuated_joints):
@@ -161,8 +161,9 @@ class SimulationResult:
     def to_xarray(self):
         """The samples as an xarray Dataset on the coordinates t and joint: phi and omega
         (t, joint), energy, constraint_error (and the energy flows) over t, u (t, actuated
-        joint) for an actuated scene; the run's settings and counters as attributes. Needs
-        xarray (the sweep extra)."""
+        joint) for an actuated scene; the run's settings and counters as attributes. Its
+        arrays are copies: changing the Dataset leaves the result as it was (they were views
+        of `samples`). Needs xarray (the sweep extra)."""
         import xarray as xr
 
         joints = np.arange(1, self.n_joints + 1)
@@ -173,10 +174,10 @@ class SimulationResult:
                 name = column.name.replace("{i}", "")
                 variables[name] = (("t", "joint"),
                                    self.samples[:, sample_slice(self.columns,
-                                                                         column.name)], units)
+                                                                column.name)].copy(), units)
             elif column.name in self.columns:
-                variables[column.name] = ("t", self.column(column.name), units)
-        coordinates = {"t": ("t", self.t, {"units": contract.SAMPLE_COLUMNS[0].unit}),
+                variables[column.name] = ("t", self.column(column.name).copy(), units)
+        coordinates = {"t": ("t", self.t.copy(), {"units": contract.SAMPLE_COLUMNS[0].unit}),
                        "joint": joints}
         sampled = self._sampled_torques()
         if sampled is not None:
