@@ -280,7 +280,13 @@ def command_check(args) -> int:
 
 def command_order(args) -> int:
     from .simulation import run_settings
-    from .studies.order import allowed_orders, format_summary, format_table, order_studies
+    from .studies.order import (
+        SAMPLE_INTERVAL,
+        allowed_orders,
+        format_summary,
+        format_table,
+        order_studies,
+    )
     from .views.order_plot import plot_order
 
     scene = load_command_scene(args.scene)
@@ -289,6 +295,10 @@ def command_order(args) -> int:
                             quadrature=args.quadrature,
                             t_end=args.t_end, order=args.order or 2, gradient=args.gradient,
                             source=str(args.scene))
+    samples = round(settings.t_end / SAMPLE_INTERVAL)    # the study compares its runs there
+    if samples < 1 or abs(samples * SAMPLE_INTERVAL - settings.t_end) > 1e-9 * settings.t_end:
+        raise SettingsError(f"--t-end: must be a whole multiple of the study's sample interval, "
+                            f"{SAMPLE_INTERVAL:g} s, got {settings.t_end:g}")
     if args.plot is not None:   # before the study: the plot needs matplotlib
         from .views.figure import require_matplotlib
         require_matplotlib("order --plot")

@@ -290,3 +290,16 @@ def test_the_command_runs_every_order_or_the_one_asked(tmp_path):
     assert one.returncode == 0, one.stderr
     assert "order 4;" in one.stdout and "order 2;" not in one.stdout
     assert "order option" not in one.stdout
+
+
+@pytest.mark.parametrize("t_end", ["0.3", "1e-300"])
+def test_order_names_a_t_end_off_its_sample_grid_by_its_option(tmp_path, t_end):
+    """Before: 'chaingen: error: t_end must be a multiple of the sample interval: 0.2 s does
+    not divide 1e-300 s', naming t_end but not its option --t-end."""
+    result = chaingen_in_process("order", scene_path("three_link_mono"), "--method", "midpoint",
+                                 "--order", "2", "--t-end", t_end, cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.strip() == (
+        "chaingen: error: --t-end: must be a whole multiple of the study's sample interval, "
+        f"0.2 s, got {float(t_end):g}")
+    assert not list(tmp_path.iterdir())
