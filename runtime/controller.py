@@ -30,19 +30,23 @@ def context_address(pointer) -> int | None:
                          f"{type(pointer).__name__}") from None
 
 
-def controller_address(controller, n: int, nu: int, errors: list):
-    """(address of a C controller, the ctypes callback to keep alive or None) for a chain of n
-    joints with nu inputs. An exception a Python controller raises goes to `errors` and
-    stops the run (the callback returns 1)."""
+def controller_address(controller, n: int, nu: int, errors: list, context=None):
+    """(address of a C controller, the ctypes callback to keep alive or None, the address of
+    its context) for a chain of n joints with nu inputs. An exception a Python controller
+    raises goes to `errors` and stops the run (the callback returns 1). A context is for a C
+    controller only (a Python controller was run without the one it was given)."""
     if isinstance(controller, ctypes._CFuncPtr):
-        return ctypes.cast(controller, ctypes.c_void_p).value, None
+        return ctypes.cast(controller, ctypes.c_void_p).value, None, context_address(context)
     if isinstance(controller, int) and not isinstance(controller, bool):
         if controller == 0:
             raise ValueError("controller: the address of a C function, got 0 (NULL)")
-        return controller, None
+        return controller, None, context_address(context)
     if not callable(controller):
         raise ValueError(f"controller: a callable controller(t, phi, omega) -> torques, or "
                          f"a C function pointer, got {type(controller).__name__}")
+    if context is not None:
+        raise ValueError("controller_context: for a C controller; a Python controller keeps "
+                         "its own state (a closure, an object's method)")
     views: dict[int, np.ndarray] = {}    # the C loop's arrays by address (they stay put)
 
     def view(address: int, size: int) -> np.ndarray:
@@ -66,4 +70,4 @@ def controller_address(controller, n: int, nu: int, errors: list):
             return 1
 
     callback = _CONTROLLER(call)
-    return ctypes.cast(callback, ctypes.c_void_p).value, callback
+    return ctypes.cast(callback, ctypes.c_void_p).value, callback, None

@@ -32,7 +32,7 @@ import numpy as np
 
 from . import contract
 from .build import build_shared_library
-from .controller import context_address, controller_address
+from .controller import controller_address
 from .errors import NewtonError
 from .interface import (
     ControlStruct,
@@ -412,6 +412,8 @@ class Solver:
                              f"{MAX_SAMPLE_BYTES / 2 ** 30:g} GiB): sample less often (a "
                              "larger every)")
         inputs, recorded, errors, callback = None, None, [], None
+        if controller is None and (hold != 1 or controller_context is not None):
+            raise ValueError("hold and controller_context go with a controller (were ignored)")
         if controller is not None:
             if not self.nu:
                 raise ValueError(f"{self.prefix} has no actuated joints: nothing to control")
@@ -421,7 +423,8 @@ class Solver:
                 raise ValueError(f"hold must be an integer >= 1 (steps per controller call), "
                                  f"got {hold!r}")
             recorded = np.zeros((sampled, self.nu))     # C writes the sampled steps' inputs
-            address, callback = controller_address(controller, self.n, self.nu, errors)
+            address, callback, context = controller_address(controller, self.n, self.nu, errors,
+                                                            controller_context)
         elif self.nu and torques is None:      # u = NULL: zero torques, none held per step
             recorded = np.zeros((sampled, self.nu))
         elif self.nu:
@@ -451,8 +454,7 @@ class Solver:
         if controller is not None:
             entry = "simulate_controlled"
             arguments.update(controller=address, hold=hold, torques=_pointer(recorded),
-                             context=(None if callback is not None else
-                                      context_address(controller_context)))
+                             context=context)
         started = time.perf_counter()
         # The run owns this workspace until it returns: a call from a callback meanwhile
         # (progress, the controller) gets another (runtime/workspaces.py).

@@ -521,3 +521,18 @@ def test_a_results_tables_are_copies_of_its_samples():
     frame.iloc[:, :] = -1.0
     np.testing.assert_array_equal(result.samples, kept)
     np.testing.assert_array_equal(result.torques, torques)
+
+
+def test_hold_and_a_context_go_with_a_controller_they_can_reach():
+    """hold without a controller (torques given, or none) and a controller_context beside a
+    Python controller were ignored without a word: a run asked to hold each input for 5
+    steps took the torques as given, a Python controller ran without the context."""
+    solver, good = fake_solver(), np.zeros(3)
+    for extra in ({"hold": 5}, {"controller_context": 1234},
+                  {"hold": 5, "torques": np.zeros((3, 2))}):
+        with pytest.raises(ValueError, match="^hold and controller_context go with a "
+                                             "controller"):
+            solver.simulate(good, good, dt=DT, n_steps=3, **extra)
+    with pytest.raises(ValueError, match="^controller_context: for a C controller"):
+        solver.simulate(good, good, dt=DT, n_steps=3, controller=lambda t, phi, omega: phi[:2],
+                        controller_context=1234)
