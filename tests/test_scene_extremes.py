@@ -135,3 +135,45 @@ def test_es_takes_a_com_whose_square_is_a_double():
     coordinates(parse_scene(edited(("com = 0.5", "com = 1e-150")), "arm.toml", "arm"))
     with pytest.raises(Exception, match="com = com_normal = 0"):
         coordinates(parse_scene(edited(("com = 0.5", "com = 0.0")), "arm.toml", "arm"))
+
+
+HEAVY_ON_AXIS = """
+gravity = [0.0, 0.0, -9.81]
+
+[[links]]
+mass = MASS
+com = [0.0, 0.0, 0.2]
+inertia = [0.01, 0.01, 0.001, 0.0, 0.0, 0.0]
+joint = { xyz = [0.0, 0.0, 0.1], rpy = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 1.0] }
+
+[[links]]
+mass = 1.0
+com = [0.1, 0.0, 0.0]
+inertia = [0.001, 0.01, 0.01, 0.0, 0.0, 0.0]
+joint = { xyz = [0.0, 0.0, 0.4], rpy = [0.0, 0.0, 0.0], axis = [0.0, 1.0, 0.0] }
+"""
+
+
+@pytest.mark.parametrize("mass", ["1.0", "1e12", "1e300"])
+def test_a_heavy_link_on_the_axis_does_not_hide_the_mass_the_joint_turns(mass):
+    """Link 1 of 1e12 kg stands on joint 1's axis (its com 0.2 m up it); joint 1 turns link 1's
+    izz = 0.001 kg m^2 and link 2, 1 kg 0.1 m off the axis: M_11 = 0.021 kg m^2. Against the
+    links' summed inertia about joint 1's origin (4e10 kg m^2) that was below 1e-12 and the
+    reader (and chaingen import of the same URDF) refused 'joint 1 moves no mass'."""
+    from chaingen.spatial import parse_spatial_scene
+
+    scene = parse_spatial_scene(HEAVY_ON_AXIS.replace("MASS", mass), "arm.toml")
+    assert scene.links[0].mass == float(mass)
+
+
+def test_a_point_mass_on_the_axis_is_still_refused():
+    from chaingen.spatial import parse_spatial_scene
+
+    text = (HEAVY_ON_AXIS.replace("MASS", "1.0")
+            .replace("inertia = [0.01, 0.01, 0.001, 0.0, 0.0, 0.0]",
+                     "inertia = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]")
+            .replace("com = [0.1, 0.0, 0.0]", "com = [0.0, 0.0, 0.3]")
+            .replace("inertia = [0.001, 0.01, 0.01, 0.0, 0.0, 0.0]",
+                     "inertia = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]"))
+    with pytest.raises(SceneError, match=r"arm.toml: links\[0\]: joint 1 moves no mass"):
+        parse_spatial_scene(text, "arm.toml")

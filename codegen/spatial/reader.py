@@ -368,21 +368,31 @@ class SpatialSceneReader(SceneReader):
     def refuse_singular_mass_matrix(self, scene: SpatialScene, mass: np.ndarray) -> None:
         """Refuse a chain whose mass matrix at the initial angles is singular (within
         SINGULAR_RELATIVE_TOLERANCE): no step can solve for its accelerations. Its diagonal
-        entry k is the inertia about joint k's axis of the links it carries: where it is zero
-        against their inertia about joint k's origin (sum of m |c - o|^2 + trace I), their mass
-        lies on the axis, joint k moves none, and it is named; else the matrix scaled to a
-        unit diagonal has a zero eigenvalue (joints that move the same masses the same way)."""
+        entry k is the inertia about joint k's axis of the links it carries, the sum of each
+        one's m |a x (c - o)|^2 + a . I a: where every link's share is zero against its own
+        inertia about joint k's origin (m |c - o|^2 + trace I), their mass lies on the axis,
+        joint k moves none, and it is named; else the matrix scaled to a unit diagonal has a
+        zero eigenvalue (joints that move the same masses the same way). Link by link, not
+        summed: a 1e12 kg link standing on joint 1's axis does not hide the 1 kg one it turns
+        0.1 m off it (it did, summed: 'joint 1 moves no mass')."""
         poses = dynamics.link_poses(scene, scene.initial_angles)
+        axes = dynamics.joint_axes(scene, poses)
         with np.errstate(over="ignore", invalid="ignore"):
             coms = [dynamics.point_position(poses, i + 1, link.com)
                     for i, link in enumerate(scene.links)]
+            inertias = [poses[i + 1][0] @ np.array(link.inertia_matrix()) @ poses[i + 1][0].T
+                        for i, link in enumerate(scene.links)]
             for k in range(scene.n):
-                origin = poses[k + 1][1]
-                about_origin = sum(link.mass * float(np.dot(com - origin, com - origin))
-                                   + sum(link.inertia[:3])
-                                   for link, com in zip(scene.links[k:], coms[k:]))
-                if not (math.isfinite(about_origin)
-                        and mass[k, k] <= SINGULAR_RELATIVE_TOLERANCE * about_origin):
+                origin, axis = poses[k + 1][1], axes[k]
+                moved = False
+                for link, com, inertia in zip(scene.links[k:], coms[k:], inertias[k:]):
+                    arm = com - origin
+                    about_origin = link.mass * float(arm @ arm) + float(np.trace(inertia))
+                    lever = np.cross(axis, arm)
+                    share = link.mass * float(lever @ lever) + float(axis @ inertia @ axis)
+                    moved = moved or not (math.isfinite(about_origin)
+                                          and share <= SINGULAR_RELATIVE_TOLERANCE * about_origin)
+                if moved:
                     continue
                 carried, remedy = ((f"link {k + 1} has", f"give link {k + 1} an inertia "
                                     "about the axis or move its com off it")
