@@ -172,6 +172,8 @@ class Stepper:
     def reset(self, phi, omega, t: float = 0.0) -> None:
         """Start again from joint space (phi, omega) at time t, with no Newton history."""
         t = real_number(t, "t")
+        if not np.isfinite(t):     # every later t would be NaN or Inf
+            raise ValueError(f"t: must be finite, got {t!r}")
         self._take()
         try:
             self._reset(phi, omega, t)

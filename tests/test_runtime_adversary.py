@@ -480,6 +480,9 @@ def test_a_result_holds_its_own_torques_and_a_stepper_names_a_nan():
         stepper.reset(phi0, [0.0, 0.0, np.inf])
     with pytest.raises(ValueError, match=r"^phi: must be finite, got nan at \[0\]$"):
         solver.stepper([np.nan, 0.0, 0.0], omega0, DT)
+    for t in (np.nan, np.inf):      # taken: every later t was NaN or Inf
+        with pytest.raises(ValueError, match=r"^t: must be finite, got (nan|inf)$"):
+            stepper.reset(phi0, omega0, t=t)
     stepper.step(np.zeros(3))
     assert stepper.t == DT
     # A package without run-time parameters: a Stepper ran with the scene's own numbers
