@@ -80,3 +80,25 @@ def test_angles_agree_with_mujoco_on_the_exported_model(tmp_path, method):
     difference = np.angle(np.exp(1j * (ours.phi[-1] - data.qpos)))   # wrapped
     print(f"{method}: max |phi - phi_MuJoCo| at t = 1 s: {np.abs(difference).max():.2e} rad")
     assert np.abs(difference).max() <= 1e-5
+
+
+@pytest.mark.parametrize("scene_name, old, new, count, geoms", [
+    # Every link 1e-7 m: MuJoCo refused the file ('fromto points too close in geom').
+    ("three_link_mono", "length = 1.0", "length = 1e-7", 3, 0),
+    ("three_link_mono", "length = 1.0", "length = 1e-300", 1, 2),      # the first link only
+    # Joint 3 1e-8 m from joint 2: link 2's capsule (spatial: origin to the next joint).
+    ("spatial_three_link", "xyz = [0.3, 0.0, 0.0]", "xyz = [1e-8, 0.0, 0.0]", 1, 2),
+])
+def test_export_of_links_too_short_for_a_capsule_loads(tmp_path, scene_name, old, new, count,
+                                                       geoms):
+    """The capsules only draw the links (no mass, no contacts): one MuJoCo's compiler refuses,
+    1e-7 m long or shorter, is left out, and the file loads (it did not, exit 0 before)."""
+    text = scene_path(scene_name).read_text()
+    assert text.count(old) >= count
+    scene = tmp_path / "arm.toml"
+    scene.write_text(text.replace(old, new, count))
+    out = tmp_path / "arm.xml"
+    result = chaingen_in_process("export", scene, "--mjcf", out, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    model = mujoco.MjModel.from_xml_path(str(out))
+    assert (model.nq, model.ngeom) == (3, geoms)

@@ -27,6 +27,12 @@ from ..scene import Scene
 # larger than this ("mass and inertia of moving bodies must be larger than mjMINVAL").
 MUJOCO_MINIMUM_INERTIA = 1e-15
 
+# MuJoCo's compiler refuses a capsule whose fromto ends are this close or closer ("fromto
+# points too close in geom"; measured with MuJoCo 4.0.1: 1e-7 m refused, 1.0000000000021e-7 m
+# taken). The export leaves out a shorter link's capsule, which only draws it (no mass, no
+# contacts), as the spatial export leaves out one of zero length.
+MUJOCO_MINIMUM_CAPSULE = 1e-7
+
 # The values of <option integrator=...> that MuJoCo 4 accepts (it rejects e.g. "rk4").
 MUJOCO_INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
 
@@ -98,11 +104,12 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
     armature, limits or joint stiffness) is added.
 
     export (`chaingen export --mjcf`): also what a user of the file sees and drives: a capsule
-    geom along each link (no contacts, no mass: the <inertial> stays the only mass), visible
-    sites and tendons, and a motor (gear 1, no control limits) on each actuated joint, in the
-    scene's order, so that data.ctrl[j] is the torque of the j-th actuated joint, and a
-    keyframe "initial" (key 0) holding the scene's initial angles and velocities as qpos and
-    qvel. The dynamics are those of the reference model.
+    geom along each link longer than MUJOCO_MINIMUM_CAPSULE (no contacts, no mass: the
+    <inertial> stays the only mass), visible sites and tendons, and a motor (gear 1, no
+    control limits) on each actuated joint, in the scene's order, so that data.ctrl[j] is
+    the torque of the j-th actuated joint, and a keyframe "initial" (key 0) holding the
+    scene's initial angles and velocities as qpos and qvel. The dynamics are those of the
+    reference model.
 
     Raises ValueError for a link with J_i = 0 (MuJoCo cannot represent a moving body without
     rotational inertia), for dt that is not positive and finite, and for an unknown integrator.
@@ -161,7 +168,7 @@ def mjcf_from_scene(scene: Scene, *, dt: float, integrator: str = "RK4",
             f"mass={quoteattr(number_text(link.mass))} "
             f"diaginertia={quoteattr(vector_text(link.inertia, link.inertia, link.inertia))}/>",
         ]
-        if export:
+        if export and link.length > MUJOCO_MINIMUM_CAPSULE:
             lines.append(
                 f"{indent}  <geom name={quoteattr(f'link{i}_geom')} type=\"capsule\" "
                 f"fromto={quoteattr(vector_text(0.0, 0.0, 0.0, link.length, 0.0, 0.0))} "

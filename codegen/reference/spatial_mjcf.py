@@ -37,6 +37,7 @@ import numpy as np
 
 from .mjcf import (
     MUJOCO_INTEGRATORS,
+    MUJOCO_MINIMUM_CAPSULE,
     MUJOCO_MINIMUM_INERTIA,
     body_name,
     joint_name,
@@ -144,7 +145,8 @@ def spatial_mjcf_from_scene(scene, *, dt: float, integrator: str = "RK4",
         ]
         if export:
             end = scene.links[i].joint.xyz if i < scene.n else link.com
-            if np.linalg.norm(end) > 0.0:     # MuJoCo refuses a capsule of zero length
+            # MuJoCo refuses a capsule of zero length, or of one up to 1e-7 m
+            if np.linalg.norm(end) > MUJOCO_MINIMUM_CAPSULE:
                 lines.append(
                     f"{indent}  <geom name={quoteattr(f'link{i}_geom')} type=\"capsule\" "
                     f"fromto={quoteattr(vector_text(0.0, 0.0, 0.0, *end))} "
