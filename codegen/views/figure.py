@@ -12,6 +12,11 @@ from ..runtime.files import reported_write, staged_file
 
 INSTALL_HINT = install_hint("plot")
 
+#: Matplotlib's log axes draw values within these bounds; beyond them (1e300 kg, 1e-300 N/m)
+#: its tick locator overflows or the axis falls back to 1..10 and the figure is empty. The
+#: figures draw such values as their log10 on a linear axis, labelled so.
+LOG_AXIS_LIMITS = (1e-200, 1e200)
+
 
 def require_matplotlib(what: str) -> None:
     """ChaingenError (exit status 2) unless matplotlib imports: checked before a command

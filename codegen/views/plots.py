@@ -28,7 +28,7 @@ from ..runtime.results import sample_joints, sample_slice
 from ..runtime.trajectory import metadata_path, read_trajectory
 from ..scene import ORDERS
 from ..scene.labels import scheme_label
-from .figure import matplotlib_figure, save_png
+from .figure import LOG_AXIS_LIMITS, matplotlib_figure, save_png
 
 #: Figure size in inches and resolution: 1500 x 1200 pixels.
 FIGURE_SIZE = (10.0, 8.0)
@@ -263,21 +263,36 @@ def _spans_decades(values: np.ndarray) -> bool:
     positive = values[values > 0]
     if positive.size < 2:
         return False
-    return math.log10(positive.max() / positive.min()) > LOG_DECADES
+    # The logarithms' difference: the ratio of 1e300 to 1e-300 overflows.
+    return math.log10(positive.max()) - math.log10(positive.min()) > LOG_DECADES
+
+
+def _beyond_log_axis(values: np.ndarray) -> bool:
+    """Positive values a log axis does not draw (figure.LOG_AXIS_LIMITS)."""
+    positive = values[values > 0]
+    return positive.size > 0 and (positive.min() < LOG_AXIS_LIMITS[0]
+                                  or positive.max() > LOG_AXIS_LIMITS[1])
 
 
 def _error_axis(axis, runs, values, ylabel: str, empty_note: str) -> None:
     drawn = False
     log = any(_spans_decades(v) for v in values)
+    # Beyond a log axis's range (a constraint error from 1e-300 to 1e300): log10 of the
+    # errors on a linear axis, labelled so (before: an empty panel on 1..10).
+    log10 = log and any(_beyond_log_axis(v) for v in values)
     for run, value, style in zip(runs, values, _styles(len(runs))):
         if not np.any(value > 0):
             if len(runs) > 1:   # a legend entry still says why the run has no curve
                 axis.plot([], [], label=f"{run.legend}: 0 at every sample", **style)
             continue
         shown = np.where(value > 0, value, np.nan) if log else value
+        if log10:
+            shown = np.log10(shown)
         axis.plot(run.t, shown, label=run.legend, **style)
         drawn = True
-    if log:
+    if log10:
+        ylabel = f"log10 {ylabel}"
+    elif log:
         axis.set_yscale("log")
     if not drawn:
         axis.text(0.5, 0.5, empty_note, transform=axis.transAxes, ha="center", va="center",

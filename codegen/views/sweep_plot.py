@@ -23,7 +23,7 @@ from ..studies.sweep.store import (
     SPEC_FILE,
     TRAJECTORIES,
 )
-from .figure import matplotlib_figure, save_png
+from .figure import LOG_AXIS_LIMITS, matplotlib_figure, save_png
 
 
 def check_metric(metric: str, n: int, axes, trajectories: bool) -> None:
@@ -154,11 +154,6 @@ def plot_sweep(out: str | Path, metric: str, path: str | Path | None = None) -> 
     axis.grid(True, alpha=0.3)
     figure.tight_layout()
     return save_png(figure, target)
-
-
-#: Matplotlib's log axes draw values within these bounds; beyond them (1e300 kg, 1e-300 N/m)
-#: its tick locator overflows or the axis falls back to 1..10 and the figure is empty.
-LOG_AXIS_LIMITS = (1e-200, 1e200)
 
 
 def _logged(values: np.ndarray, label: str, set_scale, log_spacing: bool):

@@ -1,7 +1,8 @@
-"""chaingen plot of a sweep whose axis or metric reaches the ends of a double's range, and whose
-failed runs carry the metrics of the steps they completed (docs/sweep-format.md, section 6).
-Before: an axis from 1 to 1e300 drew an empty figure on 1..10 (matplotlib's log axis fell
-back), a failed run's max_energy_error of 0 was drawn as a result."""
+"""chaingen plot of a sweep, or of a trajectory file, whose axis, metric or error reaches the
+ends of a double's range, and of a sweep whose failed runs carry the metrics of the steps they
+completed (docs/sweep-format.md, section 6). Before: an axis from 1 to 1e300 drew an empty
+figure on 1..10 (matplotlib's log axis fell back), a failed run's max_energy_error of 0 was
+drawn as a result."""
 from __future__ import annotations
 
 import json
@@ -99,3 +100,28 @@ def test_a_heat_map_reaching_1e300_is_drawn_in_log10(tmp_path, drawn):
     assert drawn[0].axes[1].get_ylabel() == "log10 max_energy_error"
     drawn[0].canvas.draw()
     assert shown(axis, np.log10(mass), np.log10(stiffness))
+
+
+# -- chaingen plot of a trajectory file --------------------------------------------------------
+
+def test_a_trajectory_error_from_1e_300_to_1e300_is_drawn_as_its_log10(tmp_path, monkeypatch):
+    """A constraint_error column from 1e-300 to 1e300 (a file edited by hand: every number
+    finite): before, the log axis fell back to 1..10 and the panel showed no curve (exit 0)."""
+    from chaingen.views import plots
+
+    figures = []
+    monkeypatch.setattr(plots, "save_png", lambda figure, target: figures.append(figure)
+                        or target)
+    errors = [0.0, 1e-300, 1e300, 1e-15, 1.0]
+    rows = [f"{0.3 * k!r},0.1,0.2,0.3,0,0,0,4.19,{error!r}" for k, error in enumerate(errors)]
+    path = tmp_path / "run.csv"
+    path.write_text("t,phi1,phi2,phi3,omega1,omega2,omega3,energy,constraint_error\n"
+                    + "\n".join(rows) + "\n")
+    plots.plot_files([path], tmp_path / "run.png")
+    axis = figures[0].axes[2]
+    assert axis.get_yscale() == "linear" and axis.get_ylabel() == "log10 constraint error"
+    (line,) = axis.get_lines()
+    np.testing.assert_allclose(line.get_ydata()[1:], np.log10(errors[1:]))
+    figures[0].canvas.draw()
+    bottom, top = axis.get_ylim()
+    assert bottom <= -300 and top >= 300
