@@ -45,7 +45,9 @@ def real_array(values, name: str, shape: tuple | None = None, *,
                noun: str = "real numbers") -> np.ndarray:
     """`values` as a contiguous float64 array (of `shape`, if given), `name` naming them in a
     one-line error: real numbers only (a bool, complex number, string or None is a
-    TypeError)."""
+    TypeError, and so is a masked entry, whose hidden value numpy would take)."""
+    if np.ma.is_masked(values):
+        raise TypeError(f"{name}: must be {noun}, got a masked entry (a missing value)")
     if not (type(values) is np.ndarray and values.dtype.kind in "fiu"):
         found = _not_real(values)
         if found is _REAL and not isinstance(values, (list, tuple)):
@@ -55,7 +57,7 @@ def real_array(values, name: str, shape: tuple | None = None, *,
             raise TypeError(f"{name}: must be {noun}, got {what}")
     try:
         array = np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError) as error:    # a ragged list is a ValueError, as it was
+    except (TypeError, ValueError, OverflowError) as error:    # ragged: ValueError; 10**400
         raise type(error)(f"{name}: must be {noun} ({error})") from None
     if shape is not None or not array.flags.c_contiguous:
         array = np.ascontiguousarray(array)      # with a shape: a scalar is one entry

@@ -43,6 +43,17 @@ class StopSignal:
             self._blocks.pop(id(block), None)
 
 
+def check_watchers(progress, stop) -> None:
+    """A one-line TypeError for a progress that is not callable or a stop that is no
+    StopSignal (they failed once the run had started: "'int' object is not callable",
+    "'bool' object has no attribute '_attach'")."""
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress: must be a callable progress(steps_done) or None, got "
+                        f"{type(progress).__name__}")
+    if stop is not None and not isinstance(stop, StopSignal):
+        raise TypeError(f"stop: must be a StopSignal or None, got {type(stop).__name__}")
+
+
 def run_watched(call, control, progress, name: str) -> int:
     """call() (the C run, whose control block is `control`): in this thread, or, from the
     main thread or with a progress callback, in a worker thread `name` while this thread

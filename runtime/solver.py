@@ -47,7 +47,7 @@ from .interface import (
 from .parameters import no_values, parameter_vector
 from .parameters import parameter_bounds as _parameter_bounds
 from .results import ControlledStep, Sensitivities, SimulationResult, StepResult, storage_of
-from .runs import StopSignal, run_watched
+from .runs import StopSignal, check_watchers, run_watched
 from .stepper import Stepper
 from .workspaces import Workspaces
 
@@ -403,6 +403,7 @@ class Solver:
             raise ValueError(f"need 0 <= n_steps and 1 <= every, both below 2^63, got "
                              f"{n_steps}, {every}")
         dt = positive_step(dt)
+        check_watchers(progress, stop)
         sampled = -(-n_steps // every)      # the steps 0, every, 2 every, ... before n_steps
         held = sampled if self.nu else 0      # given torques: a copy of their sampled rows
         needed = 8 * ((n_steps // every + 1) * self.nsample + held * self.nu)

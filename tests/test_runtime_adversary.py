@@ -539,3 +539,22 @@ def test_hold_and_a_context_go_with_a_controller_they_can_reach():
     with pytest.raises(ValueError, match="^controller_context: for a C controller"):
         solver.simulate(good, good, dt=DT, n_steps=3, controller=lambda t, phi, omega: phi[:2],
                         controller_context=1234)
+
+
+def test_masked_entries_huge_integers_and_odd_watchers_are_refused_naming_them():
+    """A masked entry ran as the value under its mask (phi0 [0.5, --, 0.0] over 9.0 started
+    joint 2 at 9 rad, wrapped to 2.72); 10**400 was 'int too large to convert to float';
+    progress=5 and stop=True failed once the run had started, naming neither."""
+    solver, good = fake_solver(), np.zeros(3)
+    masked = np.ma.masked_array([0.5, 9.0, 0.0], mask=[False, True, False])
+    with pytest.raises(TypeError, match=r"^phi0: must be real numbers, got a masked entry"):
+        solver.simulate(masked, good, dt=DT, n_steps=3)
+    np.testing.assert_array_equal(real_array(np.ma.masked_array([0.5, 9.0], mask=False), "phi"),
+                                  [0.5, 9.0])
+    with pytest.raises(OverflowError, match=r"^phi0: must be real numbers \(int too large"):
+        solver.simulate([10 ** 400, 0, 0], good, dt=DT, n_steps=3)
+    with pytest.raises(TypeError, match=r"^progress: must be a callable progress\(steps_done\) "
+                                        r"or None, got int$"):
+        solver.simulate(good, good, dt=DT, n_steps=3, progress=5)
+    with pytest.raises(TypeError, match=r"^stop: must be a StopSignal or None, got bool$"):
+        solver.simulate(good, good, dt=DT, n_steps=3, stop=True)
