@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from ...generate.interface import c_literal
+from ...generate.package import LARGE_MODEL_BYTES
 from ...runtime import contract
 from ...runtime.build import STRICT_FLAGS, compiler
 from .config import (
@@ -147,7 +148,8 @@ def machine_description() -> list[tuple[str, str]]:
         ("C compiler", f"{compiler()}: {_first_line([compiler(), '--version'])}"),
         ("our flags", " ".join(STRICT_FLAGS + HARNESS_FLAGS) + ", and the package's own "
                       "per-source flags in their place (the solver source -O3, a generated "
-                      "model over 1 MB -O1), each source in its own compiler process, as "
+                      f"model over {LARGE_MODEL_BYTES / 1e6:g} MB -O1), each source in its own "
+                      "compiler process, as "
                       "chaingen's build does; the Solver used for the errors is that build"),
         ("MuJoCo", f"{version('mujoco')} (PyPI wheel, its own build flags)"),
         ("SciPy", f"{version('scipy')} (right-hand side and Jacobian: CasADi C compiled by "
@@ -263,7 +265,8 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
                                for field in contract.NEWTON_OPTIONS
                                if field.name.endswith(("_rtol", "_atol", "_tol")))
         lines += ["## Speed knobs", "", KNOBS_TEXT.format(scene=HEADLINE_SCENE, dt=HEADLINE_DT,
-                                                          tolerances=tolerances),
+                                                          tolerances=tolerances,
+                                                          large=f"{LARGE_MODEL_BYTES / 1e6:g}"),
                   "", knob_table(knobs), ""]
     if studies is not None:
         lines += ["## Studies: run-time parameters and sweeps", "",
@@ -283,7 +286,7 @@ LU (es: of the n x n reduced system, docs/model.md section 18) and the size of t
 model dominate. The package defaults are warm start, Newton-chord (the
 Jacobian evaluated and factorised once a step, reused within it) for "es" and "midpoint" and
 simplified Newton (reused across steps) for "vi", tolerances {tolerances}, the solver
-source at -O3 and a generated model larger than 1 MB at -O1. "step / (F, dF/dz)" is the step's
+source at -O3 and a generated model larger than {large} MB at -O1. "step / (F, dF/dz)" is the step's
 time in units of one residual-and-Jacobian evaluation. Run-time parameters against constants
 compiled in are measured in the next section."""
 
