@@ -66,12 +66,9 @@ MODEL_FUNCTIONS = (
     ("newton_matrix", "newton_matrix"), ("applied_torques", "applied_torques"))
 
 #: A generated model source larger than this is compiled with LARGE_MODEL_FLAGS in place of the
-#: optimisation level: gcc's -O2 time grows faster than the file. Measured (gcc 14, the bench's
-#: scaling chain, sensitivities off, a loaded machine): vi's model of 2.65 MB at n = 100 compiles
-#: in 70.1 s at -O2 against 29.6 s at -O1 (1.2 GB against 0.5 GB); at n = 50 its 1.30 MB take
-#: 21.1 against 15.7 s, and -O2 makes the step 0.886 of -O1's (0.81 to 0.93, 9 rounds side by
-#: side; es's 1.01 MB model: 14.0 against 10.1 s, its step 0.97, within the noise). Before,
-#: the line was 1 MB, from unrolled models (n = 20: about 40 s unloaded against 5 s).
+#: optimisation level: gcc's -O2 time grows faster than the file. vi on the bench's scaling
+#: chain: 2.65 MB (n = 100) in 70.1 s at -O2 against 29.6 s at -O1; 1.30 MB (n = 50) in 21.1
+#: against 15.7 s, where -O2 makes the step 0.886 of -O1's (CHANGELOG; was 1 MB).
 LARGE_MODEL_BYTES = 1_500_000
 LARGE_MODEL_FLAGS = ("-O1",)
 #: The solver source (Newton loop and the dense LU inlined in it) is compiled with -O3: gcc
