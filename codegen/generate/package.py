@@ -65,10 +65,9 @@ MODEL_FUNCTIONS = (
     ("sensitivity_map", "sensitivity_map"), ("joint_maps", "joint_maps"),
     ("newton_matrix", "newton_matrix"), ("applied_torques", "applied_torques"))
 
-#: A generated model source larger than this is compiled with LARGE_MODEL_FLAGS in place of the
-#: optimisation level: gcc's -O2 time grows faster than the file. vi on the bench's scaling
-#: chain: 2.65 MB (n = 100) in 70.1 s at -O2 against 29.6 s at -O1; 1.30 MB (n = 50) in 21.1
-#: against 15.7 s, where -O2 makes the step 0.886 of -O1's (CHANGELOG; was 1 MB).
+#: A model source larger than this gets LARGE_MODEL_FLAGS (gcc's -O2 time grows faster than the
+#: file): vi's 2.65 MB at n = 100 take 70.1 s at -O2, 29.6 s at -O1; its 1.30 MB at n = 50 21.1
+#: against 15.7 s, and -O2 makes the step 0.886 of -O1's (CHANGELOG; was 1 MB).
 LARGE_MODEL_BYTES = 1_500_000
 LARGE_MODEL_FLAGS = ("-O1",)
 #: The solver source (Newton loop and the dense LU inlined in it) is compiled with -O3: gcc
