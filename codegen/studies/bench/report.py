@@ -264,9 +264,8 @@ def markdown(config: BenchConfig, found: list[Headline], reference, scaling,
         tolerances = ", ".join(f"{field.name} = {c_literal(field.default)}"
                                for field in contract.NEWTON_OPTIONS
                                if field.name.endswith(("_rtol", "_atol", "_tol")))
-        lines += ["## Speed knobs", "", KNOBS_TEXT.format(
-                      scene=HEADLINE_SCENE, dt=HEADLINE_DT, tolerances=tolerances,
-                      large=f"{LARGE_MODEL_BYTES / 1e6:g}"),
+        lines += ["## Speed knobs", "", KNOBS_TEXT.format(scene=HEADLINE_SCENE, dt=HEADLINE_DT,
+                  tolerances=tolerances, large=f"{LARGE_MODEL_BYTES / 1e6:g}"),
                   "", knob_table(knobs), ""]
     if studies is not None:
         lines += ["## Studies: run-time parameters and sweeps", "",
