@@ -5,9 +5,10 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
-from chaingen.studies.sweep import chunk_size, parse_spec
+from chaingen.studies.sweep import SweepError, chunk_size, parse_spec
 
 from helpers import ROOT, chaingen_in_process
 
@@ -27,6 +28,33 @@ def test_product_expands_first_axis_slowest():
     assert [run["springs[0].stiffness"] for run in found.runs[:5]] == [1.0] * 4 + [2.0]
     assert [run["links[1].mass"] for run in found.runs[:4]] == [0.5, 1.0, 1.5, 2.0]
     assert found.parameters == ("springs[0].stiffness", "links[1].mass")
+
+
+def test_a_spec_built_with_numpy_reads_as_the_plain_one():
+    """numpy scalars and arrays, and tuples, read as the numbers and lists they hold (before,
+    t_end = np.float32(0.5) was refused as 'must be > 0 and finite', an axis given as an array
+    as 'a list or a range', and the digest took numpy's str())."""
+    plain = spec(t_end=0.5, every=2, seed=3,
+                 axes={"springs[0].stiffness": [5.0, 10.0],
+                       "links[1].mass": {"from": 0.5, "to": 2.0, "num": 4}})
+    mixed = spec(t_end=np.float32(0.5), every=np.int64(2), seed=np.uint8(3),
+                 axes={"springs[0].stiffness": np.array([5.0, 10.0]),
+                       "links[1].mass": {"from": np.float64(0.5), "to": np.float32(2.0),
+                                         "num": np.int32(4)}})
+    assert mixed.runs == plain.runs and mixed.digest == plain.digest
+    assert (mixed.t_end, mixed.every, mixed.seed) == (plain.t_end, plain.every, plain.seed)
+    assert spec(axes={"springs[0].stiffness": (5.0, 10.0)}).runs == spec().runs
+    with pytest.raises(SweepError, match="every: must be an integer"):
+        spec(every=np.True_)
+
+
+def test_a_spec_that_is_no_table_is_refused():
+    with pytest.raises(SweepError, match=r"<sweep>: a sweep spec is a table .* got list"):
+        parse_spec([{"scene": SCENE}])
+    from chaingen import sweep
+
+    with pytest.raises(TypeError, match="sweep: spec must be .* got list"):
+        sweep([{"scene": SCENE}])
 
 
 def test_run_time_axes_are_not_parameters():

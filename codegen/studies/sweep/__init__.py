@@ -128,12 +128,15 @@ def sweep(spec, out: str | Path | None = None, *, engine: str = "local",
     """Run a sweep from a spec file, a spec dict (paths relative to the working directory) or
     a SweepSpec, into `out` (default: a temporary directory, removed afterwards). Returns the
     runs table (pandas), and with `trajectories` also the trajectories (xarray, loaded)."""
-    import pandas as pd
-
     if isinstance(spec, (str, Path)):
         spec = load_spec(spec)
     elif isinstance(spec, dict):
         spec = parse_spec(spec)
+    elif not isinstance(spec, SweepSpec):
+        raise TypeError(f"sweep: spec must be a spec file's path, a dict or a SweepSpec, "
+                        f"got {type(spec).__name__}")
+    import pandas as pd
+
     scratch = None
     if out is None:
         scratch = tempfile.mkdtemp(prefix="chaingen-sweep-")

@@ -231,10 +231,15 @@ def load_spec(path: str | os.PathLike) -> SweepSpec:
 
 def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
                base: Path = Path(".")) -> SweepSpec:
-    """Check a spec document (a dict, as TOML or Python gives it)."""
+    """Check a spec document (a dict, as TOML or Python gives it; numpy's scalars and arrays
+    read as the numbers and lists they hold)."""
     def fail(key: str, what: str) -> SweepError:
         return SweepError(f"{source}: {key}: {what}")
 
+    if not isinstance(document, dict):
+        raise SweepError(f"{source}: a sweep spec is a table of keys (a dict), "
+                         f"got {type(document).__name__}")
+    document = _plain(document)
     for key in document:
         if key not in TOP_KEYS:
             raise fail(key, f"unknown key (allowed: {', '.join(TOP_KEYS)})")
@@ -305,6 +310,18 @@ def parse_spec(document: dict[str, Any], source: str = "<sweep>", *,
     _check_values(spec)
     _check_sizes(spec)
     return spec
+
+
+def _plain(value):
+    """`value` in Python's own types: numpy scalars as the int, float or bool they hold, arrays
+    and tuples as lists, so that a spec built with numpy reads (and digests) as its TOML would."""
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(item) for item in value]
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def _integer(value) -> bool:
