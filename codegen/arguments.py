@@ -43,6 +43,18 @@ def positive_int(text: str, bits: int = 64) -> int:
     return value
 
 
+def check_samples(text: str) -> int:
+    """check --samples: 1 to chaingen.studies.check.MAX_SAMPLES (the time it takes)."""
+    from .studies.check import MAX_SAMPLES
+
+    value = positive_int(text)
+    if value > MAX_SAMPLES:
+        raise argparse.ArgumentTypeError(
+            f"must be at most {MAX_SAMPLES} (a random state takes milliseconds to 0.15 s to "
+            f"check, so {MAX_SAMPLES} of them take up to hours), got {value}")
+    return value
+
+
 def integer(text: str) -> int:
     try:
         return int(text)

@@ -12,6 +12,7 @@ from .arguments import (
     add_newton_options,
     add_parameters_option,
     add_scheme_options,
+    check_samples,
     dimension,
     load_command_scene,
     newton_overrides,
@@ -144,8 +145,8 @@ def parser() -> argparse.ArgumentParser:
         "check", help="compare the generated functions with finite differences and SymPy")
     add_scheme_options(check)
     add_parameters_option(check)
-    check.add_argument("--samples", type=positive_int, default=5, metavar="N",
-                       help="random states to check at (default 5)")
+    check.add_argument("--samples", type=check_samples, default=5, metavar="N",
+                       help="random states to check at, 1 to 100000 (default 5)")
     check.add_argument("--seed", type=seed, default=0,
                        help="random seed, 0 to 2^64 - 1 (default 0)")
     check.add_argument("--dt", type=number, help="step in s (default: the scene's)")

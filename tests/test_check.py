@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from chaingen.studies.check import check_solver
+from chaingen.studies.check import MAX_SAMPLES, check_solver
 from chaingen.symbolic.schemes import build_scheme
 
 from helpers import REFERENCE_SCENES, load, scene_path, solver_for
@@ -99,6 +99,35 @@ def test_check_command_refuses_bad_options_with_status_2(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 2
     assert "--dt" in result.stderr and "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("samples", [str(MAX_SAMPLES + 1), "1000000000", str(10 ** 18)])
+def test_check_refuses_more_samples_than_it_can_take_before_any_work(samples):
+    """Each random state takes 4 ms to 0.15 s to check and nothing else grows with them, so
+    the bound is time: --samples 10**9 ran silently for days (49 on the cheapest scene) before
+    MAX_SAMPLES. Now it is exit 2 at once, naming --samples and the limit."""
+    result = subprocess.run([sys.executable, "-m", "chaingen", "check",
+                             str(scene_path("three_link_gravity")), "--samples", samples],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stdout + result.stderr
+    last = result.stderr.strip().splitlines()[-1]
+    assert last == (f"chaingen check: error: argument --samples: must be at most {MAX_SAMPLES} "
+                    f"(a random state takes milliseconds to 0.15 s to check, so {MAX_SAMPLES} "
+                    f"of them take up to hours), got {samples}")
+    assert "Traceback" not in result.stderr and not result.stdout
+
+
+@pytest.mark.parametrize("samples", [0, -1, MAX_SAMPLES + 1, 1.5, True, "5"])
+def test_check_solver_refuses_a_count_of_samples_it_cannot_honour(samples):
+    """No states is no check (a report of no rows passed); too many is days (see above)."""
+    with pytest.raises(ValueError, match=rf"^samples: must be an integer from 1 to {MAX_SAMPLES}"):
+        check_solver(None, None, samples=samples)
+
+
+def test_check_help_states_the_samples_limit():
+    result = subprocess.run([sys.executable, "-m", "chaingen", "check", "--help"],
+                            capture_output=True, text=True, timeout=60)
+    assert f"1 to {MAX_SAMPLES}" in " ".join(result.stdout.split())
 
 
 @pytest.mark.compile

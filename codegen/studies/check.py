@@ -37,6 +37,12 @@ VALUE_TOLERANCE = 1e-9
 #: The reference Newton stops at the round-off floor once its updates are below this of the
 #: unknowns and stop shrinking (_converged_unknowns): far below VALUE_TOLERANCE.
 ROUND_OFF_GATE = 1e-10
+#: The most random states a check takes. Nothing is kept per state (only the worst error of
+#: each row), so the bound is time: a state takes 4.2 ms (three_link_mono, es K = 3), 12.8 ms
+#: (panda_springs) to 150 ms (panda_springs --order 6) to check, measured over 200 states on a
+#: shared 2-core machine; 100000 of them are 7 min to 4 h, and --samples 10**9 (which ran,
+#: silently, before this bound) 49 days on the cheapest of them.
+MAX_SAMPLES = 100_000
 
 
 @dataclass(frozen=True)
@@ -121,7 +127,12 @@ class _SympyFunctions:
 
 def check_solver(scheme: DiscreteScheme, solver: Solver, *, samples: int = 5,
                  seed: int = 0, dt: float | None = None) -> CheckReport:
-    """Compare `solver` (the C built from `scheme`) with differences and with SymPy."""
+    """Compare `solver` (the C built from `scheme`) with differences and with SymPy, at
+    `samples` random states, 1 to MAX_SAMPLES (ValueError otherwise: no states, no check)."""
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) \
+            or not 1 <= samples <= MAX_SAMPLES:
+        raise ValueError(f"samples: must be an integer from 1 to {MAX_SAMPLES} (random states "
+                         f"to check at), got {samples!r}")
     scene = scheme.scene
     n, nu = scene.n, solver.nu
     dt = dt if dt is not None else scene.simulation.dt
