@@ -481,6 +481,25 @@ def test_zero_segment_elsewhere_than_the_initial_configuration_is_accepted():
     parse_scene(text, SOURCE, "x")
 
 
+@pytest.mark.parametrize("key, line", [("links[1].length", 19), ("links[2].fastening", 28)])
+def test_a_length_that_dwarfs_a_spring_is_named_with_the_reason(key, line):
+    """A link 1e150 m long (or a fastening 1e150 m off it) makes the zero-length limit 1e-9 G
+    of every segment 1e141 m: spring 0's segment of 0.727 m was refused as 'segment s_1 ...
+    has zero length at the initial configuration; move a fastening ... (limit 1e+141 m)'. The
+    refusal names the key that dwarfs it now."""
+    lines = (SCENES / "three_link_mono.toml").read_text().splitlines()
+    name, _ = lines[line - 1].split(" = ")
+    assert name in key
+    lines[line - 1] = f"{name} = 1e150"
+    message = scene_error("\n".join(lines))
+    assert message == (
+        f"{SOURCE}: {key}: 1e+150 m dwarfs segment s_1 of springs[0] (fastening P_1 to P_2), "
+        "0.727 m long at the initial angles: it makes the geometry's size G so large that the "
+        "segment is below 1e-9 G = 1e+141 m, where a segment counts as zero length (and a run "
+        "stops below 1e-6 G); every segment must be at least 1e-9 of the geometry's size: write "
+        f"{key} in metres, got 1e+150")
+
+
 # -- syntax errors and files ---------------------------------------------------------------
 
 @pytest.mark.parametrize("text, line", [

@@ -453,6 +453,27 @@ def test_zero_segment_only_at_the_initial_angles_is_refused():
         "the initial angles (limit 2e-10 m), got 0.0")
 
 
+@pytest.mark.parametrize("offset", ["1e150", "1e100"])
+def test_a_joint_offset_that_dwarfs_a_spring_is_named_with_the_reason(offset):
+    """Link 3's joint 1e150 m out makes the geometry's size G, and so the zero-length limit
+    1e-9 G, dwarf spring 0's segment of 0.307 m, which joins the base and link 1 and does not
+    involve that joint. The refusal said 'route[0] and route[1] are one point at every angle
+    (on the axis of joint 1) ... (limit 1e+141 m)', which they are not; it names the joint's
+    xyz and the real reason now."""
+    text = (SCENES / "spatial_three_link.toml").read_text()
+    old = "xyz = [0.3, 0.0, 0.0]"
+    assert text.count(old) == 1
+    message = spatial_error(text.replace(old, f"xyz = [{offset}, 0.0, 0.0]"))
+    limit = f"{1e-9 * (float(offset) + 0.1 + math.hypot(0.02, 0.35)):.3g}"
+    assert message == (
+        f"{SOURCE}: links[2].joint.xyz: {float(offset):.3g} m dwarfs segment 1 of springs[0] "
+        "(route[0] to route[1]), 0.307 m long at the initial angles: it makes the geometry's "
+        f"size G so large that the segment is below 1e-9 G = {limit} m, where a segment counts "
+        "as zero length (and a run stops below 1e-6 G); every segment must be at least 1e-9 of "
+        "the geometry's size: write links[2].joint.xyz in metres, got "
+        f"[{float(offset)!r}, 0.0, 0.0]")
+
+
 def test_toml_syntax_error_names_the_line():
     assert spatial_error("gravity = [0, 0,\n\n[[links]]\n").startswith(f"{SOURCE}:3: TOML "
                                                                         "syntax error: ")

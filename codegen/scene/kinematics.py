@@ -156,6 +156,49 @@ def zero_segment_tolerance(scene: Scene, spring: Spring) -> float:
     return ZERO_SEGMENT_RELATIVE_TOLERANCE * geometry_size(scene, spring)
 
 
+def dwarfing_size(sizes, length: float) -> int | None:
+    """Which one of the terms `sizes` of a geometry's size G alone puts a segment of `length`
+    below the zero-length limit ZERO_SEGMENT_RELATIVE_TOLERANCE * G: the index of the largest,
+    if the segment is at least the limit of G without it; None if the segment is short by the
+    rest of the geometry too (a segment that is short in its own right), or if there is no
+    rest (the largest term is the whole geometry). A joint 1e150 m out
+    dwarfs a spring of 0.2 m between two other links: the key to name is that joint's."""
+    sizes = [float(size) for size in sizes]
+    if not sizes:
+        return None
+    largest = max(range(len(sizes)), key=sizes.__getitem__)
+    rest = sum(size for index, size in enumerate(sizes) if index != largest)
+    return largest if rest > 0 and length >= ZERO_SEGMENT_RELATIVE_TOLERANCE * rest else None
+
+
+def dwarfed_segment(key: str, size: float, segment: str, length: float,
+                    tolerance: float) -> str:
+    """The refusal of a segment dwarfed by one key's length (dwarfing_size): the real reason."""
+    return (f"{size:.3g} m dwarfs {segment}, {length:.3g} m long at the initial angles: it "
+            f"makes the geometry's size G so large that the segment is below 1e-9 G = "
+            f"{tolerance:.3g} m, where a segment counts as zero length (and a run stops below "
+            f"1e-6 G); every segment must be at least 1e-9 of the geometry's size: write {key} "
+            f"in metres")
+
+
+def dwarfed_by(scene: Scene, index: int, j: int, length: float,
+               tolerance: float) -> tuple[str, str, float] | None:
+    """(key path, what is wrong, value) of the one length or fastening whose size alone puts
+    segment s_j of spring `index` below the zero-length limit (dwarfing_size): a link 1e150 m
+    long, which the segment's own refusal (zero length, move a fastening) would not name."""
+    spring = scene.springs[index]
+    keys = ([(f"links[{i}].length", link.length) for i, link in enumerate(scene.links)]
+            + [("base.fastening", scene.base_fastening)]
+            + [(f"links[{i}].fastening", link.fastening) for i, link in enumerate(scene.links)]
+            + [(f"springs[{index}].offsets[{k}]", r) for k, r in enumerate(spring.offsets or ())])
+    largest = dwarfing_size([abs(value) for _, value in keys], length)
+    if largest is None:
+        return None
+    key, value = keys[largest]
+    return (key, dwarfed_segment(key, abs(value), f"segment s_{j} of springs[{index}] "
+                                 f"(fastening P_{j} to P_{j + 1})", length, tolerance), value)
+
+
 def joint_velocities(scene: Scene, phi, phidot) -> np.ndarray:
     """Xdot_1..Xdot_{n+1}, shape (n + 1, 2): Xdot_1 = 0, Xdot_{i+1} = Xdot_i + thetadot_i L_i n_i.
 

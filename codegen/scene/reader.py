@@ -486,6 +486,9 @@ class SceneReader:
             tolerance = kinematics.zero_segment_tolerance(scene, spring)
             for j, length in zip(spring.joints, geometry.segment_lengths):
                 if length < tolerance:
+                    dwarfed = kinematics.dwarfed_by(scene, index, j, float(length), tolerance)
+                    if dwarfed is not None:
+                        self.fail(*dwarfed)
                     self.fail(f"springs[{index}]",
                               f"segment s_{j} (fastening P_{j} to P_{j + 1}, joint {j}) has zero "
                               "length at the initial configuration (initial.angles), where its "

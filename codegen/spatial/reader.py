@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scene.kinematics import ZERO_SEGMENT_RELATIVE_TOLERANCE
+from ..scene.kinematics import ZERO_SEGMENT_RELATIVE_TOLERANCE, dwarfed_segment, dwarfing_size
 from ..scene.reader import (
     SceneReader,
     parse_scene,
@@ -434,6 +434,8 @@ class SpatialSceneReader(SceneReader):
             tolerance = ZERO_SEGMENT_RELATIVE_TOLERANCE * min(
                 largest, size + sum(math.hypot(*point.point) for point in spring.route))
             for k, length in enumerate(lengths):
+                if length < tolerance:
+                    self.refuse_dwarfed_segment(scene, index, k, float(length), tolerance)
                 if length < tolerance and _zero_at_every_angle(scene, index, k, tolerance):
                     ends = sorted(point.link for point in spring.route[k:k + 2])
                     joints = (f"the axis of joint {ends[1]}" if ends[1] == ends[0] + 1 else
@@ -451,6 +453,25 @@ class SpatialSceneReader(SceneReader):
                               "undefined; move a route point or change the initial angles "
                               f"(limit {tolerance:.3g} m)", float(length))
 
+
+
+    def refuse_dwarfed_segment(self, scene: SpatialScene, index: int, k: int, length: float,
+                               tolerance: float) -> None:
+        """Fail at the one joint's xyz or route point whose length alone puts segment k of
+        spring `index` below the zero-length limit (kinematics.dwarfing_size): a joint 1e150 m
+        out, which the segment's own refusal (one point at every angle) would not name."""
+        keys = ([(f"links[{i}].joint.xyz", list(link.joint.xyz))
+                 for i, link in enumerate(scene.links)]
+                + [(f"springs[{index}].route[{j}]", [point.link, *point.point])
+                   for j, point in enumerate(scene.springs[index].route)])
+        sizes = ([math.hypot(*link.joint.xyz) for link in scene.links]
+                 + [math.hypot(*point.point) for point in scene.springs[index].route])
+        largest = dwarfing_size(sizes, length)
+        if largest is not None:
+            key, value = keys[largest]
+            self.fail(key, dwarfed_segment(
+                key, sizes[largest], f"segment {k + 1} of springs[{index}] (route[{k}] to "
+                f"route[{k + 1}])", length, tolerance), value)
 
 
 def _zero_at_every_angle(scene: SpatialScene, spring: int, segment: int, tolerance: float) -> bool:
