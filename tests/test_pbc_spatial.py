@@ -48,10 +48,14 @@ def test_the_panda_keeps_the_closed_loop_balance_on_every_step(panda_es, dt, sca
 
 
 def test_the_panda_is_regulated_to_its_target(panda_es):
+    """With the energy check on by default (1e-6 of T) to rest, where H_d cancels its terms'
+    joules: before, with it on, step 292 (t = 2.91 s) failed with ENERGY_JUMP."""
+    assert panda_es.newton_options().energy_tol == 1e-6
     result = panda_es.simulate(PANDA.initial_angles, PANDA.initial_velocities, dt=0.01,
                                n_steps=1000, parameters=_gains(PANDA, 1.0))
     assert np.abs(result.phi[-1] - PANDA.control.target).max() < 1e-6
     assert np.abs(result.omega[-1]).max() < 1e-6
+    assert result.split_steps == 0
 
 
 def test_the_panda_controllers_torque_reproduces_the_closed_loop_on_the_plant(panda_es):

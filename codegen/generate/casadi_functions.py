@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import casadi as ca
+import sympy as sp
 
 from ..spatial.values import SpatialScene
 from ..symbolic.schemes import DiscreteScheme
@@ -55,10 +56,8 @@ class SchemeFunctions:
     holding_torques: ca.Function | None  # (phi) -> dV/dphi, actuated scenes only
     segment_margins: ca.Function | None  # (x0, x1) -> (s_j(x1) / tol_j, cos of each segment's
                                          # turn over the step), scenes with springs only
-    energy_check: ca.Function | None = None  # (x) -> (H, T): schemes with a kinetic_energy
-                                             # only
-    parameters: ca.Function | None = None  # p -> q, the derived parameters every other
-                                           # function takes in p's place (packages with p)
+    energy_check: ca.Function | None = None  # (x) -> (H, T, S), schemes with a kinetic_energy
+    parameters: ca.Function | None = None  # p -> q, the derived parameters the others take
     # es's Newton matrix by its factors (DiscreteScheme.arm_space): -> (F, factors), factors =
     # (H's nonzeros, G_mu, G_c, m, A) as runtime/c/chaingen_arm_solve.h reads them; and H's
     # pattern, (rows, columns) of its nonzeros in that order. None: dense LU of dF/dz.
@@ -262,14 +261,17 @@ def segment_margins(t: SchemeTranslation) -> GeneratedFunction | None:
 
 
 def energy_check(t: SchemeTranslation) -> GeneratedFunction | None:
-    """(x) -> (H, T), for a scheme with a kinetic_energy (the energy check, model.md 13)."""
+    """(x) -> (H, T, S), schemes with a kinetic_energy (model.md 13). S, the sum of |H's terms|,
+    scales H's round-off: a controlled loop's H_d cancels joules to nothing at its target."""
     maps = t.scheme.maps
     if maps.kinetic_energy is None:
         return None
-    energies = t.translated("outputs", [maps.energy, maps.kinetic_energy],
-                            t.state_translator(t.x), t.state_symbols)
+    translate, symbols = t.state_translator(t.x), t.state_symbols
+    terms = t.translated("outputs", list(sp.Add.make_args(maps.energy)), translate, symbols)
+    energies = ca.vertcat(t.translated("outputs", [maps.energy, maps.kinetic_energy], translate,
+                                       symbols), ca.sum1(ca.fabs(terms)))
     return GeneratedFunction("energy_check", tuple([t.x] + t.with_p[0]),
-                             tuple(["x"] + t.with_p[1]), (energies,), ("H_T",))
+                             tuple(["x"] + t.with_p[1]), (energies,), ("H_T_S",))
 
 
 def holding_torques(t: SchemeTranslation) -> GeneratedFunction | None:

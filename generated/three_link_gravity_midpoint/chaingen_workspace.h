@@ -31,7 +31,7 @@ typedef struct {
     double proposed_dt;     /* adaptive steps: the controller's next step (0: none yet) */
     double previous_error;  /* adaptive steps: the previous error estimate */
     double composed_dt;     /* composed steps: dt of the step that ended at composed_x1 */
-    double energy_ends[2];  /* the energy check: (H, T) at energy_x */
+    double energy_ends[3];  /* the energy check: (H, T, S) at energy_x */
     long step_fallbacks;    /* full-Newton fallbacks of the last step */
     long step_splits;       /* halvings of the last step */
     int history;            /* solutions in previous_z: 0 to CHAINGEN_WARM_START_HISTORY */

@@ -1293,33 +1293,35 @@ static int cg_finish_step(const chaingen_model *table, const cg_solver *c, const
         /* The scheme keeps the energy balance H_1 - H_0 = W - D only up to its error, small
          * against the kinetic energy at the step's ends; a root that misses it by energy_tol
          * (T_0 + T_1) or more is spurious: Newton converged to another solution of a step too
-         * long for the motion (docs/model.md, section 13). Within round-off of H it passes (a
-         * chain held still has T = 0). The energies at x0 are the last accepted step's when it
-         * ended there. options NULL: the model's default. */
+         * long for the motion (docs/model.md, section 13). Within round-off it passes (a chain
+         * held still has T = 0): of H's terms, whose magnitudes S sums (a controlled loop's
+         * H_d cancels joules of them to nothing at its target), and of the flows. The
+         * energies at x0 are the last accepted step's when it ended there. options NULL: the
+         * model's default. */
         const double tolerance = options ? options->energy_tol : model->defaults.energy_tol;
-        double start[2], end[2], balance;
+        double start[3], end[3], balance, scale;
         if (tolerance > 0.0) {
             if (s->energy_valid && !memcmp(x0, c->energy_x, sizeof(double) * (size_t)nx)) {
-                start[0] = s->energy_ends[0];
-                start[1] = s->energy_ends[1];
+                memcpy(start, s->energy_ends, sizeof(start));
             } else if (cg_state_energies(model, c, x0, start)) {
                 return CHAINGEN_EVALUATION_FAILED;
             }
             if (cg_state_energies(model, c, candidate, end)) {
                 return CHAINGEN_EVALUATION_FAILED;
             }
+            scale = start[2] + end[2];
             if (model->flows) {
                 balance = end[0] - start[0] - (step_flows[0] - step_flows[1]);
+                scale += fabs(step_flows[0]) + fabs(step_flows[1]);
             } else {
                 balance = end[0] - start[0];
             }
             if (!(fabs(balance) <= tolerance * (start[1] + end[1])
-                                   + CG_ROUNDOFF_RESIDUAL * (fabs(start[0]) + fabs(end[0])))) {
+                                   + CG_ROUNDOFF_RESIDUAL * scale)) {
                 return CHAINGEN_ENERGY_JUMP;
             }
             memcpy(c->energy_x, candidate, sizeof(double) * (size_t)nx);
-            s->energy_ends[0] = end[0];
-            s->energy_ends[1] = end[1];
+            memcpy(s->energy_ends, end, sizeof(end));
             s->energy_valid = 1;
         }
     }

@@ -181,7 +181,7 @@ extern "C" {
  * Energy check (vi and midpoint; energy_tol > 0): the scheme keeps the energy balance
  * H_1 - H_0 = W - D only up to its error, small against the kinetic energy T at the step's ends.
  * A converged step that misses it by more than energy_tol (T_0 + T_1), beyond the round-off of
- * H, is a spurious root of a step too long for the motion: it fails with
+ * H's terms and the flows, is a spurious root of a step too long for the motion: it fails with
  * THREE_LINK_MONO_ES_ENERGY_JUMP, and step() and simulate() split it like a step Newton failed.
  * The defaults of this package:
  * max_iterations 20, update_rtol 1e-10, update_atol 1e-13, residual_tol 1e-8, warm_start 1,

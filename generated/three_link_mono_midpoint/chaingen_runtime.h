@@ -54,7 +54,7 @@ typedef int (*chaingen_function)(const double **arg, double **res, long long int
  *   predictor         (x0, q, dt) -> (z)
  *   next_state        (z, x0, u, q, dt) -> (x1, flows[2] when flows)
  *   segment_margins   (x0, x1, q) -> (margins[2 nsegment])     when nsegment > 0
- *   energy_check      (x, q) -> (H, T)                         when energy_check
+ *   energy_check      (x, q) -> (H, T, S)  S: sum of |H's terms|  when energy_check
  *   sensitivity_rhs   (z, x0, u, q, dt) -> (R[nz x ncols])     when sensitivities
  *   sensitivity_map   (z, x0, u, q, dt) -> (S_z, S_s0, S_u, S_p)  when sensitivities
  *   joint_maps        (x0, x1, q) -> (x0_s0, s1_x1, x0_p, s1_p)   composed, chain_state

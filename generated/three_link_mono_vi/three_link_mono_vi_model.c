@@ -27,15 +27,25 @@
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
 #define casadi_f7 CASADI_PREFIX(f7)
+#define casadi_fabs CASADI_PREFIX(fabs)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s4 CASADI_PREFIX(s4)
-#define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_sq CASADI_PREFIX(sq)
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
+
+casadi_real casadi_fabs(casadi_real x) {
+  (void)x;
+/* Pre-c99 compatibility */
+#if __STDC_VERSION__ < 199901L
+  return x>0 ? x : -x;
+#else
+  return fabs(x);
+#endif
+}
 
 /* Configuration this file was compiled with */
 void three_link_mono_vi__casadi_version(int* major, int* minor, int* patch) {
@@ -52,7 +62,6 @@ static const casadi_int casadi_s1[3] = {9, 1, 1};
 static const casadi_int casadi_s2[3] = {1, 1, 1};
 static const casadi_int casadi_s3[3] = {3, 3, 1};
 static const casadi_int casadi_s4[3] = {6, 1, 1};
-static const casadi_int casadi_s5[3] = {2, 1, 1};
 
 /* three_link_mono_vi_model_residual:(z[3],x0[9],dt)->(F[3]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -2287,12 +2296,12 @@ int three_link_mono_vi_model_segment_margins_work_bytes(casadi_int *sz_arg, casa
   return 0;
 }
 
-/* three_link_mono_vi_model_energy_check:(x[9])->(H_T[2]) */
+/* three_link_mono_vi_model_energy_check:(x[9])->(H_T_S[3]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)res; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24, a25, a26, a27, a28;
+  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
   a00=arg[0]? arg[0][3] : 0;
   a01=arg[0]? arg[0][0] : 0;
   a02=arg[0]? arg[0][4] : 0;
@@ -2317,189 +2326,209 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a09=(a07+a09);
   a09=casadi_sq(a09);
   a09=(a06*a09);
-  a05=(a05+a09);
+  a10=(a05+a09);
   a04=(a01*a04);
   a02=(a00*a02);
   a04=(a04-a02);
   a02=(a11*a00);
   a02=(a04+a02);
-  a09=(a08*a03);
-  a02=(a02+a09);
+  a12=(a08*a03);
+  a02=(a02+a12);
   a02=casadi_sq(a02);
-  a09=(a11*a04);
-  a09=(a03+a09);
-  a10=(a08*a01);
-  a09=(a09+a10);
-  a09=casadi_sq(a09);
-  a02=(a02+a09);
+  a12=(a11*a04);
+  a12=(a03+a12);
+  a13=(a08*a01);
+  a12=(a12+a13);
+  a12=casadi_sq(a12);
+  a02=(a02+a12);
   a02=sqrt(a02);
   a02=(a07+a02);
   a02=casadi_sq(a02);
   a02=(a06*a02);
-  a05=(a05+a02);
-  a02=arg[0]? arg[0][2] : 0;
-  a09=(a02*a04);
-  a10=arg[0]? arg[0][5] : 0;
-  a12=(a10*a03);
-  a09=(a09-a12);
-  a12=(a11*a03);
-  a12=(a09+a12);
-  a02=(a02*a03);
-  a10=(a10*a04);
-  a02=(a02+a10);
-  a10=(a08*a02);
-  a12=(a12+a10);
-  a12=casadi_sq(a12);
-  a11=(a11*a09);
-  a11=(a02+a11);
+  a10=(a10+a02);
+  a12=arg[0]? arg[0][2] : 0;
+  a13=(a12*a04);
+  a14=arg[0]? arg[0][5] : 0;
+  a15=(a14*a03);
+  a13=(a13-a15);
+  a15=(a11*a03);
+  a15=(a13+a15);
+  a12=(a12*a03);
+  a14=(a14*a04);
+  a12=(a12+a14);
+  a14=(a08*a12);
+  a15=(a15+a14);
+  a15=casadi_sq(a15);
+  a11=(a11*a13);
+  a11=(a12+a11);
   a08=(a08*a04);
   a11=(a11+a08);
   a11=casadi_sq(a11);
-  a12=(a12+a11);
-  a12=sqrt(a12);
-  a07=(a07+a12);
+  a15=(a15+a11);
+  a15=sqrt(a15);
+  a07=(a07+a15);
   a07=casadi_sq(a07);
   a07=(a06*a07);
-  a05=(a05+a07);
-  a07=(a06*a03);
-  a05=(a05+a07);
-  a07=(a06*a02);
-  a05=(a05+a07);
-  a07=1.5000000000000000e+00;
-  a07=(a07*a00);
-  a05=(a05+a07);
-  a07=arg[0]? arg[0][6] : 0;
-  a12=(a06*a07);
-  a11=arg[0]? arg[0][8] : 0;
-  a08=(a06*a09);
-  a10=(a08*a04);
-  a13=1.;
-  a14=2.5000000000000000e-01;
-  a09=casadi_sq(a09);
-  a09=(a14*a09);
-  a09=(a13+a09);
-  a15=casadi_sq(a02);
-  a15=(a14*a15);
-  a09=(a09+a15);
-  a15=(a11/a09);
-  a10=(a10*a15);
-  a10=(a11+a10);
-  a16=-5.0000000000000000e-01;
-  a02=(a16*a02);
-  a17=(a02*a03);
-  a17=(a17*a15);
-  a10=(a10-a17);
-  a17=(a08*a15);
-  a18=(a06*a04);
-  a19=casadi_sq(a08);
-  a19=(a19/a09);
-  a20=(a13-a19);
-  a20=(a04*a20);
-  a18=(a18+a20);
-  a21=(a02*a08);
-  a22=(a21*a03);
-  a22=(a22/a09);
-  a18=(a18+a22);
-  a23=arg[0]? arg[0][7] : 0;
-  a24=(a23-a10);
-  a25=casadi_sq(a04);
-  a25=(a14*a25);
-  a25=(a13+a25);
-  a26=casadi_sq(a03);
-  a26=(a14*a26);
-  a25=(a25+a26);
-  a20=(a20+a22);
-  a20=(a04*a20);
-  a25=(a25+a20);
-  a20=casadi_sq(a02);
-  a20=(a20/a09);
-  a22=(a13-a20);
-  a22=(a03*a22);
-  a26=(a21*a04);
-  a26=(a26/a09);
-  a27=(a22+a26);
-  a27=(a03*a27);
+  a10=(a10+a07);
+  a15=(a06*a03);
+  a10=(a10+a15);
+  a11=(a06*a12);
+  a10=(a10+a11);
+  a08=1.5000000000000000e+00;
+  a08=(a08*a00);
+  a10=(a10+a08);
+  a14=arg[0]? arg[0][6] : 0;
+  a16=(a06*a14);
+  a17=arg[0]? arg[0][8] : 0;
+  a18=(a06*a13);
+  a19=(a18*a04);
+  a20=1.;
+  a21=2.5000000000000000e-01;
+  a13=casadi_sq(a13);
+  a13=(a21*a13);
+  a13=(a20+a13);
+  a22=casadi_sq(a12);
+  a22=(a21*a22);
+  a13=(a13+a22);
+  a22=(a17/a13);
+  a19=(a19*a22);
+  a19=(a17+a19);
+  a23=-5.0000000000000000e-01;
+  a12=(a23*a12);
+  a24=(a12*a03);
+  a24=(a24*a22);
+  a19=(a19-a24);
+  a24=(a18*a22);
+  a25=(a06*a04);
+  a26=casadi_sq(a18);
+  a26=(a26/a13);
+  a27=(a20-a26);
+  a27=(a04*a27);
   a25=(a25+a27);
-  a27=(a24/a25);
-  a28=(a18*a27);
-  a17=(a17+a28);
-  a17=(a01*a17);
-  a10=(a10+a17);
-  a10=(a10+a24);
-  a15=(a02*a15);
-  a16=(a16*a03);
-  a16=(a16-a22);
-  a16=(a16-a26);
-  a27=(a16*a27);
-  a15=(a15+a27);
-  a15=(a00*a15);
-  a10=(a10-a15);
-  a07=(a07-a10);
-  a10=casadi_sq(a01);
-  a10=(a14*a10);
-  a13=(a13+a10);
-  a10=casadi_sq(a00);
-  a14=(a14*a10);
-  a13=(a13+a14);
-  a14=2.;
-  a19=(a14-a19);
-  a10=casadi_sq(a18);
-  a10=(a10/a25);
-  a19=(a19-a10);
-  a19=(a01*a19);
-  a21=(a21/a09);
-  a10=(a16*a18);
-  a10=(a10/a25);
-  a21=(a21+a10);
-  a10=(a00*a21);
-  a19=(a19+a10);
-  a19=(a01*a19);
-  a13=(a13+a19);
-  a21=(a01*a21);
-  a14=(a14-a20);
-  a20=casadi_sq(a16);
-  a20=(a20/a25);
-  a14=(a14-a20);
-  a14=(a00*a14);
-  a21=(a21+a14);
+  a28=(a12*a18);
+  a29=(a28*a03);
+  a29=(a29/a13);
+  a25=(a25+a29);
+  a30=arg[0]? arg[0][7] : 0;
+  a31=(a30-a19);
+  a32=casadi_sq(a04);
+  a32=(a21*a32);
+  a32=(a20+a32);
+  a33=casadi_sq(a03);
+  a33=(a21*a33);
+  a32=(a32+a33);
+  a27=(a27+a29);
+  a27=(a04*a27);
+  a32=(a32+a27);
+  a27=casadi_sq(a12);
+  a27=(a27/a13);
+  a29=(a20-a27);
+  a29=(a03*a29);
+  a33=(a28*a04);
+  a33=(a33/a13);
+  a34=(a29+a33);
+  a34=(a03*a34);
+  a32=(a32+a34);
+  a34=(a31/a32);
+  a35=(a25*a34);
+  a24=(a24+a35);
+  a24=(a01*a24);
+  a19=(a19+a24);
+  a19=(a19+a31);
+  a22=(a12*a22);
+  a23=(a23*a03);
+  a23=(a23-a29);
+  a23=(a23-a33);
+  a34=(a23*a34);
+  a22=(a22+a34);
+  a22=(a00*a22);
+  a19=(a19-a22);
+  a14=(a14-a19);
+  a19=casadi_sq(a01);
+  a19=(a21*a19);
+  a20=(a20+a19);
+  a19=casadi_sq(a00);
+  a21=(a21*a19);
+  a20=(a20+a21);
+  a21=2.;
+  a26=(a21-a26);
+  a19=casadi_sq(a25);
+  a19=(a19/a32);
+  a26=(a26-a19);
+  a26=(a01*a26);
+  a28=(a28/a13);
+  a19=(a23*a25);
+  a19=(a19/a32);
+  a28=(a28+a19);
+  a19=(a00*a28);
+  a26=(a26+a19);
+  a26=(a01*a26);
+  a20=(a20+a26);
+  a28=(a01*a28);
+  a21=(a21-a27);
+  a27=casadi_sq(a23);
+  a27=(a27/a32);
+  a21=(a21-a27);
   a21=(a00*a21);
-  a13=(a13+a21);
-  a07=(a07/a13);
-  a12=(a12*a07);
-  a05=(a05+a12);
-  a23=(a06*a23);
-  a13=(a25*a07);
-  a24=(a24-a13);
-  a16=(a00*a16);
-  a16=(a16*a07);
-  a24=(a24+a16);
-  a18=(a01*a18);
-  a18=(a18*a07);
-  a24=(a24-a18);
-  a24=(a24/a25);
-  a23=(a23*a24);
-  a05=(a05+a23);
-  a06=(a06*a11);
-  a24=(a07+a24);
-  a25=(a09*a24);
-  a11=(a11-a25);
-  a00=(a00*a07);
-  a03=(a03*a24);
+  a28=(a28+a21);
+  a28=(a00*a28);
+  a20=(a20+a28);
+  a14=(a14/a20);
+  a16=(a16*a14);
+  a10=(a10+a16);
+  a30=(a06*a30);
+  a20=(a32*a14);
+  a31=(a31-a20);
+  a23=(a00*a23);
+  a23=(a23*a14);
+  a31=(a31+a23);
+  a25=(a01*a25);
+  a25=(a25*a14);
+  a31=(a31-a25);
+  a31=(a31/a32);
+  a30=(a30*a31);
+  a10=(a10+a30);
+  a06=(a06*a17);
+  a31=(a14+a31);
+  a32=(a13*a31);
+  a17=(a17-a32);
+  a00=(a00*a14);
+  a03=(a03*a31);
   a00=(a00+a03);
-  a02=(a02*a00);
-  a11=(a11+a02);
-  a01=(a01*a07);
-  a04=(a04*a24);
+  a12=(a12*a00);
+  a17=(a17+a12);
+  a01=(a01*a14);
+  a04=(a04*a31);
   a01=(a01+a04);
-  a08=(a08*a01);
-  a11=(a11-a08);
-  a11=(a11/a09);
-  a06=(a06*a11);
+  a18=(a18*a01);
+  a17=(a17-a18);
+  a17=(a17/a13);
+  a06=(a06*a17);
+  a10=(a10+a06);
+  if (res[0]!=0) res[0][0]=a10;
+  a10=(a16+a30);
+  a10=(a10+a06);
+  if (res[0]!=0) res[0][1]=a10;
+  a05=casadi_fabs(a05);
+  a09=casadi_fabs(a09);
+  a05=(a05+a09);
+  a02=casadi_fabs(a02);
+  a05=(a05+a02);
+  a07=casadi_fabs(a07);
+  a05=(a05+a07);
+  a15=casadi_fabs(a15);
+  a05=(a05+a15);
+  a11=casadi_fabs(a11);
+  a05=(a05+a11);
+  a08=casadi_fabs(a08);
+  a05=(a05+a08);
+  a16=casadi_fabs(a16);
+  a05=(a05+a16);
+  a30=casadi_fabs(a30);
+  a05=(a05+a30);
+  a06=casadi_fabs(a06);
   a05=(a05+a06);
-  if (res[0]!=0) res[0][0]=a05;
-  a12=(a12+a23);
-  a12=(a12+a06);
-  if (res[0]!=0) res[0][1]=a12;
+  if (res[0]!=0) res[0][2]=a05;
   return 0;
 }
 
@@ -2544,7 +2573,7 @@ const char* three_link_mono_vi_model_energy_check_name_in(casadi_int i) {
 const char* three_link_mono_vi_model_energy_check_name_out(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return "H_T";
+    case 0: return "H_T_S";
     default: return 0;
   }
 }
@@ -2560,7 +2589,7 @@ const casadi_int* three_link_mono_vi_model_energy_check_sparsity_in(casadi_int i
 const casadi_int* three_link_mono_vi_model_energy_check_sparsity_out(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return casadi_s5;
+    case 0: return casadi_s0;
     default: return 0;
   }
 }

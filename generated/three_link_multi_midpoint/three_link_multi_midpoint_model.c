@@ -27,15 +27,25 @@
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
 #define casadi_f7 CASADI_PREFIX(f7)
+#define casadi_fabs CASADI_PREFIX(fabs)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s4 CASADI_PREFIX(s4)
-#define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_sq CASADI_PREFIX(sq)
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
+
+casadi_real casadi_fabs(casadi_real x) {
+  (void)x;
+/* Pre-c99 compatibility */
+#if __STDC_VERSION__ < 199901L
+  return x>0 ? x : -x;
+#else
+  return fabs(x);
+#endif
+}
 
 /* Configuration this file was compiled with */
 void three_link_multi_midpoint__casadi_version(int* major, int* minor, int* patch) {
@@ -52,7 +62,6 @@ static const casadi_int casadi_s1[3] = {6, 1, 1};
 static const casadi_int casadi_s2[3] = {1, 1, 1};
 static const casadi_int casadi_s3[3] = {3, 3, 1};
 static const casadi_int casadi_s4[3] = {0, 1, 1};
-static const casadi_int casadi_s5[3] = {2, 1, 1};
 
 /* three_link_multi_midpoint_model_residual:(z[3],x0[6],dt)->(F[3]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -1702,11 +1711,11 @@ int three_link_multi_midpoint_model_segment_margins_work_bytes(casadi_int *sz_ar
   return 0;
 }
 
-/* three_link_multi_midpoint_model_energy_check:(x[6])->(H_T[2]) */
+/* three_link_multi_midpoint_model_energy_check:(x[6])->(H_T_S[3]) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)arg; (void)res; (void)iw; (void)w; (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
-  casadi_real a12, a13, a14, a15, a16, a17, a18, a19;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21;
   a00=arg[0]? arg[0][0] : 0;
   a01=sin(a00);
   a02=arg[0]? arg[0][1] : 0;
@@ -1719,121 +1728,149 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a07=(a06+a07);
   a08=casadi_sq(a07);
   a08=(a05*a08);
-  a04=(a04+a08);
-  a09=arg[0]? arg[0][5] : 0;
-  a09=(a07+a09);
-  a10=casadi_sq(a09);
-  a10=(a05*a10);
-  a04=(a04+a10);
-  a11=-5.9999999999999998e-01;
-  a00=cos(a00);
-  a12=-4.0000000000000002e-01;
-  a13=(a12*a01);
-  a13=(a00+a13);
-  a13=casadi_sq(a13);
-  a14=(a12+a01);
-  a15=4.0000000000000002e-01;
-  a16=(a15*a00);
-  a14=(a14+a16);
-  a14=casadi_sq(a14);
-  a13=(a13+a14);
-  a13=sqrt(a13);
-  a11=(a11+a13);
-  a13=cos(a02);
-  a14=(a15*a01);
-  a14=(a13+a14);
-  a16=(a12*a03);
-  a14=(a14+a16);
-  a14=casadi_sq(a14);
-  a16=(a15*a13);
-  a16=(a03+a16);
-  a17=(a12*a00);
-  a16=(a16+a17);
-  a16=casadi_sq(a16);
-  a14=(a14+a16);
-  a14=sqrt(a14);
-  a11=(a11+a14);
-  a14=arg[0]? arg[0][2] : 0;
-  a14=(a14+a02);
-  a02=cos(a14);
-  a16=(a15*a03);
-  a16=(a02+a16);
-  a14=sin(a14);
-  a17=(a12*a14);
-  a16=(a16+a17);
-  a16=casadi_sq(a16);
-  a15=(a15*a02);
-  a15=(a14+a15);
-  a12=(a12*a13);
-  a15=(a15+a12);
-  a15=casadi_sq(a15);
-  a16=(a16+a15);
-  a16=sqrt(a16);
-  a11=(a11+a16);
-  a11=casadi_sq(a11);
+  a09=(a04+a08);
+  a10=arg[0]? arg[0][5] : 0;
+  a10=(a07+a10);
+  a11=casadi_sq(a10);
   a11=(a05*a11);
-  a04=(a04+a11);
-  a11=-5.0000000000000000e-01;
-  a16=(a11*a01);
+  a09=(a09+a11);
+  a12=-5.9999999999999998e-01;
+  a00=cos(a00);
+  a13=-4.0000000000000002e-01;
+  a14=(a13*a01);
+  a14=(a00+a14);
+  a14=casadi_sq(a14);
+  a15=(a13+a01);
+  a16=4.0000000000000002e-01;
+  a17=(a16*a00);
+  a15=(a15+a17);
+  a15=casadi_sq(a15);
+  a14=(a14+a15);
+  a14=sqrt(a14);
+  a12=(a12+a14);
+  a14=cos(a02);
+  a15=(a16*a01);
+  a15=(a14+a15);
+  a17=(a13*a03);
+  a15=(a15+a17);
+  a15=casadi_sq(a15);
+  a17=(a16*a14);
+  a17=(a03+a17);
+  a18=(a13*a00);
+  a17=(a17+a18);
+  a17=casadi_sq(a17);
+  a15=(a15+a17);
+  a15=sqrt(a15);
+  a12=(a12+a15);
+  a15=arg[0]? arg[0][2] : 0;
+  a15=(a15+a02);
+  a02=cos(a15);
+  a17=(a16*a03);
+  a17=(a02+a17);
+  a15=sin(a15);
+  a18=(a13*a15);
+  a17=(a17+a18);
+  a17=casadi_sq(a17);
+  a16=(a16*a02);
+  a16=(a15+a16);
+  a13=(a13*a14);
+  a16=(a16+a13);
+  a16=casadi_sq(a16);
+  a17=(a17+a16);
+  a17=sqrt(a17);
+  a12=(a12+a17);
+  a12=casadi_sq(a12);
+  a12=(a05*a12);
+  a09=(a09+a12);
+  a17=-5.0000000000000000e-01;
+  a16=(a17*a01);
   a16=(a16*a06);
   a16=casadi_sq(a16);
   a16=(a05*a16);
-  a04=(a04+a16);
-  a15=(a05*a00);
-  a15=(a15*a06);
-  a15=casadi_sq(a15);
-  a15=(a05*a15);
-  a04=(a04+a15);
-  a12=(a11*a07);
-  a12=(a12*a03);
-  a17=(a01*a06);
-  a12=(a12-a17);
-  a12=casadi_sq(a12);
-  a12=(a05*a12);
-  a04=(a04+a12);
-  a00=(a00*a06);
-  a18=(a05*a07);
-  a18=(a18*a13);
-  a18=(a00+a18);
+  a09=(a09+a16);
+  a13=(a05*a00);
+  a13=(a13*a06);
+  a13=casadi_sq(a13);
+  a13=(a05*a13);
+  a09=(a09+a13);
+  a18=(a17*a07);
+  a18=(a18*a03);
+  a19=(a01*a06);
+  a18=(a18-a19);
   a18=casadi_sq(a18);
   a18=(a05*a18);
-  a04=(a04+a18);
-  a11=(a11*a09);
-  a11=(a11*a14);
-  a19=(a07*a03);
-  a17=(a17+a19);
-  a11=(a11-a17);
-  a11=casadi_sq(a11);
-  a11=(a05*a11);
-  a04=(a04+a11);
-  a07=(a07*a13);
+  a09=(a09+a18);
+  a00=(a00*a06);
+  a20=(a05*a07);
+  a20=(a20*a14);
+  a20=(a00+a20);
+  a20=casadi_sq(a20);
+  a20=(a05*a20);
+  a09=(a09+a20);
+  a17=(a17*a10);
+  a17=(a17*a15);
+  a21=(a07*a03);
+  a19=(a19+a21);
+  a17=(a17-a19);
+  a17=casadi_sq(a17);
+  a17=(a05*a17);
+  a09=(a09+a17);
+  a07=(a07*a14);
   a00=(a00+a07);
-  a09=(a05*a09);
-  a09=(a09*a02);
-  a00=(a00+a09);
+  a10=(a05*a10);
+  a10=(a10*a02);
+  a00=(a00+a10);
   a00=casadi_sq(a00);
   a00=(a05*a00);
-  a04=(a04+a00);
+  a09=(a09+a00);
   a06=casadi_sq(a06);
   a06=(a05*a06);
-  a04=(a04+a06);
+  a09=(a09+a06);
   a03=(a05*a03);
+  a09=(a09+a03);
+  a05=(a05*a15);
+  a09=(a09+a05);
+  a15=1.5000000000000000e+00;
+  a15=(a15*a01);
+  a09=(a09+a15);
+  if (res[0]!=0) res[0][0]=a09;
+  a09=(a08+a11);
+  a09=(a09+a16);
+  a09=(a09+a13);
+  a09=(a09+a18);
+  a09=(a09+a20);
+  a09=(a09+a17);
+  a09=(a09+a00);
+  a09=(a09+a06);
+  if (res[0]!=0) res[0][1]=a09;
+  a04=casadi_fabs(a04);
+  a08=casadi_fabs(a08);
+  a04=(a04+a08);
+  a11=casadi_fabs(a11);
+  a04=(a04+a11);
+  a12=casadi_fabs(a12);
+  a04=(a04+a12);
+  a16=casadi_fabs(a16);
+  a04=(a04+a16);
+  a13=casadi_fabs(a13);
+  a04=(a04+a13);
+  a18=casadi_fabs(a18);
+  a04=(a04+a18);
+  a20=casadi_fabs(a20);
+  a04=(a04+a20);
+  a17=casadi_fabs(a17);
+  a04=(a04+a17);
+  a00=casadi_fabs(a00);
+  a04=(a04+a00);
+  a06=casadi_fabs(a06);
+  a04=(a04+a06);
+  a03=casadi_fabs(a03);
   a04=(a04+a03);
-  a05=(a05*a14);
+  a05=casadi_fabs(a05);
   a04=(a04+a05);
-  a05=1.5000000000000000e+00;
-  a05=(a05*a01);
-  a04=(a04+a05);
-  if (res[0]!=0) res[0][0]=a04;
-  a08=(a08+a10);
-  a08=(a08+a16);
-  a08=(a08+a15);
-  a08=(a08+a12);
-  a08=(a08+a18);
-  a08=(a08+a11);
-  a08=(a08+a00);
-  a08=(a08+a06);
-  if (res[0]!=0) res[0][1]=a08;
+  a15=casadi_fabs(a15);
+  a04=(a04+a15);
+  if (res[0]!=0) res[0][2]=a04;
   return 0;
 }
 
@@ -1878,7 +1915,7 @@ const char* three_link_multi_midpoint_model_energy_check_name_in(casadi_int i) {
 const char* three_link_multi_midpoint_model_energy_check_name_out(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return "H_T";
+    case 0: return "H_T_S";
     default: return 0;
   }
 }
@@ -1894,7 +1931,7 @@ const casadi_int* three_link_multi_midpoint_model_energy_check_sparsity_in(casad
 const casadi_int* three_link_multi_midpoint_model_energy_check_sparsity_out(casadi_int i) {
   (void)i;
   switch (i) {
-    case 0: return casadi_s5;
+    case 0: return casadi_s0;
     default: return 0;
   }
 }

@@ -202,6 +202,13 @@ def spatial_es_control(scene, dt, q0, q1, angles, rates_mid, axes_mid, rates0,
                         rates_mid, rates0, defs, law)
 
 
+def sampled_law(scene) -> bool:
+    """Whether `scene` has a [control] law held from the step's start (law = "sampled"): it
+    misses the energy balance by design, so its schemes take no energy check by default."""
+    control = getattr(scene, "control", None)
+    return control is not None and control.law == "sampled"
+
+
 def state_shaping(scene, angles) -> sp.Expr:
     """V_s at the state's joint angles `angles` (every joint), planar or spatial: H_d = H +
     this."""

@@ -28,7 +28,7 @@ from .base import (
     joint_space_state,
     joint_torques,
 )
-from .control import StepControl, spatial_midpoint_control, state_shaping
+from .control import StepControl, sampled_law, spatial_midpoint_control, state_shaping
 from .midpoint import CONTROLLED_FLOWS, FLOWS, SUMMARY
 
 
@@ -85,7 +85,7 @@ def build(scene: SpatialScene, quadrature: int | None = None, order: int = 2) ->
         flow_description=(CONTROLLED_FLOWS if scene.control else
                           FLOWS if has_energy_flows(scene) else None),
         jacobian_reuse=JACOBIAN_PER_STEP, kinetic_energy=kinetic,
-        newton_overrides=(("energy_tol", 0.0),) if scene.control else (),
+        newton_overrides=(("energy_tol", 0.0),) if sampled_law(scene) else (),   # midpoint.py
     )
 
 

@@ -355,8 +355,11 @@ static int f_energy_terms(const double **arg, double **res, long long int *iw, d
         return 1;
     }
     if (res[0]) {
+        double v[4];
+        pendulum_potential(x[0], k_at(arg, 1), v);
         res[0][0] = pendulum_energy(x, k_at(arg, 1)) + pendulum_knob.energy_jump * x[0];
         res[0][1] = 0.5 * inertia() * x[1] * x[1];
+        res[0][2] = res[0][1] + fabs(v[0]) + pendulum_knob.energy_cancelled;
     }
     return 0;
 }

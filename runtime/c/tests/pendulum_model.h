@@ -110,6 +110,8 @@ typedef struct {
     double above_dt;         /* the knobs above (and fail_mask's step functions) act when
                               * |dt| > this */
     double energy_jump;      /* energy_terms reports H + energy_jump phi */
+    double energy_cancelled; /* energy_terms reports S, the magnitude of H's terms, this much
+                              * above |T| + |V|: terms that cancel in H */
     double state_kick;       /* next_state adds this to omega1 (an error no step length
                               * removes) */
     double angle_kick;       /* next_state adds this to phi1: the round-off of an angle taken

@@ -1061,6 +1061,19 @@ static void test_energy_jump(void)
     pendulum_knob.energy_jump = 0.3;
     STATUS(step(x0, 0.0, 0.02, x1, NULL, NULL, NULL), CHAINGEN_OK);
     EXPECT(store->scalars.step_splits == 0, "a small miss split the step");
+    /* Round-off scales with the magnitude S of H's terms, not with H: a miss of 1e-6 J with
+     * next to no tolerance on T fails, and passes where H's terms are 1e12 J that cancel (the
+     * round-off allowance 1024 eps S is then 4.5e-4 J), as a controlled loop's H_d at rest. */
+    use(full_variant());
+    chaingen_default_options(&model, &options);
+    options.energy_tol = 1e-300;
+    pendulum_knob.energy_jump = 1e-6 / (x0[1] * 0.01);
+    STATUS(step(x0, 0.0, 0.01, x1, NULL, &options, NULL), CHAINGEN_ENERGY_JUMP);
+    use(full_variant());
+    pendulum_knob.energy_jump = 1e-6 / (x0[1] * 0.01);
+    pendulum_knob.energy_cancelled = 1e12;
+    STATUS(step(x0, 0.0, 0.01, x1, NULL, &options, NULL), CHAINGEN_OK);
+    EXPECT(store->scalars.step_splits == 0, "a miss within the round-off of H's terms split");
     end();
 }
 
