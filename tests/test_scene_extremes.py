@@ -4,6 +4,8 @@ at its key path, as the spatial reader does (docs/scene-format.md, sections 5, 6
 it takes, the run either simulates or stops with its reason (exit 1), never an internal error."""
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from chaingen.errors import SceneError
@@ -74,6 +76,68 @@ def test_simulate_refuses_an_overflowing_com_in_one_line_exit_2(tmp_path):
                                                   "length, a com, a mass or an inertia far too "
                                                   "large, or gravity): write the scene in SI "
                                                   "units (m, kg, kg m^2)"]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["arm.toml"]
+
+
+# -- the bottom of a double: a chain whose squares underflow ------------------------------------
+
+def tiny(scale: str) -> str:
+    """three_link_mono with every length, com and fastening (and rest length) times `scale`."""
+    text = BASE
+    for key in ("length", "com", "fastening", "rest_length"):
+        text = re.sub(rf"^({key} = [0-9.]+)$", rf"\g<1>{scale}", text, flags=re.M)
+    return text
+
+
+@pytest.mark.parametrize("scale", ["e-300", "e-200", "e-155"])
+def test_the_reader_refuses_a_chain_whose_squares_underflow(scale):
+    """Lengths of 1e-300 m: the generated segment length sqrt(dx^2 + dy^2) is 0, and midpoint
+    and vi stopped at the initial state ('a spring segment came within 1e-06 of the geometry's
+    size of zero length ...', exit 1) though the reader had taken the scene. The refusal names
+    the largest of the lengths."""
+    with pytest.raises(SceneError) as refused:
+        parse_scene(tiny(scale), "arm.toml", "arm")
+    size = 6.1 * float(f"1{scale}")     # 0.4 + 3 (1 + 0.5 + 0.4) times the scale
+    assert str(refused.value) == (
+        f"arm.toml: links[0].length: the largest of the chain's lengths (link lengths, coms, "
+        f"fastenings), which sum to {size:.3g} m, below 1.49e-154 m: their squares in the "
+        "energies, the mass matrix and the springs' segment lengths are subnormal or zero in a "
+        f"double: write the scene in SI units (m), got {float(f'1{scale}')!r}")
+
+
+def test_the_reader_refuses_a_mass_matrix_that_underflows():
+    """Masses of 1e-200 kg at 1e-60 m, no inertia: sum m R^2 + J is 2.5e-320 kg m^2, a
+    subnormal. midpoint stopped at step 1 on 'the converged step missed the energy balance
+    ... (a spurious Newton root ...)', exit 1."""
+    text = tiny("e-60").replace("mass = 1.0", "mass = 1e-200").replace("inertia = 1.0",
+                                                                       "inertia = 0.0")
+    with pytest.raises(SceneError) as refused:
+        parse_scene(text, "arm.toml", "arm")
+    assert str(refused.value).startswith(
+        "arm.toml: links: the chain's mass matrix at the initial angles is at most ")
+    assert str(refused.value).endswith(
+        "kg m^2 (sum_i m_i R_i^2 + J_i), below the smallest normal double 2.23e-308: subnormal "
+        "or zero, no step can solve with it (a mass, an inertia or a length far too small): "
+        "write the scene in SI units (m, kg, kg m^2)")
+
+
+@pytest.mark.parametrize("text", [
+    tiny("e-150"),                                     # squares 1e-300: normal doubles
+    BASE.replace("length = 1.0", "length = 1e-300", 1),    # beside lengths of 1 m: round-off
+    BASE.replace("com = 0.5", "com = 0.0").replace("inertia = 1.0", "inertia = 1e-300"),
+])
+def test_the_reader_takes_small_numbers_whose_squares_are_doubles(text):
+    parse_scene(text, "arm.toml", "arm")
+
+
+def test_simulate_refuses_a_chain_whose_squares_underflow_in_one_line_exit_2(tmp_path):
+    scene = tmp_path / "arm.toml"
+    scene.write_text(tiny("e-300"))
+    result = chaingen_in_process("simulate", scene, "--method", "midpoint", "--t-end", "0.1",
+                                 "--out", "run.csv", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"chaingen: error: {scene}: links[0].length: ")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["arm.toml"]
 
 

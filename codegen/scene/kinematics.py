@@ -25,6 +25,13 @@ S = np.array([[0.0, -1.0], [1.0, 0.0]])
 ZERO_SEGMENT_RELATIVE_TOLERANCE = 1e-9
 """A spring segment shorter than this times the chain's size counts as zero length."""
 
+SMALLEST_NORMAL = float(np.finfo(float).tiny)
+"""The smallest normal double (2.2e-308)."""
+SMALLEST_SQUARED_LENGTH = float(np.sqrt(SMALLEST_NORMAL))
+"""1.49e-154 m: the smallest length whose square is a normal double. The generated code squares
+lengths (a segment's sqrt(dx^2 + dy^2), m (a^2 + b^2) in the mass matrix); below it the square
+is subnormal (digits lost) or zero, and a segment shorter counts as zero length too."""
+
 
 def _frozen(array: np.ndarray) -> np.ndarray:
     array.setflags(write=False)
@@ -151,9 +158,11 @@ def zero_segment_tolerance(scene: Scene, spring: Spring) -> float:
     """The length under which a segment of `spring` counts as zero.
 
     ZERO_SEGMENT_RELATIVE_TOLERANCE times the size of the geometry: the sum of the link lengths,
-    of |r| over the chain's fastenings and of |r| over the spring's own offsets (if any).
+    of |r| over the chain's fastenings and of |r| over the spring's own offsets (if any); at
+    least SMALLEST_SQUARED_LENGTH, below which the generated sqrt(dx^2 + dy^2) underflows.
     """
-    return ZERO_SEGMENT_RELATIVE_TOLERANCE * geometry_size(scene, spring)
+    return max(ZERO_SEGMENT_RELATIVE_TOLERANCE * geometry_size(scene, spring),
+               SMALLEST_SQUARED_LENGTH)
 
 
 def dwarfing_size(sizes, length: float) -> int | None:

@@ -1,7 +1,8 @@
 """Finite numbers whose products are not: the planar reader's checks of a scene's dynamics at
 its start against the range of a double (docs/scene-format.md, sections 5, 6 and 8), as the
-spatial reader's refuse_overflowing_dynamics. Each returns the refusal as (key path, what is
-wrong[, value]) for SceneReader.fail, or None."""
+spatial reader's refuse_overflowing_dynamics, and against its bottom: a geometry or a mass
+matrix whose squares underflow (dynamics_underflow). Each returns the refusal as (key path,
+what is wrong[, value]) for SceneReader.fail, or None."""
 from __future__ import annotations
 
 import math
@@ -9,7 +10,7 @@ import math
 import numpy as np
 
 from . import kinematics
-from .values import Scene
+from .values import LINK_FIELDS, Scene
 
 
 def dynamics_overflow(scene: Scene) -> tuple | None:
@@ -36,6 +37,52 @@ def dynamics_overflow(scene: Scene) -> tuple | None:
     return ("links", "the chain's mass matrix or gravity torques at the initial angles are "
             "beyond the range of a double (a length, a com, a mass or an inertia far too "
             "large, or gravity): write the scene in SI units (m, kg, kg m^2)")
+
+
+SMALLEST_NORMAL = kinematics.SMALLEST_NORMAL
+SMALLEST_SQUARED_LENGTH = kinematics.SMALLEST_SQUARED_LENGTH
+
+
+def _geometry_keys(scene: Scene) -> list[tuple[str, float]]:
+    """The chain's lengths by key path: each link's length, com, com_normal and fastening, and
+    the base's fastening."""
+    keys = [("base.fastening", scene.base_fastening)]
+    for i, link in enumerate(scene.links):
+        keys += [(f"links[{i}].{field.key}", getattr(link, field.key))
+                 for field in LINK_FIELDS if field.unit == "m"]
+    return keys
+
+
+def dynamics_underflow(scene: Scene) -> tuple | None:
+    """A chain so small (all of it 1e-300 m) that the squares of its lengths, which its
+    energies and Jacobians hold, are subnormal or zero in a double: the generated code's
+    segment lengths sqrt(dx^2 + dy^2) come out 0 and the run stopped at its initial state
+    (exit 1), or a mass matrix sum_i m_i R_i^2 + J_i (the bound of dynamics_overflow) that is
+    subnormal or zero though its masses sit off the joints (a mass of 1e-200 kg at 1e-60 m).
+    One small length among ordinary ones is no such chain: its squares are round-off beside
+    theirs."""
+    keys = _geometry_keys(scene)
+    size = math.fsum(abs(value) for _, value in keys)
+    if size < SMALLEST_SQUARED_LENGTH:
+        key, value = max(keys, key=lambda item: abs(item[1]))
+        return (key, f"the largest of the chain's lengths (link lengths, coms, fastenings), "
+                f"which sum to {size:.3g} m, below {SMALLEST_SQUARED_LENGTH:.3g} m: their "
+                "squares in the energies, the mass matrix and the springs' segment lengths "
+                "are subnormal or zero in a double: write the scene in SI units (m)", value)
+    geometry = kinematics.chain_geometry(scene, scene.initial_angles)
+    masses = np.array([link.mass for link in scene.links])
+    inertias = np.array([link.inertia for link in scene.links])
+    arms = geometry.coms[:, None, :] - geometry.joints[None, :-1, :]
+    reach = np.hypot(arms[..., 0], arms[..., 1])
+    reach = np.where(np.tri(scene.n, dtype=bool), reach, 0.0).max(axis=1)
+    with np.errstate(under="ignore"):
+        bound = float(np.sum(masses * (reach * reach) + inertias))
+    if bound >= SMALLEST_NORMAL or not np.any(masses * reach > 0):
+        return None
+    return ("links", f"the chain's mass matrix at the initial angles is at most {bound:.3g} kg "
+            f"m^2 (sum_i m_i R_i^2 + J_i), below the smallest normal double "
+            f"{SMALLEST_NORMAL:.3g}: subnormal or zero, no step can solve with it (a mass, an "
+            "inertia or a length far too small): write the scene in SI units (m, kg, kg m^2)")
 
 
 def energy_overflow(scene: Scene) -> tuple | None:

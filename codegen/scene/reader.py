@@ -308,8 +308,8 @@ class SceneReader:
         )
         # Numbers whose products overflow (overflow.py): the chain's first, as the segments'
         # zero-length limit scales with it; the energies need the segments.
-        for check in (overflow.dynamics_overflow, self.refuse_zero_length_segments,
-                      overflow.energy_overflow):
+        for check in (overflow.dynamics_overflow, overflow.dynamics_underflow,
+                      self.refuse_zero_length_segments, overflow.energy_overflow):
             refused = check(scene)
             if refused is not None:
                 self.fail(*refused)
