@@ -10,11 +10,18 @@ constraint error into arrays it owns. Its C calls are bound once, with their arg
 Threads: a Stepper has a C workspace of its own and is used by one thread at a time; make one
 per thread (they share the loaded library, which keeps no mutable state). A step or reset
 begun while another thread's is under way is refused with a RuntimeError (two at once would
-overwrite each other's workspace and state: wrong numbers, no error).
+overwrite each other's workspace and state: wrong numbers, no error). Torques assigned to `u`
+from another thread while a step is under way are taken as a digital controller's command
+register is: the step under way keeps the torques it began with (zero-order hold over the
+step), and the new ones hold from the next step on (`u` reads them at once). Before, the C
+step read `u` where the assignment wrote it, so its Newton iterations after the assignment
+solved with the new torques: a step with neither torques, and no error. Change `u` by
+assigning it; the array `u` returns is the held one, changed in place only by its own thread.
 """
 from __future__ import annotations
 
 import ctypes
+import threading
 
 import numpy as np
 
@@ -69,6 +76,12 @@ class Stepper:
         n, nu = solver.n, solver.nu
         self.phi, self.omega = np.empty(n), np.empty(n)
         self._u = np.zeros(nu)
+        # Torques assigned to u: a new array, never changed once stored, taken by the next
+        # step as it begins (_take_pending), so that an assignment from another thread during
+        # a step leaves that step's torques alone; the lock orders the assignments that store
+        # and the step that takes them (a step without one reads the attribute alone).
+        self._pending: np.ndarray | None = None
+        self._pending_lock = threading.Lock()
         self._inputs_shape = (nu,) if nu else None    # of a u taken as it is
         # t = base + count dt, as simulate's t0 + k dt (a sum of dt would drift from it in the
         # last bits); a new dt starts a new base.
@@ -112,15 +125,22 @@ class Stepper:
 
     @property
     def u(self) -> np.ndarray:
-        """The torques of the next step (nu,), held until changed (assigning copies)."""
-        return self._u
+        """The torques of the next step (nu,), held until changed (assigning copies). Assigned
+        from another thread while a step is under way, they hold from the next step on: the
+        step under way keeps the torques it began with (module docstring)."""
+        pending = self._pending
+        return self._u if pending is None else pending
 
     @u.setter
     def u(self, value) -> None:
-        self._set_inputs(value)
+        # Stored aside and taken by the next step as it begins: never written where a step
+        # under way (another thread's) reads its torques, and never refused.
+        array = np.array(self._checked_inputs(value), dtype=float)
+        with self._pending_lock:
+            self._pending = array
 
-    def _set_inputs(self, value) -> None:
-        """u = value: exactly nu torques (no scalar spread over the joints, as Solver.step)."""
+    def _checked_inputs(self, value) -> np.ndarray:
+        """value as u: exactly nu torques (no scalar spread over the joints, as Solver.step)."""
         u = self._u
         if not u.shape[0]:
             raise ValueError(f"{self.solver.prefix} has no actuated joints; u must be None")
@@ -128,7 +148,15 @@ class Stepper:
         if array.shape != u.shape:
             raise ValueError(f"u must have {u.shape[0]} entries (one per actuated joint), got "
                              f"shape {array.shape}")
-        u[:] = array
+        return array
+
+    def _take_pending(self) -> None:
+        """Hold the torques assigned since the last step began from now on (the step's token
+        held: no C call reads self._u meanwhile)."""
+        with self._pending_lock:
+            pending, self._pending = self._pending, None
+        if pending is not None:
+            self._u[:] = pending
 
     @property
     def dt(self) -> float:
@@ -208,11 +236,13 @@ class Stepper:
         except IndexError:      # another thread's step is under way
             raise self._busy() from None
         try:
+            if self._pending is not None:    # u assigned since the last step began
+                self._take_pending()
             if u is not None:
                 if type(u) is np.ndarray and u.dtype is _DOUBLE and u.shape == self._inputs_shape:
                     self._u[:] = u
                 else:
-                    self._set_inputs(u)
+                    self._u[:] = self._checked_inputs(u)
             current = self._current
             status = self._step_function(*self._step_arguments[current])
             if status:

@@ -17,7 +17,7 @@ from chaingen.runtime import NewtonOptions, Solver
 from chaingen.runtime.interface import real_array, real_number
 from chaingen.runtime.parameters import parameter_bounds
 
-from helpers import load
+from helpers import load, scene_path
 
 DT = 0.01
 PATHS = ("springs[0].stiffness", "links[1].mass")
@@ -188,6 +188,65 @@ def test_one_stepper_stepped_by_two_threads_at_once_is_an_error_not_wrong_number
     np.testing.assert_array_equal(stepper.omega, alone.omega)
     assert stepper.t == alone.t
     stepper.step()         # free again once the other thread is done
+
+
+@pytest.mark.compile
+def test_torques_assigned_from_another_thread_during_a_step_hold_from_the_next_step():
+    """A controller thread assigns u while the loop thread's step is under way (the panda's 7
+    joints, midpoint at order 6, full Newton at dt = 0.05 s: a step of about 0.4 ms, in C with
+    the GIL released). The step under way keeps the torques it began with, bit for bit those
+    of the same step taken alone, and the new torques hold from the next step. Before, the C
+    step read u where the assignment wrote it: its later Newton iterations solved with the new
+    torques, a step with neither torques and no error (measured: 0.043 and 0.555 rad from the
+    step with the torques it began with, in the 2 of 30 steps the assignment landed in; the
+    first also 0.51 rad from the new torques' step, a mix of both). The assignment lands
+    during the step when the controller thread gets a core while the step runs: up to 500
+    tries for 5 such steps."""
+    from chaingen import build_solver
+    from chaingen.spatial import load_spatial_scene
+
+    scene = load_spatial_scene(scene_path("panda_springs"))
+    solver = build_solver(scene, "midpoint", order=6, sensitivities=False)
+    options = NewtonOptions(reuse_jacobian=0)
+    phi0, omega0, dt = np.array(scene.initial_angles), np.array(scene.initial_velocities), 0.05
+    first, new = np.zeros(solver.nu), np.full(solver.nu, 2.0)
+    stepper = solver.stepper(phi0, omega0, dt, options=options)
+    alone = solver.stepper(phi0, omega0, dt, options=options)
+    tokens = stepper._take_token.__self__      # empty while a step holds it
+    landed = attempts = 0
+    while landed < 5 and attempts < 500:      # the machine's other load may hold a core
+        attempts += 1
+        stepper.reset(phi0, omega0)
+        alone.reset(phi0, omega0)
+        stepper.u = alone.u = first
+        stepper.step()      # the torques assigned before a step are that step's
+        alone.step()
+        go, finished, seen = threading.Event(), threading.Event(), []
+
+        def controller(go=go, finished=finished, seen=seen) -> None:
+            go.wait()
+            while tokens and not finished.is_set():
+                pass        # until the loop thread's step holds the token
+            stepper.u = new
+            seen.append(not tokens)     # still under way after the assignment
+
+        thread = threading.Thread(target=controller)
+        thread.start()
+        go.set()
+        stepper.step()
+        finished.set()
+        thread.join()
+        alone.step()
+        if seen[0]:
+            landed += 1
+            np.testing.assert_array_equal(stepper.phi, alone.phi)
+            np.testing.assert_array_equal(stepper.omega, alone.omega)
+        np.testing.assert_array_equal(stepper.u, new)       # held from the next step on
+        alone.u = new
+        stepper.step()
+        alone.step()
+        np.testing.assert_array_equal(stepper.phi, alone.phi)
+    assert landed == 5, f"the assignment landed during {landed} of {attempts} steps"
 
 
 # -- 4: values that are no real numbers --------------------------------------------------
