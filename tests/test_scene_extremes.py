@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
 import pytest
 
 from chaingen.errors import SceneError
@@ -139,6 +140,52 @@ def test_simulate_refuses_a_chain_whose_squares_underflow_in_one_line_exit_2(tmp
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"chaingen: error: {scene}: links[0].length: ")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["arm.toml"]
+
+
+# -- initial angles a double holds too coarsely for a step ------------------------------------
+
+ANGLES = "angles = [0.7853981633974483, 0.3, 0.3]"
+
+
+@pytest.mark.parametrize("angle, spacing", [("1e10", "1.9e-06"), ("-1048576.0", "2.3e-10"),
+                                            ("1e300", "1.5e+284")])
+def test_the_reader_refuses_an_initial_angle_beyond_2_to_the_20(angle, spacing):
+    """From 1e10 rad (held to 1.9e-6 rad) midpoint's first step failed on 'a spurious Newton
+    root of a step too long for the motion' (exit 1), and es ran on silently: 7.4e-7 rad off
+    the same start given within its turn after 1 s (4.8e-5 at 1e12, 0.06 rad at 1e15)."""
+    with pytest.raises(SceneError) as refused:
+        parse_scene(edited((ANGLES, f"angles = [0.1, {angle}, 0.3]")), "arm.toml", "arm")
+    assert str(refused.value) == (
+        "arm.toml: initial.angles[1]: must be within +-2^20 = 1048576 rad (an angle in rad): a "
+        f"double holds {float(angle):g} rad only to {spacing} rad, coarser than the 1e-10 of "
+        "its unknowns a step resolves (update_rtol), so every step rounds the motion it takes; "
+        f"subtract whole turns (2 pi k), from a [control] target too, got {float(angle)!r}")
+
+
+def test_the_spatial_reader_refuses_an_initial_angle_beyond_2_to_the_20():
+    from chaingen.spatial import parse_spatial_scene
+
+    old = "angles = [0.3, -0.5, 0.8]"
+    assert old in SPATIAL
+    with pytest.raises(SceneError, match=r"^arm\.toml: initial\.angles\[2\]: must be within "
+                                         r"\+-2\^20 = 1048576 rad"):
+        parse_spatial_scene(SPATIAL.replace(old, "angles = [0.3, -0.5, 1e10]"), "arm.toml")
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
+def test_an_initial_angle_within_the_bound_runs_as_the_same_angle_within_its_turn(method):
+    """phi_1 = 1e6 rad (held to 1.2e-10 rad) against 1e6 mod 2 pi, 100 steps of 0.01 s:
+    measured 4.5e-11 rad apart (es), 1.9e-10 (midpoint), 0 (vi)."""
+    from chaingen import build_solver
+
+    turn = 5.925621140093852      # 1e6 mod 2 pi (mpmath, 40 digits)
+    scene = parse_scene(edited((ANGLES, "angles = [1e6, 0.3, 0.3]")), "arm.toml", "arm")
+    solver = build_solver(scene, method, 3, sensitivities=False)
+    far, near = (solver.simulate([phi, 0.3, 0.3], [0.0] * 3, dt=0.01, n_steps=100)
+                 for phi in (1e6, turn))
+    apart = np.angle(np.exp(1j * (np.asarray(far.phi)[-1] - np.asarray(near.phi)[-1])))
+    assert np.abs(apart).max() < 1e-9
 
 
 # -- spatial: the same energies (its mass matrix and gravity torques were checked before) ------

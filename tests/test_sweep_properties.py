@@ -204,7 +204,8 @@ def names_a_number(scene, path: str) -> bool:
 @settings(max_examples=300, deadline=None, derandomize=True)
 @given(values=st.dictionaries(st.sampled_from(GEOMETRY),
                               st.one_of(st.sampled_from([0.0, -0.0, 1e-12, -1e-12, 0.3, -0.3,
-                                                         math.pi, 1.0, 1e155, -1e200, 1e300]),
+                                                         math.pi, 1.0, 1e155, -1e200, 1e300,
+                                                         -2.0 ** 20, 1e10, 1e-300, 5e-324]),
                                         st.floats(-3.0, 3.0)), min_size=1, max_size=4),
        scene_name=st.sampled_from(["three_link_mono", "three_link_multi", "collapsing_spring"]))
 def test_the_screen_passes_no_run_the_reader_refuses(values, scene_name):

@@ -26,7 +26,7 @@ from .display import printable as _printable
 from .display import shown as _show
 from .shipped import scene_file
 from .solver_rules import REQUEST_KEYS, Refusal, request_refusal
-from .values import LINK_FIELDS, Control, Link, Scene, Simulation, Spring
+from .values import LINK_FIELDS, Control, Link, Scene, Simulation, Spring, far_angle
 
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 """A scene name: a letter, then letters, digits, '_' or '-' (usable in C after `c_identifier`)."""
@@ -448,6 +448,8 @@ class SceneReader:
             angle, rate, count = self.INITIAL_MEANINGS
             if key == "angles":
                 angles = self.number_list(where, item, angle, self.n, count)
+                if far_angle(where, angles):
+                    self.fail(*far_angle(where, angles))
             elif key == "velocities":
                 velocities = self.number_list(where, item, rate, self.n, count)
             else:

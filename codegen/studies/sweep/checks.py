@@ -4,11 +4,13 @@ A run is a scene with some numbers replaced, and the scene reader (`with_values`
 of whether that scene is valid, with its own messages. Calling the reader for each of 10^6 runs
 takes minutes, so the runs are first screened column by column with numpy: each number's own
 range (contract.NUMBER_BOUNDS: a mass > 0, a rest length >= 0, ...) and magnitude (beyond
-LARGE, where the reader's overflow checks apply), and, when the varied numbers move a spring's
-fastenings, its segments' lengths at the initial angles. The screen is
-generous (a run near a limit is suspect too); the reader then judges the suspects in run order
-and the first it refuses is the error. A run the screen passes is one the reader accepts: the
-screen's rules are the reader's (tests/test_sweep_properties.py compares them on drawn values).
+LARGE, where the reader's overflow checks apply, or below SMALL, where its underflow checks
+do; an initial angle from MAX_INITIAL_ANGLE),
+and, when the varied numbers move a spring's fastenings, its segments' lengths at the initial
+angles. The screen is generous (a run near a limit is suspect too); the reader then judges
+the suspects in run order and the first it refuses is the error. A run the screen passes is
+one the reader accepts: the screen's rules are the reader's (tests/test_sweep_properties.py
+compares them on drawn values).
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ from ...runtime.contract import lower_bound
 from ...scene import Scene
 from ...scene.kinematics import ZERO_SEGMENT_RELATIVE_TOLERANCE
 from ...scene.solver_spec import numbers_of
+from ...scene.values import MAX_INITIAL_ANGLE
 from ...spatial.values import SpatialScene
 
 #: Runs screened at once (bounded memory).
@@ -31,6 +34,9 @@ BLOCK = 65_536
 #: whose mass matrix, gravity torques or energies at the start overflow a double (a com of
 #: 1e200 m, a rest length of 1e300 m), which takes products of such numbers.
 LARGE = 1e30
+#: And one below this magnitude, but 0: the reader refuses a chain whose lengths' squares or
+#: mass matrix underflow a double (lengths of 1e-300 m; masses of 1e-200 kg at 1e-60 m).
+SMALL = 1e-30
 
 
 def _geometric(path: str) -> bool:
@@ -47,6 +53,9 @@ def suspects(scene: Scene | SpatialScene, columns: dict[str, np.ndarray], first:
     block = {path: column[first:first + count] for path, column in columns.items()}
     for path, values in block.items():
         bad |= ~(np.abs(values) <= LARGE)      # also inf and NaN
+        bad |= (np.abs(values) < SMALL) & (values != 0)
+        if path.startswith("initial.angles["):     # the reader's MAX_INITIAL_ANGLE
+            bad |= ~(np.abs(values) < MAX_INITIAL_ANGLE)
         bound = lower_bound(path)     # the scene format's, stated once (the reader's too)
         if bound is not None:
             bad |= ~(values >= bound.value if bound.inclusive else values > bound.value)
