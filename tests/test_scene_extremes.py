@@ -43,6 +43,12 @@ def edited(*replacements: tuple[str, str]) -> str:
      "a double"),
     ([("stiffness = 1.0", "stiffness = 1e300"), ("rest_length = 0.2", "rest_length = 1e5")],
      "springs[0]: its energy"),
+    # Fastenings whose sum overflows a double: an internal OverflowError (fsum) on main for a
+    # moment, and before that '... (limit inf m)'; the limit is taken at the largest double.
+    ([("fastening = 0.4", "fastening = 1.7e308")] * 2, "springs[2]: segment s_3 (fastening P_3 "
+     "to P_4, joint 3) has zero length at the initial configuration (initial.angles), where its "
+     "direction is undefined; move a fastening (offsets) or change the initial angles (limit "
+     "1.8e+299 m)"),
     ([("velocities = [0.0, 0.0, 0.0]", "velocities = [1e160, 0.0, 0.0]")],
      "initial.velocities: the kinetic energy of the initial state is beyond the range of a "
      "double: write the rates in rad/s, got [1e+160, 0.0, 0.0]"),
@@ -210,6 +216,31 @@ def test_the_spatial_reader_refuses_energies_that_overflow(old, new, message):
     with pytest.raises(SceneError) as refused:
         parse_spatial_scene(SPATIAL.replace(old, new, 1), "arm.toml")
     assert str(refused.value).startswith(f"arm.toml: {message}")
+
+
+def test_the_spatial_reader_refuses_a_chain_whose_squares_underflow():
+    """spatial_three_link with every xyz, com and route point times 1e-300: it was refused as
+    'springs[0]: route[0] and route[1] are one point at every angle (on the axis of joint 1)',
+    which they are not (their distance's square underflowed to 0)."""
+    from chaingen.spatial import parse_spatial_scene
+
+    def tiny(match: re.Match) -> str:
+        return "[" + ", ".join(repr(float(x) * 1e-300) for x in match.group(1).split(",")) + "]"
+
+    text = re.sub(r"(?<=xyz = )\[([^\]]*)\]|(?<=com = )\[([^\]]*)\]",
+                  lambda m: tiny(re.match(r"\[([^\]]*)\]", m.group(0))), SPATIAL)
+    text = re.sub(r"\[(\d), ([-0-9.e]+), ([-0-9.e]+), ([-0-9.e]+)\]", lambda m: (
+        f"[{m.group(1)}, " + ", ".join(repr(float(m.group(k)) * 1e-300) for k in (2, 3, 4))
+        + "]"), text)
+    with pytest.raises(SceneError) as refused:
+        parse_spatial_scene(text, "arm.toml")
+    assert str(refused.value).startswith(
+        "arm.toml: links[1].joint.xyz: the largest of the chain's lengths (joints' xyz, coms, "
+        "route points), which sum to ")
+    assert str(refused.value).endswith(
+        "m, below 1.49e-154 m: their squares in the energies, the mass matrix and the springs' "
+        "segment lengths are subnormal or zero in a double: write the scene in SI units (m), "
+        "got [0.0, 2.0000000000000002e-302, 3.5e-301]")
 
 
 def test_the_spatial_reader_reads_large_numbers_within_range():

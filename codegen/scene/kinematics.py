@@ -161,8 +161,8 @@ def zero_segment_tolerance(scene: Scene, spring: Spring) -> float:
     of |r| over the chain's fastenings and of |r| over the spring's own offsets (if any); at
     least SMALLEST_SQUARED_LENGTH, below which the generated sqrt(dx^2 + dy^2) underflows.
     """
-    return max(ZERO_SEGMENT_RELATIVE_TOLERANCE * geometry_size(scene, spring),
-               SMALLEST_SQUARED_LENGTH)
+    size = min(geometry_size(scene, spring), float(np.finfo(float).max))   # no limit of inf
+    return max(ZERO_SEGMENT_RELATIVE_TOLERANCE * size, SMALLEST_SQUARED_LENGTH)
 
 
 def dwarfing_size(sizes, length: float) -> int | None:

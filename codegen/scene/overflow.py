@@ -62,7 +62,7 @@ def dynamics_underflow(scene: Scene) -> tuple | None:
     One small length among ordinary ones is no such chain: its squares are round-off beside
     theirs."""
     keys = _geometry_keys(scene)
-    size = math.fsum(abs(value) for _, value in keys)
+    size = sum(abs(value) for _, value in keys)
     if size < SMALLEST_SQUARED_LENGTH:
         key, value = max(keys, key=lambda item: abs(item[1]))
         return (key, f"the largest of the chain's lengths (link lengths, coms, fastenings), "

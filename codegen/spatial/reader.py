@@ -36,6 +36,7 @@ from .values import (
     SpatialLink,
     SpatialScene,
     SpatialSpring,
+    geometry_underflow,
 )
 
 #: Gravity when a spatial scene does not set it: 9.81 m/s^2 along the world's -z (URDF's up is z).
@@ -163,6 +164,8 @@ class SpatialSceneReader(SceneReader):
                      else self.control(control_table, n, actuated)),
             simulation=simulation,
         )
+        if geometry_underflow(scene):       # then the segments' lengths are 0
+            self.fail(*geometry_underflow(scene))
         self.refuse_overflowing_dynamics(scene)     # first: the segments' limit scales with it
         self.refuse_zero_length_segments(scene)
         self.refuse_overflowing_energies(scene)

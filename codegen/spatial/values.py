@@ -13,6 +13,7 @@ default method.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -105,3 +106,25 @@ class SpatialScene:
     @property
     def n(self) -> int:
         return len(self.links)
+
+
+def geometry_underflow(scene: SpatialScene) -> tuple[str, str, list] | None:
+    """(key path, what is wrong, value) for a chain so small that the squares of its lengths
+    are subnormal or zero in a double: its joints' xyz, COMs and route points sum to less than
+    1.49e-154 m (the planar reader's rule, chaingen.scene.overflow.dynamics_underflow), named
+    at the largest; None otherwise. All of spatial_three_link times 1e-300 was refused as
+    'route[0] and route[1] are one point at every angle', which they are not."""
+    from ..scene.kinematics import SMALLEST_SQUARED_LENGTH
+
+    keys = [(f"links[{i}].{name}", list(vector)) for i, link in enumerate(scene.links)
+            for name, vector in (("joint.xyz", link.joint.xyz), ("com", link.com))]
+    keys += [(f"springs[{i}].route[{j}]", [point.link, *point.point])
+             for i, spring in enumerate(scene.springs) for j, point in enumerate(spring.route)]
+    sizes = [math.hypot(*value[-3:]) for _, value in keys]
+    if not 0.0 < sum(sizes) < SMALLEST_SQUARED_LENGTH:   # 0: a body on its axis
+        return None
+    key, value = keys[max(range(len(keys)), key=sizes.__getitem__)]
+    return (key, f"the largest of the chain's lengths (joints' xyz, coms, route points), which "
+            f"sum to {sum(sizes):.3g} m, below {SMALLEST_SQUARED_LENGTH:.3g} m: their "
+            "squares in the energies, the mass matrix and the springs' segment lengths are "
+            "subnormal or zero in a double: write the scene in SI units (m)", value)
