@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import math
 import operator
 
 import numpy as np
@@ -93,6 +94,42 @@ def positive_step(dt) -> float:
     if not 0.0 < dt < np.inf:
         raise ValueError(f"dt: must be > 0 and finite, got {dt!r}")
     return dt
+
+
+#: The largest angle (rad) a chain starts from, 2^20 rad (166,886 turns): below it a double
+#: holds an angle to 2^-33 = 1.16e-10 rad or finer, about what a step resolves its unknowns to
+#: (the Newton option update_rtol, 1e-10). Beyond it every step rounds the angle it moves by
+#: more: from 1e10 rad (held to 1.9e-6 rad) midpoint's first step fails (a spurious root),
+#: and es ran on silently, 7.4e-7 rad off the same start given within its turn after 1 s
+#: (4.8e-5 at 1e12, 0.06 rad at 1e15). Angles are not wrapped for the user: a control target
+#: makes the physics non-periodic. The scene readers (initial.angles[i]) and
+#: Solver.initial_state (so simulate and a Stepper) refuse such angles.
+MAX_INITIAL_ANGLE = 2.0 ** 20
+
+
+def far_angle(angles) -> tuple[int, float, str] | None:
+    """(index, angle, what is wrong) of the first of the finite `angles` beyond
+    MAX_INITIAL_ANGLE, or None."""
+    for index, angle in enumerate(angles):
+        if abs(angle) >= MAX_INITIAL_ANGLE:
+            angle = float(angle)
+            return index, angle, (
+                f"must be within +-2^20 = {MAX_INITIAL_ANGLE:.0f} rad (an angle in rad): a "
+                f"double holds {angle:g} rad only to {math.ulp(angle):.2g} rad, coarser than "
+                "the 1e-10 of its unknowns a step resolves (update_rtol), so every step rounds "
+                "the motion it takes; subtract whole turns (2 pi k), from a [control] target "
+                "too")
+    return None
+
+
+def held_angles(array: np.ndarray, name: str) -> np.ndarray:
+    """`array` (finite angles) if every entry is within MAX_INITIAL_ANGLE, else a one-line
+    ValueError naming `name`, the entry and why (far_angle)."""
+    refused = far_angle(array)
+    if refused is not None:
+        index, angle, what = refused
+        raise ValueError(f"{name}[{index}]: {what}, got {angle!r}")
+    return array
 
 
 def finite(array: np.ndarray, name: str) -> np.ndarray:

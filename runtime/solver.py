@@ -40,6 +40,7 @@ from .interface import (
     StatsStruct,
     ctypes_type,
     finite,
+    held_angles,
     positive_step,
     real_array,
     step_length,
@@ -54,8 +55,7 @@ from .workspaces import Workspaces
 __all__ = ["MAX_SAMPLE_BYTES", "Solver", "StopSignal"]
 
 _double_p = ctypes.POINTER(ctypes.c_double)
-#: Samples (and recorded torques) are held in memory: a run that would need more is refused
-#: before anything is allocated.
+#: Samples (and recorded torques) are held in memory: a bigger run is refused before allocating.
 MAX_SAMPLE_BYTES = 4 * 2 ** 30
 
 
@@ -198,8 +198,8 @@ class Solver:
         self._call("workspace_init", workspace=self._workspaces.home())
 
     def initial_state(self, phi, phidot, parameters=None) -> np.ndarray:
-        x = np.empty(self.nx)
-        self._check(self._leased("initial_state", phi=_pointer(_vector(phi, self.n, "phi")),
+        phi, x = held_angles(_vector(phi, self.n, "phi"), "phi"), np.empty(self.nx)
+        self._check(self._leased("initial_state", phi=_pointer(phi),
                                p=self._p(parameters),
                                phidot=_pointer(_vector(phidot, self.n, "phidot")),
                                x=_pointer(x)), "initial_state")

@@ -1,7 +1,8 @@
 """What the Python runtime refuses before C sees it, each with a one-line error: run-time parameter
 values the scene format refuses (issue 30, point 4), runs whose samples would not fit in memory
-(point 12), a Stepper's scalar or misplaced torques and a dt <= 0 (point 13), and integer options
-that would wrap in the C int they land in (point 11)."""
+(point 12), a Stepper's scalar or misplaced torques and a dt <= 0 (point 13), start angles beyond
+2^20 rad (the scene reader's bound), and integer options that would wrap in the C int they land
+in (point 11)."""
 from __future__ import annotations
 
 import math
@@ -172,6 +173,33 @@ def test_a_stepper_refuses_a_dt_that_is_not_positive():
         with pytest.raises(ValueError, match=r"^dt: must be > 0 and finite"):
             stepper.dt = bad
     assert stepper.dt == DT
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("method", ["es", "vi", "midpoint"])
+def test_the_runtime_refuses_a_start_angle_a_double_holds_too_coarsely(method):
+    """The scene reader's bound on initial angles (2^20 rad) for the Python API too: before,
+    simulate from phi_2 = 1e10 rad ran (es: silently 7.4e-7 rad off the same start within its
+    turn after 1 s; midpoint: a spurious root at step 1), and so did a Stepper."""
+    from chaingen import build_solver
+    from chaingen.runtime.interface import MAX_INITIAL_ANGLE
+
+    scene = load("three_link_mono")
+    solver = build_solver(scene, method, 3, sensitivities=False)
+    message = (r"^phi\[1\]: must be within \+-2\^20 = 1048576 rad \(an angle in rad\): a double "
+               r"holds 1e\+10 rad only to 1\.9e-06 rad, .*, got 10000000000\.0$")
+    far = [0.1, 1e10, 0.3]
+    with pytest.raises(ValueError, match=message):
+        solver.simulate(far, [0.0] * 3, dt=DT, n_steps=10)
+    with pytest.raises(ValueError, match=message):
+        solver.stepper(far, [0.0] * 3, DT)
+    stepper = solver.stepper([0.1, 0.2, 0.3], [0.0] * 3, DT)
+    with pytest.raises(ValueError, match=message):
+        stepper.reset(far, [0.0] * 3)
+    with pytest.raises(ValueError, match=r"^phi\[0\]: must be within"):
+        solver.initial_state([-MAX_INITIAL_ANGLE, 0.0, 0.0], [0.0] * 3)
+    within = np.nextafter(MAX_INITIAL_ANGLE, 0.0)
+    solver.simulate([within, 0.2, 0.3], [0.0] * 3, dt=DT, n_steps=10)
 
 
 # -- point 11: integers that land in a C int ------------------------------------------------

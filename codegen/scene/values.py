@@ -5,9 +5,11 @@ A Scene is what the reader (chaingen.scene.reader) makes of a scene file; everyt
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import ClassVar
+
+from ..runtime.interface import MAX_INITIAL_ANGLE as MAX_INITIAL_ANGLE
+from ..runtime.interface import far_angle as _far_angle
 
 # The rules of a request (methods, K, orders) are chaingen.scene.solver_rules'; named here too
 # for the simulation defaults below and for the modules that import them from here.
@@ -17,28 +19,15 @@ from .solver_rules import ORDERS as ORDERS
 from .solver_rules import QUADRATURE_RANGE as QUADRATURE_RANGE
 from .solver_rules import quadrature_used as quadrature_used
 
-#: The largest initial angle (rad) a scene takes, 2^20 rad (166,886 turns): below it a double
-#: holds an angle to 2^-33 = 1.16e-10 rad or finer, about what a step resolves its unknowns to
-#: (the Newton option update_rtol, 1e-10). Beyond it every step rounds the angle it moves by
-#: more: from 1e10 rad (held to 1.9e-6 rad) midpoint's first step fails (a spurious root),
-#: and es ran on silently, 7.4e-7 rad off the same start given within its turn after 1 s
-#: (4.8e-5 at 1e12, 0.06 rad at 1e15). Angles are not wrapped for the user: a [control]
-#: target makes the physics non-periodic.
-MAX_INITIAL_ANGLE = 2.0 ** 20
-
 
 def far_angle(path: str, angles) -> tuple[str, str, float] | None:
     """(key path, what is wrong, value) for the first of `angles` beyond MAX_INITIAL_ANGLE
-    (SceneReader.fail's arguments), or None."""
-    for index, angle in enumerate(angles):
-        if abs(angle) >= MAX_INITIAL_ANGLE:
-            spacing = math.ulp(angle)
-            return (f"{path}[{index}]", f"must be within +-2^20 = {MAX_INITIAL_ANGLE:.0f} rad "
-                    f"(an angle in rad): a double holds {angle:g} rad only to {spacing:.2g} "
-                    "rad, coarser than the 1e-10 of its unknowns a step resolves (update_rtol), "
-                    "so every step rounds the motion it takes; subtract whole turns (2 pi k), "
-                    "from a [control] target too", angle)
-    return None
+    (the runtime's rule, chaingen.runtime.interface; SceneReader.fail's arguments), or None."""
+    refused = _far_angle(angles)
+    if refused is None:
+        return None
+    index, angle, what = refused
+    return f"{path}[{index}]", what, angle
 
 
 def c_identifier(name: str) -> str:
