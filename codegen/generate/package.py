@@ -66,7 +66,7 @@ MODEL_FUNCTIONS = (
     ("newton_matrix", "newton_matrix"), ("applied_torques", "applied_torques"))
 
 #: A model source larger than this gets LARGE_MODEL_FLAGS (gcc's -O2 time grows faster than the
-#: file): vi's 2.65 MB at n = 100 take 70.1 s at -O2, 29.6 s at -O1; its 1.30 MB at n = 50 21.1
+#: file): vi's 2.7 MB at n = 100 take 70.1 s at -O2, 29.6 s at -O1; its 1.3 MB at n = 50 21.1
 #: against 15.7 s, and -O2 makes the step 0.886 of -O1's (CHANGELOG; was 1 MB).
 LARGE_MODEL_BYTES = 1_500_000
 LARGE_MODEL_FLAGS = ("-O1",)
