@@ -10,6 +10,7 @@ import pytest
 
 import chaingen
 from chaingen.errors import NewtonError
+from chaingen.runtime.contract import STATUS_CODES
 from chaingen.scene import load_scene
 from chaingen.scene.parameters import with_values
 from chaingen.studies.control import closed_loop_potential, predicted_equilibrium
@@ -111,6 +112,14 @@ def test_the_midpoint_scheme_takes_both_laws():
                              n_steps=4000)
     assert np.abs(result.phi[-1] - scene.control.target).max() < 1e-6
     assert result.split_steps == 0 and abs(result.energy[-1]) < 1e-12
+    # From rest at dt = 0.1 s the first step misses its balance by more than 1 % of T: step
+    # splits it, control_torques refuses it with its own status (before: NOT_CONVERGED, "did
+    # not converge within max_iterations", which it had), and takes it without the check.
+    x0 = solver.initial_state(scene.initial_angles, scene.initial_velocities)
+    with pytest.raises(NewtonError, match="energy balance") as refused:
+        solver.control_torques(x0, None, 0.1)
+    assert refused.value.status == STATUS_CODES["ENERGY_JUMP"]
+    assert np.isfinite(solver.control_torques(x0, None, 0.1, options={"energy_tol": 0.0}).tau).all()
     sampled = chaingen.build_solver(
         dataclasses.replace(scene, control=dataclasses.replace(scene.control, law="sampled")),
         "midpoint", 3, sensitivities=False)

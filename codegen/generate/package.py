@@ -368,10 +368,10 @@ def render_package(scheme: DiscreteScheme, *, sensitivities: bool = True,
             "applies over it (in u's order, N m), which the scheme's control law determines "
             "inside the step's Newton system: evaluated at the step's converged unknowns z. A "
             "step that step() would take as halves (the fallback ladder's last rung) has no "
-            f"single torque over dt: {prefix.upper()}_NOT_CONVERGED, and neither tau nor x1 "
-            "is written (nor on any other failure; iterations is, as by step()). Arguments as "
-            f"step() ({prefix.upper()}_BAD_ARGUMENT, also for a NULL tau or an x0 with a NaN "
-            "or Inf). Like step(), one workspace per thread. "
+            "single torque over dt: the whole step's status (NOT_CONVERGED, SINGULAR_JACOBIAN, "
+            "NONFINITE, SEGMENT_COLLAPSED or ENERGY_JUMP), and neither tau nor x1 is written "
+            "(nor on any other failure; iterations is, as by step()). Arguments as step() "
+            "(BAD_ARGUMENT also for a NULL tau or an x0 with NaN or Inf); one workspace a thread. "
             + ("This package's scheme has a control law." if features.control else
                "This package's scheme has no control law (or its step is composed): "
                f"{prefix.upper()}_UNAVAILABLE.")),

@@ -330,11 +330,11 @@ int four_link_actuated_es_step_sensitivities(const double *x0, const double *u, 
  * and tau[NU], the torque each actuated joint applies over it (in u's order, N m), which the
  * scheme's control law determines inside the step's Newton system: evaluated at the step's
  * converged unknowns z. A step that step() would take as halves (the fallback ladder's last rung)
- * has no single torque over dt: FOUR_LINK_ACTUATED_ES_NOT_CONVERGED, and neither tau nor x1 is
- * written (nor on any other failure; iterations is, as by step()). Arguments as step()
- * (FOUR_LINK_ACTUATED_ES_BAD_ARGUMENT, also for a NULL tau or an x0 with a NaN or Inf). Like
- * step(), one workspace per thread. This package's scheme has no control law (or its step is
- * composed): FOUR_LINK_ACTUATED_ES_UNAVAILABLE. */
+ * has no single torque over dt: the whole step's status (NOT_CONVERGED, SINGULAR_JACOBIAN,
+ * NONFINITE, SEGMENT_COLLAPSED or ENERGY_JUMP), and neither tau nor x1 is written (nor on any
+ * other failure; iterations is, as by step()). Arguments as step() (BAD_ARGUMENT also for a NULL
+ * tau or an x0 with NaN or Inf); one workspace a thread. This package's scheme has no control law
+ * (or its step is composed): FOUR_LINK_ACTUATED_ES_UNAVAILABLE. */
 FOUR_LINK_ACTUATED_ES_API
 int four_link_actuated_es_control_torques(const double *x0, const double *u, int nu,
                                           const double *p, int np, double dt, double *tau,

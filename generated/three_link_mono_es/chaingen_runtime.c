@@ -1628,8 +1628,9 @@ CHAINGEN_LINKAGE int chaingen_control_torques(const chaingen_model *table, const
         status = cg_finish_step(model, c, x0, u, dt, x1, NULL, options);
     }
     if (status != CHAINGEN_OK) {
-        /* step() would split the step (advance): no single torque over dt. */
-        return cg_shorter_may_pass(model, status) ? CHAINGEN_NOT_CONVERGED : status;
+        /* step() would split the step (advance): no single torque over dt. The whole step's
+         * own status says why (Newton failed, not finite, a segment turned, a jump in energy). */
+        return status;
     }
     for (i = 0; i < model->nu; ++i) {
         tau[i] = torques[i];

@@ -303,11 +303,11 @@ int three_link_multi_vi_step_sensitivities(const double *x0, const double *u, in
  * and tau[NU], the torque each actuated joint applies over it (in u's order, N m), which the
  * scheme's control law determines inside the step's Newton system: evaluated at the step's
  * converged unknowns z. A step that step() would take as halves (the fallback ladder's last rung)
- * has no single torque over dt: THREE_LINK_MULTI_VI_NOT_CONVERGED, and neither tau nor x1 is
- * written (nor on any other failure; iterations is, as by step()). Arguments as step()
- * (THREE_LINK_MULTI_VI_BAD_ARGUMENT, also for a NULL tau or an x0 with a NaN or Inf). Like step(),
- * one workspace per thread. This package's scheme has no control law (or its step is composed):
- * THREE_LINK_MULTI_VI_UNAVAILABLE. */
+ * has no single torque over dt: the whole step's status (NOT_CONVERGED, SINGULAR_JACOBIAN,
+ * NONFINITE, SEGMENT_COLLAPSED or ENERGY_JUMP), and neither tau nor x1 is written (nor on any
+ * other failure; iterations is, as by step()). Arguments as step() (BAD_ARGUMENT also for a NULL
+ * tau or an x0 with NaN or Inf); one workspace a thread. This package's scheme has no control law
+ * (or its step is composed): THREE_LINK_MULTI_VI_UNAVAILABLE. */
 THREE_LINK_MULTI_VI_API
 int three_link_multi_vi_control_torques(const double *x0, const double *u, int nu, const double *p,
                                         int np, double dt, double *tau, double *x1,

@@ -2212,6 +2212,12 @@ static void test_control_torques(void)
            store->scalars.step_splits);
     pendulum_knob.jacobian_scale = 0.0;
     pendulum_knob.above_dt = 0.0;
+    /* A converged step that jumps in energy: step() splits it, control_torques refuses it with
+     * the whole step's own status (it said NOT_CONVERGED, "max_iterations reached"). */
+    pendulum_knob.energy_jump = 1e4;
+    STATUS(control_torques(x0, 0.3, 0.01, &t1, x1, NULL, NULL), CHAINGEN_ENERGY_JUMP);
+    EXPECT(x1[0] == 7.0 && x1[1] == 7.0 && t1 == 7.0, "outputs written by a refused step");
+    pendulum_knob.energy_jump = 0.0;
     /* A failed evaluation of the torques, and NaN torques: outputs untouched. */
     pendulum_knob.fail_mask = 1u << PENDULUM_F_APPLIED_TORQUES;
     STATUS(control_torques(x0, 0.3, 0.01, &t1, x1, NULL, NULL), CHAINGEN_EVALUATION_FAILED);
