@@ -168,6 +168,20 @@ def test_the_reader_refuses_an_initial_angle_beyond_2_to_the_20(angle, spacing):
         f"subtract whole turns (2 pi k), from a [control] target too, got {float(angle)!r}")
 
 
+def test_the_reader_refuses_a_control_target_beyond_2_to_the_20():
+    """A [control] target is an angle the step works with as the start is (V_s's offset
+    phi - phi*, the law's torque): 1e10 rad, held to 1.9e-6 rad, was read as it was."""
+    text = scene_path("four_link_pbc").read_text()
+    old = "target = [1.5707963267948966, 0.0, 0.0, 0.0]"
+    assert old in text
+    with pytest.raises(SceneError, match=r"^pbc\.toml: control\.target\[3\]: must be within "
+                                         r"\+-2\^20 = 1048576 rad .* got 10000000000\.0$"):
+        parse_scene(text.replace(old, "target = [1.5707963267948966, 0.0, 0.0, 1e10]"),
+                    "pbc.toml", "pbc")
+    parse_scene(text.replace(old, "target = [1.5707963267948966, 0.0, 0.0, 1e6]"), "pbc.toml",
+                "pbc")
+
+
 def test_the_spatial_reader_refuses_an_initial_angle_beyond_2_to_the_20():
     from chaingen.spatial import parse_spatial_scene
 
