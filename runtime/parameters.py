@@ -12,7 +12,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .interface import real_array, real_number
+from .interface import far_angle, real_array, real_number
 from .keypaths import spelling_error
 
 
@@ -86,6 +86,10 @@ def _check_ranges(values: np.ndarray, paths: tuple, bounds, prefix: str) -> None
     lower, inclusive = bounds
     good = np.isfinite(values) & ((values > lower) | (inclusive & (values == lower)))
     if good.all():
+        for path, value in zip(paths, values):      # an angle, as a scene's control.target
+            refused = path.startswith("control.target[") and far_angle([value])
+            if refused:
+                raise ValueError(f"{path}: {refused[2]}, got {float(value)!r}")
         return
     index = int(np.argmin(good))
     value = float(values[index])

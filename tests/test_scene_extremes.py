@@ -182,6 +182,20 @@ def test_the_reader_refuses_a_control_target_beyond_2_to_the_20():
                 "pbc")
 
 
+def test_a_control_target_given_at_run_time_is_held_within_2_to_the_20():
+    """The same bound on a target given as a run-time parameter (Solver.simulate, step, a
+    sweep's rows), checked where every parameter's range is."""
+    from chaingen.runtime.parameters import parameter_vector
+
+    paths = ("control.target[0]", "control.stiffness[0]")
+    bounds = (np.array([-np.inf, 0.0]), np.array([False, False]))
+    defaults = np.array([0.5, 10.0])
+    assert parameter_vector({"control.target[0]": -1e6}, paths, defaults, bounds, "p")[0] == -1e6
+    with pytest.raises(ValueError, match=r"^control\.target\[0\]: must be within \+-2\^20 = "
+                                         r"1048576 rad .* got 10000000000\.0$"):
+        parameter_vector([1e10, 10.0], paths, defaults, bounds, "p")
+
+
 def test_the_spatial_reader_refuses_an_initial_angle_beyond_2_to_the_20():
     from chaingen.spatial import parse_spatial_scene
 
