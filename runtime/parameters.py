@@ -8,6 +8,7 @@ would misplace (an xarray DataArray, a numpy structured array) are refused.
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 
 import numpy as np
@@ -78,6 +79,12 @@ def parameter_vector(given, paths: tuple, defaults: np.ndarray, bounds, prefix: 
     return values
 
 
+@functools.lru_cache(maxsize=64)
+def _targets(paths: tuple) -> tuple[int, ...]:
+    """The indices of the control.target entries among `paths` (a package's, cached)."""
+    return tuple(i for i, path in enumerate(paths) if path.startswith("control.target["))
+
+
 def _check_ranges(values: np.ndarray, paths: tuple, bounds, prefix: str) -> None:
     """ValueError naming the first value out of its range, as the scene reader words it."""
     if bounds is None:
@@ -86,10 +93,10 @@ def _check_ranges(values: np.ndarray, paths: tuple, bounds, prefix: str) -> None
     lower, inclusive = bounds
     good = np.isfinite(values) & ((values > lower) | (inclusive & (values == lower)))
     if good.all():
-        for path, value in zip(paths, values):      # an angle, as a scene's control.target
-            refused = path.startswith("control.target[") and far_angle([value])
+        for index in _targets(paths):       # an angle, as a scene's control.target
+            refused = far_angle([values[index]])
             if refused:
-                raise ValueError(f"{path}: {refused[2]}, got {float(value)!r}")
+                raise ValueError(f"{paths[index]}: {refused[2]}, got {float(values[index])!r}")
         return
     index = int(np.argmin(good))
     value = float(values[index])
