@@ -23,8 +23,8 @@ def read_control(reader, table: dict[str, Any], n: int, actuated: tuple[int, ...
         where = f"control.{key}"
         if key == "target":
             fields[key] = reader.number_list(where, item, "phi*_i in rad", n, "one per joint")
-            if far_angle(where, fields[key]):     # as initial.angles: held to 1.2e-10 rad
-                reader.fail(*far_angle(where, fields[key]))
+            if refused := far_angle(where, fields[key]):   # as initial.angles: 1.2e-10 rad
+                reader.fail(*refused)
         elif key in ("stiffness", "damping"):
             meaning = ("k_a in N m/rad" if key == "stiffness" else "D_a in N m s/rad")
             values = reader.number_list(where, item, meaning, count, per_joint)

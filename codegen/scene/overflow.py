@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from . import kinematics
+from .kinematics import SMALLEST_NORMAL, SMALLEST_SQUARED_LENGTH
 from .values import LINK_FIELDS, Scene
 
 
@@ -37,10 +38,6 @@ def dynamics_overflow(scene: Scene) -> tuple | None:
     return ("links", "the chain's mass matrix or gravity torques at the initial angles are "
             "beyond the range of a double (a length, a com, a mass or an inertia far too "
             "large, or gravity): write the scene in SI units (m, kg, kg m^2)")
-
-
-SMALLEST_NORMAL = kinematics.SMALLEST_NORMAL
-SMALLEST_SQUARED_LENGTH = kinematics.SMALLEST_SQUARED_LENGTH
 
 
 def _geometry_keys(scene: Scene) -> list[tuple[str, float]]:

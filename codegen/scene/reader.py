@@ -448,8 +448,8 @@ class SceneReader:
             angle, rate, count = self.INITIAL_MEANINGS
             if key == "angles":
                 angles = self.number_list(where, item, angle, self.n, count)
-                if far_angle(where, angles):
-                    self.fail(*far_angle(where, angles))
+                if refused := far_angle(where, angles):
+                    self.fail(*refused)
             elif key == "velocities":
                 velocities = self.number_list(where, item, rate, self.n, count)
             else:

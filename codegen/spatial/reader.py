@@ -164,8 +164,8 @@ class SpatialSceneReader(SceneReader):
                      else self.control(control_table, n, actuated)),
             simulation=simulation,
         )
-        if geometry_underflow(scene):       # then the segments' lengths are 0
-            self.fail(*geometry_underflow(scene))
+        if refused := geometry_underflow(scene):   # then the segments' lengths are 0
+            self.fail(*refused)
         self.refuse_overflowing_dynamics(scene)     # first: the segments' limit scales with it
         self.refuse_zero_length_segments(scene)
         self.refuse_overflowing_energies(scene)
